@@ -1,0 +1,502 @@
+"""Experiment configs (SPEC §3): strict pydantic models, loading, overrides, resolved YAML.
+
+``load_config`` reads a YAML file, applies ``--set`` style overrides, validates the document
+against the models below (unknown keys are errors), then checks what a schema cannot: names,
+expressions (parsed, never evaluated as Python), shapes. Every problem becomes one line
+``file:line:column: field.path: message``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import re
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+import yaml
+from pydantic import (
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Discriminator,
+    Field,
+    PrivateAttr,
+    Tag,
+    ValidationError,
+)
+
+from .errors import ConfigError, InputError
+from .expr import (
+    FUNCTIONS,
+    ExpressionError,
+    check_names,
+    parse_constraint,
+    parse_expression,
+)
+from .yaml_source import PathKey, SourceMap, parse_yaml, read_yaml
+
+CONFIG_VERSION = 1
+_IDENTIFIER = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+
+
+def _number_to_text(v: Any) -> Any:
+    # `terminal_cost: 0` is an expression too.
+    if isinstance(v, bool):
+        return v
+    if isinstance(v, int | float):
+        return repr(v) if isinstance(v, float) else str(v)
+    return v
+
+
+Expr = Annotated[str, BeforeValidator(_number_to_text)]
+
+
+class Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", validate_default=True)
+
+
+class Variable(Strict):
+    """A decision variable: bounds (constraints of its owner) and a start value."""
+
+    lower: float | None = None
+    upper: float | None = None
+    start: float = 0.0
+
+
+def _names_to_variables(v: Any) -> Any:
+    # `inputs: [u1, u2]` is shorthand for `inputs: {u1: {}, u2: {}}`.
+    if isinstance(v, list):
+        if not all(isinstance(x, str) for x in v):
+            return v  # let the dict validation report it
+        return {name: {} for name in v}
+    return v
+
+
+Variables = Annotated[dict[str, Variable], BeforeValidator(_names_to_variables)]
+
+
+class StaticAgent(Strict):
+    name: str
+    variables: Variables
+    cost: Expr
+    constraints: list[Expr] = Field(default_factory=list)
+
+
+class DynamicAgent(Strict):
+    name: str
+    inputs: Variables
+    stage_cost: Expr
+    terminal_cost: Expr = "0"
+    constraints: list[Expr] = Field(default_factory=list)
+
+
+class LinearDynamics(Strict):
+    """x(t+1) = A x(t) + B u(t); states in `states` order, inputs in agent order."""
+
+    A: list[list[float]]
+    B: list[list[float]]
+
+
+def _dynamics_tag(v: Any) -> str:
+    if isinstance(v, dict) and ("A" in v or "B" in v):
+        return "linear"
+    return "expressions"
+
+
+Dynamics = Annotated[
+    Annotated[LinearDynamics, Tag("linear")] | Annotated[dict[str, Expr], Tag("expressions")],
+    Discriminator(_dynamics_tag),
+]
+
+
+class StaticGame(Strict):
+    kind: Literal["static"]
+    parameters: dict[str, float] = Field(default_factory=dict)
+    agents: list[StaticAgent] = Field(min_length=1)
+    shared_constraints: list[Expr] = Field(default_factory=list)
+    equilibrium: Literal["generalized", "variational"] = "generalized"
+
+
+class DynamicGame(Strict):
+    kind: Literal["dynamic"]
+    horizon: int = Field(ge=0, le=10_000, description="T: inputs a(0..T) per agent")
+    states: list[str] = Field(min_length=1)
+    dynamics: Dynamics
+    x0: list[float]
+    parameters: dict[str, float] = Field(default_factory=dict)
+    agents: list[DynamicAgent] = Field(min_length=1)
+    shared_constraints: list[Expr] = Field(default_factory=list)
+    equilibrium: Literal["generalized", "variational"] = "generalized"
+
+
+Game = Annotated[StaticGame | DynamicGame, Field(discriminator="kind")]
+
+
+class SolverConfig(Strict):
+    kind: Literal["ssn"] = "ssn"
+    tol: float = Field(1e-10, gt=0, description="stop when ||Phi(z)||_2 <= tol")
+    max_iter: int = Field(50, ge=0, le=1_000_000)
+    complementarity: Literal["min", "fischer_burmeister"] = "min"
+    tie_tol: float = Field(
+        1e-12, ge=0, description="|-g_j - lambda_j| <= tie_tol is a tie; the multiplier row is chosen"
+    )
+    min_rcond: float = Field(1e-14, ge=0, description="JPhi with reciprocal condition below this is singular")
+    line_search: bool = Field(False, description="Armijo backtracking on 1/2||Phi||^2 (off: the paper's pure method)")
+    divergence_limit: float = Field(1e12, gt=0, description="||z||_inf beyond this is divergence")
+
+
+class DisturbanceConfig(Strict):
+    kind: Literal["none", "jacobian_noise", "residual", "pseudogradient"] = "none"
+    scale: float = Field(0.0, ge=0)
+    seed: int = 0
+    distribution: Literal["normal", "uniform"] = "normal"
+
+
+class RunConfig(Strict):
+    K: list[Annotated[int, Field(ge=1)]] = Field(default_factory=lambda: [5], min_length=1)
+    steps: int = Field(30, ge=1)
+
+
+class Config(Strict):
+    version: Literal[1] = CONFIG_VERSION
+    name: str = "run"
+    game: Game
+    solver: SolverConfig = Field(default_factory=SolverConfig)
+    disturbance: DisturbanceConfig = Field(default_factory=DisturbanceConfig)
+    run: RunConfig = Field(default_factory=RunConfig)
+
+    _source: str | None = PrivateAttr(default=None)
+
+    @property
+    def source(self) -> str | None:
+        """The file this config was loaded from, if any."""
+        return self._source
+
+    def resolved_yaml(self) -> str:
+        """The config with every default filled in, as YAML (what runs write to config.yaml)."""
+        return dump_yaml(self.model_dump(mode="json"))
+
+    def config_hash(self) -> str:
+        return hashlib.sha256(self.resolved_yaml().encode()).hexdigest()
+
+
+# ---------------------------------------------------------------------------------------------
+# YAML output
+# ---------------------------------------------------------------------------------------------
+
+
+class _Dumper(yaml.SafeDumper):
+    pass
+
+
+def _represent_list(dumper: yaml.SafeDumper, data: list) -> yaml.Node:
+    flow = all(isinstance(x, int | float | bool) or x is None for x in data) or (
+        all(isinstance(x, list) for x in data) and all(isinstance(y, int | float) for x in data for y in x)
+    )
+    return dumper.represent_sequence("tag:yaml.org,2002:seq", data, flow_style=flow and bool(data))
+
+
+_Dumper.add_representer(list, _represent_list)
+
+
+def dump_yaml(data: Any) -> str:
+    return yaml.dump(data, Dumper=_Dumper, sort_keys=False, allow_unicode=True, width=100)
+
+
+# ---------------------------------------------------------------------------------------------
+# Overrides
+# ---------------------------------------------------------------------------------------------
+
+
+def parse_override(text: str) -> tuple[str, Any]:
+    """``"a.b=value"`` -> ``("a.b", value)``, the value read as YAML (``run.K=[1,7]``)."""
+    if "=" not in text:
+        raise InputError(f"--set {text}: expected key.path=value")
+    key, _, raw = text.partition("=")
+    key = key.strip()
+    if not key or any(not part for part in key.split(".")):
+        raise InputError(f"--set {text}: expected key.path=value")
+    try:
+        value = yaml.safe_load(raw) if raw.strip() else ""
+    except yaml.YAMLError as e:
+        problem = getattr(e, "problem", None) or "cannot read the value"
+        raise InputError(f"--set {text}: the value is not valid YAML: {problem}") from None
+    return key, value
+
+
+def _apply_override(data: dict, key: str, value: Any, smap: SourceMap, shown: str) -> None:
+    parts: list[str | int] = [int(p) if p.isdigit() else p for p in key.split(".")]
+    node: Any = data
+    for i, part in enumerate(parts):
+        last = i == len(parts) - 1
+        if isinstance(node, dict):
+            if isinstance(part, int):
+                part = str(part)
+            if last:
+                node[part] = value
+            else:
+                if not isinstance(node.get(part), dict | list):
+                    node[part] = {}
+                node = node[part]
+        elif isinstance(node, list):
+            if not isinstance(part, int) or not 0 <= part < len(node):
+                raise InputError(f"--set {shown}: {'.'.join(map(str, parts[: i + 1]))}: no such list element")
+            if last:
+                node[part] = value
+            else:
+                node = node[part]
+        else:
+            raise InputError(f"--set {shown}: {'.'.join(map(str, parts[:i]))} is not a mapping")
+    smap.overridden[tuple(parts)] = shown
+
+
+# ---------------------------------------------------------------------------------------------
+# Loading
+# ---------------------------------------------------------------------------------------------
+
+
+def load_config(
+    path: str | Path | None = None,
+    overrides: dict[str, Any] | list[str] | None = None,
+    *,
+    text: str | None = None,
+) -> Config:
+    """Load and validate a config file (or ``text``), applying ``overrides``.
+
+    ``overrides`` maps dotted field paths to values (``{"solver.tol": 1e-12}``), or is a list of
+    ``"a.b=value"`` strings as given to ``--set``. Raises :class:`ConfigError` with every problem.
+    """
+    if text is not None:
+        data, smap = parse_yaml(text, str(path) if path is not None else "<string>")
+    elif path is not None:
+        data, smap = read_yaml(path)
+    else:
+        raise InputError("load_config needs a path or text")
+    if not isinstance(data, dict):
+        raise ConfigError([f"{smap.locate(())}: the config must be a mapping of fields, got {type(data).__name__}"])
+    items: list[tuple[str, Any, str]] = []
+    if isinstance(overrides, dict):
+        items = [(k, v, f"{k}={v!r}") for k, v in overrides.items()]
+    elif overrides:
+        for o in overrides:
+            k, v = parse_override(o)
+            items.append((k, v, o))
+    for key, value, shown in items:
+        _apply_override(data, key, value, smap, shown)
+    if "name" not in data and path is not None:
+        data["name"] = Path(str(path)).stem
+    try:
+        cfg = Config.model_validate(data)
+    except ValidationError as e:
+        raise ConfigError(_validation_problems(e, data, smap)) from None
+    problems = check_semantics(cfg, smap)
+    if problems:
+        raise ConfigError(problems)
+    cfg._source = str(path) if path is not None else None
+    return cfg
+
+
+def _validation_problems(err: ValidationError, data: Any, smap: SourceMap) -> list[str]:
+    problems = []
+    for e in err.errors(include_url=False):
+        path = _data_path(e["loc"], data)
+        dotted = ".".join(str(p) for p in path) or "<config>"
+        kind = e["type"]
+        if kind == "extra_forbidden":
+            where = smap.locate(path, key=True)
+            allowed = _allowed_keys(path[:-1], data)
+            msg = "unknown key" + (f" (allowed here: {', '.join(allowed)})" if allowed else "")
+        elif kind == "missing":
+            where = smap.locate(path[:-1])
+            msg = "required field is missing"
+        else:
+            where = smap.locate(path)
+            msg = e["msg"]
+            if kind == "union_tag_invalid" or kind == "literal_error":
+                msg = msg.replace("Input tag", "kind")
+        problems.append(f"{where}: {dotted}: {msg}")
+    return problems
+
+
+def _data_path(loc: tuple, data: Any) -> PathKey:
+    """Map a pydantic error location onto the document, dropping union tags."""
+    out: list[str | int] = []
+    node = data
+    for i, part in enumerate(loc):
+        last = i == len(loc) - 1
+        if isinstance(node, dict):
+            if part in node:
+                out.append(part)
+                node = node[part]
+            elif last:
+                out.append(part)
+            # else: a union tag such as 'dynamic' or 'linear': not part of the document
+        elif isinstance(node, list) and isinstance(part, int) and 0 <= part < len(node):
+            out.append(part)
+            node = node[part]
+        elif last:
+            out.append(part)
+    return tuple(out)
+
+
+def _allowed_keys(path: PathKey, data: Any) -> list[str]:
+    model: Any = Config
+    node = data
+    for part in path:
+        if isinstance(node, dict):
+            node = node.get(part)
+        elif isinstance(node, list) and isinstance(part, int):
+            node = node[part]
+        model = _field_model(model, part, node)
+        if model is None:
+            return []
+    if model is None or not (isinstance(model, type) and issubclass(model, BaseModel)):
+        return []
+    return list(model.model_fields)
+
+
+class _VariableMap:
+    """Marker: a mapping from variable names to :class:`Variable`."""
+
+
+def _field_model(model: Any, part: Any, node: Any) -> Any:
+    if isinstance(part, int):
+        return model  # a list element: same model as the list's items
+    if model is Config and part == "game":
+        kind = node.get("kind") if isinstance(node, dict) else None
+        return {"static": StaticGame, "dynamic": DynamicGame}.get(kind)
+    table = {
+        (StaticGame, "agents"): StaticAgent,
+        (DynamicGame, "agents"): DynamicAgent,
+        (Config, "solver"): SolverConfig,
+        (Config, "disturbance"): DisturbanceConfig,
+        (Config, "run"): RunConfig,
+        (DynamicGame, "dynamics"): LinearDynamics,
+        (StaticAgent, "variables"): _VariableMap,
+        (DynamicAgent, "inputs"): _VariableMap,
+    }
+    if model is _VariableMap:
+        return Variable
+    return table.get((model, part))
+
+
+# ---------------------------------------------------------------------------------------------
+# Semantic checks: names, expressions, shapes
+# ---------------------------------------------------------------------------------------------
+
+
+def _check_identifier(name: str, path: PathKey, smap: SourceMap, problems: list[str], what: str,
+                      *, key: bool = False) -> None:
+    dotted = ".".join(str(p) for p in path)
+    if not _IDENTIFIER.match(name):
+        problems.append(f"{smap.locate(path, key=key)}: {dotted}: {what} {name!r} is not a valid name "
+                        "(letters, digits and _, not starting with a digit)")
+    elif name in FUNCTIONS:
+        problems.append(f"{smap.locate(path, key=key)}: {dotted}: {what} {name!r} is the name of a function")
+
+
+def check_semantics(cfg: Config, smap: SourceMap) -> list[str]:
+    """Every problem a schema cannot see, as ``file:line:column: path: message`` lines."""
+    problems: list[str] = []
+    g = cfg.game
+    seen: dict[str, str] = {}
+
+    def declare(name: str, path: PathKey, what: str, *, key: bool = False) -> None:
+        dotted = ".".join(str(p) for p in path)
+        _check_identifier(name, path, smap, problems, what, key=key)
+        if name in seen:
+            problems.append(f"{smap.locate(path, key=key)}: {dotted}: {what} {name!r} is already declared as {seen[name]}")
+        else:
+            seen[name] = what
+
+    for pname, value in g.parameters.items():
+        declare(pname, ("game", "parameters", pname), "parameter", key=True)
+        if not math.isfinite(value):
+            problems.append(f"{smap.locate(('game', 'parameters', pname))}: game.parameters.{pname}: must be finite")
+
+    agent_names: set[str] = set()
+    for i, agent in enumerate(g.agents):
+        if agent.name in agent_names:
+            problems.append(f"{smap.locate(('game', 'agents', i, 'name'))}: game.agents.{i}.name: "
+                            f"agent {agent.name!r} is declared twice")
+        agent_names.add(agent.name)
+
+    variable_field = "variables" if isinstance(g, StaticGame) else "inputs"
+    if isinstance(g, DynamicGame):
+        for j, s in enumerate(g.states):
+            declare(s, ("game", "states", j), "state")
+    for i, agent in enumerate(g.agents):
+        variables = agent.variables if isinstance(agent, StaticAgent) else agent.inputs
+        if not variables:
+            problems.append(f"{smap.locate(('game', 'agents', i, variable_field))}: game.agents.{i}.{variable_field}: "
+                            f"agent {agent.name!r} has no {variable_field}")
+        for vname, var in variables.items():
+            path = ("game", "agents", i, variable_field, vname)
+            declare(vname, path, "variable" if isinstance(g, StaticGame) else "input", key=True)
+            lo = var.lower if var.lower is not None else -math.inf
+            hi = var.upper if var.upper is not None else math.inf
+            if lo > hi:
+                problems.append(f"{smap.locate(path)}: {'.'.join(map(str, path))}: lower bound {lo} exceeds upper bound {hi}")
+            if math.isnan(lo) or math.isnan(hi) or not math.isfinite(var.start):
+                problems.append(f"{smap.locate(path)}: {'.'.join(map(str, path))}: bounds and start must be numbers")
+
+    params = set(g.parameters)
+
+    def check(text: str, path: PathKey, names: set[str], constraint: bool) -> None:
+        dotted = ".".join(str(p) for p in path)
+        try:
+            parsed = parse_constraint(text) if constraint else parse_expression(text)
+            check_names(parsed, names)
+        except ExpressionError as e:
+            problems.append(f"{smap.locate_in_text(path, e.column)}: {dotted}: {e.describe()}")
+
+    if isinstance(g, StaticGame):
+        all_vars = {v for a in g.agents for v in a.variables}
+        scope = all_vars | params
+        for i, agent in enumerate(g.agents):
+            check(agent.cost, ("game", "agents", i, "cost"), scope, False)
+            for j, c in enumerate(agent.constraints):
+                check(c, ("game", "agents", i, "constraints", j), scope, True)
+    else:
+        inputs = [u for a in g.agents for u in a.inputs]
+        states = set(g.states)
+        full = states | set(inputs) | params
+        for i, agent in enumerate(g.agents):
+            check(agent.stage_cost, ("game", "agents", i, "stage_cost"), full, False)
+            check(agent.terminal_cost, ("game", "agents", i, "terminal_cost"), states | params, False)
+            for j, c in enumerate(agent.constraints):
+                check(c, ("game", "agents", i, "constraints", j), full, True)
+        nx, nu = len(g.states), len(inputs)
+        if len(g.x0) != nx:
+            problems.append(f"{smap.locate(('game', 'x0'))}: game.x0: has {len(g.x0)} entries for {nx} states")
+        elif not all(math.isfinite(v) for v in g.x0):
+            problems.append(f"{smap.locate(('game', 'x0'))}: game.x0: must be finite")
+        if isinstance(g.dynamics, LinearDynamics):
+            A, B = g.dynamics.A, g.dynamics.B
+            if len(A) != nx or any(len(r) != nx for r in A):
+                problems.append(f"{smap.locate(('game', 'dynamics', 'A'))}: game.dynamics.A: must be {nx} x {nx} "
+                                f"(states {', '.join(g.states)})")
+            if len(B) != nx or any(len(r) != nu for r in B):
+                problems.append(f"{smap.locate(('game', 'dynamics', 'B'))}: game.dynamics.B: must be {nx} x {nu} "
+                                f"(inputs in agent order: {', '.join(inputs)})")
+        else:
+            for s in g.states:
+                if s not in g.dynamics:
+                    problems.append(f"{smap.locate(('game', 'dynamics'))}: game.dynamics: no equation for state {s!r}")
+            for s, text in g.dynamics.items():
+                if s not in states:
+                    problems.append(f"{smap.locate(('game', 'dynamics', s), key=True)}: game.dynamics.{s}: "
+                                    f"{s!r} is not a declared state (states: {', '.join(g.states)})")
+                    continue
+                check(text, ("game", "dynamics", s), full, False)
+    scope_shared = ({v for a in g.agents for v in a.variables} | params) if isinstance(g, StaticGame) else (
+        set(g.states) | {u for a in g.agents for u in a.inputs} | params)
+    for j, c in enumerate(g.shared_constraints):
+        check(c, ("game", "shared_constraints", j), scope_shared, True)
+
+    d = cfg.disturbance
+    if d.kind == "pseudogradient" and cfg.solver.kind == "ssn":
+        problems.append(f"{smap.locate(('disturbance', 'kind'))}: disturbance.kind: 'pseudogradient' perturbs "
+                        "the Josephy-Newton method; with solver.kind 'ssn' use 'jacobian_noise' or 'residual'")
+    return problems

@@ -1,0 +1,26 @@
+"""Errors that the command line reports as bad input (exit code 2), in one line each."""
+
+from __future__ import annotations
+
+
+class InputError(Exception):
+    """Bad input from the user: a config, an argument, an unreadable file.
+
+    ``str(err)`` is the complete one-line message, e.g.
+    ``configs/x.yaml:12:7: game.agents.0.cost: unknown name 'y' at column 5 of expression 'x + y'``.
+    """
+
+
+class ConfigError(InputError):
+    """A config that cannot be loaded: YAML syntax, schema or semantic error.
+
+    ``problems`` holds every message found (each ``file:line:column: field.path: message``);
+    ``str(err)`` is the first one, followed by a count of the others.
+    """
+
+    def __init__(self, problems: list[str]):
+        self.problems = list(problems)
+        first = self.problems[0] if self.problems else "invalid config"
+        more = len(self.problems) - 1
+        suffix = f" (and {more} more problem{'s' if more > 1 else ''}: run `gnerun validate` for all)" if more else ""
+        super().__init__(first + suffix)

@@ -1,0 +1,498 @@
+"""The expression language of gnerun configs.
+
+Expressions are parsed into a small syntax tree by a hand-written recursive-descent parser and
+interpreted over our own node types: nothing is ever evaluated as Python (no eval, exec, compile,
+or sympify of raw strings). The grammar (SPEC §3):
+
+    constraint := expr ("<=" | ">=" | "==") expr
+    expr       := term (("+" | "-") term)*
+    term       := unary (("*" | "/") unary)*
+    unary      := ("-" | "+") unary | power
+    power      := atom (("**" | "^") unary)?          # right-associative, binds tighter than unary minus
+    atom       := NUMBER | NAME | NAME "(" expr ("," expr)* ")" | "(" expr ")"
+
+so that ``-x**2 == -(x**2)`` and ``2**3**2 == 2**9`` as in Python and in mathematics.
+Functions: sqrt exp log sin cos tan tanh abs (one argument), min max (two or more).
+
+Every error is an :class:`ExpressionError` carrying the expression and a 1-based column.
+Inputs longer than :data:`MAX_LENGTH` characters or nested deeper than :data:`MAX_DEPTH` are refused
+before they can exhaust the interpreter's stack.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+MAX_LENGTH = 20_000
+MAX_DEPTH = 100
+
+UNARY_FUNCTIONS = ("sqrt", "exp", "log", "sin", "cos", "tan", "tanh", "abs")
+VARIADIC_FUNCTIONS = ("min", "max")
+FUNCTIONS = UNARY_FUNCTIONS + VARIADIC_FUNCTIONS
+RELATIONS = ("<=", ">=", "==")
+
+
+class ExpressionError(ValueError):
+    """A malformed expression: ``message`` at 1-based ``column`` of ``expression``."""
+
+    def __init__(self, message: str, expression: str, column: int):
+        self.message = message
+        self.expression = expression
+        self.column = column
+        super().__init__(self.describe())
+
+    def describe(self) -> str:
+        shown = self.expression if len(self.expression) <= 120 else self.expression[:117] + "..."
+        return f"{self.message} at column {self.column} of expression {shown!r}"
+
+
+# ---------------------------------------------------------------------------------------------
+# Syntax tree
+# ---------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Num:
+    value: float
+    column: int
+
+
+@dataclass(frozen=True)
+class Name:
+    id: str
+    column: int
+
+
+@dataclass(frozen=True)
+class Unary:
+    op: str  # "-" or "+"
+    operand: Node
+    column: int
+
+
+@dataclass(frozen=True)
+class Binary:
+    op: str  # + - * / **
+    left: Node
+    right: Node
+    column: int
+
+
+@dataclass(frozen=True)
+class Call:
+    function: str
+    args: tuple[Node, ...]
+    column: int
+
+
+Node = Num | Name | Unary | Binary | Call
+
+
+@dataclass(frozen=True)
+class Expression:
+    """A parsed expression and the text it came from."""
+
+    text: str
+    tree: Node
+
+    @property
+    def names(self) -> set[str]:
+        return names_in(self.tree)
+
+
+@dataclass(frozen=True)
+class Constraint:
+    """A parsed constraint ``lhs REL rhs``; :meth:`residual` is g with g <= 0 (or g == 0)."""
+
+    text: str
+    lhs: Node
+    relation: str  # "<=", ">=", "=="
+    rhs: Node
+
+    @property
+    def names(self) -> set[str]:
+        return names_in(self.lhs) | names_in(self.rhs)
+
+    @property
+    def is_equality(self) -> bool:
+        return self.relation == "=="
+
+    def residual(self, env: Mapping[str, Any], functions: Mapping[str, Callable] | None = None) -> Any:
+        """g = lhs - rhs for ``<=`` and ``==``, rhs - lhs for ``>=``: feasible iff g <= 0 (or == 0)."""
+        lhs = evaluate(self.lhs, env, functions)
+        rhs = evaluate(self.rhs, env, functions)
+        return rhs - lhs if self.relation == ">=" else lhs - rhs
+
+
+def names_in(node: Node) -> set[str]:
+    out: set[str] = set()
+    stack = [node]
+    while stack:
+        n = stack.pop()
+        if isinstance(n, Name):
+            out.add(n.id)
+        elif isinstance(n, Unary):
+            stack.append(n.operand)
+        elif isinstance(n, Binary):
+            stack.extend((n.left, n.right))
+        elif isinstance(n, Call):
+            stack.extend(n.args)
+    return out
+
+
+def first_column_of(node: Node, name: str) -> int | None:
+    """Column of the first occurrence of ``name`` in the tree (for error messages)."""
+    stack = [node]
+    best: int | None = None
+    while stack:
+        n = stack.pop()
+        if isinstance(n, Name) and n.id == name:
+            best = n.column if best is None else min(best, n.column)
+        elif isinstance(n, Unary):
+            stack.append(n.operand)
+        elif isinstance(n, Binary):
+            stack.extend((n.left, n.right))
+        elif isinstance(n, Call):
+            stack.extend(n.args)
+    return best
+
+
+# ---------------------------------------------------------------------------------------------
+# Tokenizer
+# ---------------------------------------------------------------------------------------------
+
+_TOKEN = re.compile(
+    r"""
+    (?P<ws>[ \t]+)
+  | (?P<number>(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?)
+  | (?P<name>[A-Za-z_][A-Za-z0-9_]*)
+  | (?P<op>\*\*|<=|>=|==|[-+*/^(),])
+    """,
+    re.VERBOSE,
+)
+
+
+@dataclass(frozen=True)
+class _Token:
+    kind: str  # number | name | op | end
+    text: str
+    column: int  # 1-based
+
+
+def _tokenize(text: str) -> list[_Token]:
+    tokens: list[_Token] = []
+    pos = 0
+    while pos < len(text):
+        m = _TOKEN.match(text, pos)
+        if m is None:
+            ch = text[pos]
+            hint = ""
+            if ch == ".":
+                hint = " (attribute access is not part of the language)"
+            elif ch in "'\"":
+                hint = " (strings are not part of the language)"
+            elif ch in "<>=!":
+                hint = " (comparisons are <=, >= and ==, and only in constraints)"
+            elif ch == "[" or ch == "]":
+                hint = " (indexing is not part of the language)"
+            raise ExpressionError(f"unexpected character {ch!r}{hint}", text, pos + 1)
+        kind = m.lastgroup or ""
+        if kind != "ws":
+            tokens.append(_Token(kind, m.group(), pos + 1))
+        pos = m.end()
+    tokens.append(_Token("end", "", len(text) + 1))
+    return tokens
+
+
+# ---------------------------------------------------------------------------------------------
+# Parser
+# ---------------------------------------------------------------------------------------------
+
+
+class _Parser:
+    def __init__(self, text: str):
+        self.text = text
+        self.tokens = _tokenize(text)
+        self.i = 0
+        self.depth = 0
+
+    def error(self, message: str, token: _Token | None = None) -> ExpressionError:
+        tok = token or self.peek()
+        return ExpressionError(message, self.text, tok.column)
+
+    def peek(self) -> _Token:
+        return self.tokens[self.i]
+
+    def advance(self) -> _Token:
+        tok = self.tokens[self.i]
+        self.i += 1
+        return tok
+
+    def expect(self, text: str) -> _Token:
+        tok = self.peek()
+        if tok.kind != "op" or tok.text != text:
+            found = "end of expression" if tok.kind == "end" else repr(tok.text)
+            raise self.error(f"expected {text!r}, found {found}")
+        return self.advance()
+
+    def enter(self) -> None:
+        self.depth += 1
+        if self.depth > MAX_DEPTH:
+            raise self.error(f"expression nested deeper than {MAX_DEPTH} levels")
+
+    def leave(self) -> None:
+        self.depth -= 1
+
+    # grammar -------------------------------------------------------------------------------
+    def expr(self) -> Node:
+        self.enter()
+        node = self.term()
+        while self.peek().kind == "op" and self.peek().text in "+-":
+            tok = self.advance()
+            node = Binary(tok.text, node, self.term(), tok.column)
+        self.leave()
+        return node
+
+    def term(self) -> Node:
+        node = self.unary()
+        while self.peek().kind == "op" and self.peek().text in ("*", "/"):
+            tok = self.advance()
+            node = Binary(tok.text, node, self.unary(), tok.column)
+        return node
+
+    def unary(self) -> Node:
+        tok = self.peek()
+        if tok.kind == "op" and tok.text in "+-":
+            self.advance()
+            self.enter()
+            operand = self.unary()
+            self.leave()
+            return Unary(tok.text, operand, tok.column)
+        return self.power()
+
+    def power(self) -> Node:
+        base = self.atom()
+        tok = self.peek()
+        if tok.kind == "op" and tok.text in ("**", "^"):
+            self.advance()
+            self.enter()
+            exponent = self.unary()
+            self.leave()
+            return Binary("**", base, exponent, tok.column)
+        return base
+
+    def atom(self) -> Node:
+        tok = self.peek()
+        if tok.kind == "number":
+            self.advance()
+            value = float(tok.text)
+            if not math.isfinite(value):
+                raise self.error(f"number {tok.text!r} is out of range", tok)
+            return Num(value, tok.column)
+        if tok.kind == "name":
+            self.advance()
+            nxt = self.peek()
+            if nxt.kind == "op" and nxt.text == "(":
+                return self.call(tok)
+            if nxt.kind in ("name", "number"):
+                raise self.error(f"unexpected {nxt.text!r} after {tok.text!r} (missing operator?)", nxt)
+            return Name(tok.text, tok.column)
+        if tok.kind == "op" and tok.text == "(":
+            self.advance()
+            node = self.expr()
+            self.expect(")")
+            return node
+        if tok.kind == "end":
+            raise self.error("unexpected end of expression")
+        raise self.error(f"unexpected {tok.text!r}")
+
+    def call(self, name: _Token) -> Node:
+        fn = name.text
+        if fn not in FUNCTIONS:
+            raise self.error(
+                f"unknown function {fn!r} (functions: {', '.join(FUNCTIONS)})",
+                name,
+            )
+        self.expect("(")
+        args = [self.expr()]
+        while self.peek().kind == "op" and self.peek().text == ",":
+            self.advance()
+            args.append(self.expr())
+        self.expect(")")
+        if fn in UNARY_FUNCTIONS and len(args) != 1:
+            raise self.error(f"{fn}() takes exactly one argument, got {len(args)}", name)
+        if fn in VARIADIC_FUNCTIONS and len(args) < 2:
+            raise self.error(f"{fn}() takes two or more arguments, got {len(args)}", name)
+        return Call(fn, tuple(args), name.column)
+
+    def finish(self) -> None:
+        tok = self.peek()
+        if tok.kind != "end":
+            if tok.kind == "op" and tok.text in RELATIONS:
+                raise self.error(f"comparison {tok.text!r} is only allowed in a constraint")
+            if tok.kind == "op" and tok.text == ")":
+                raise self.error("unbalanced ')'")
+            raise self.error(f"unexpected {tok.text!r}")
+
+
+def _check_text(text: object) -> str:
+    if not isinstance(text, str):
+        raise ExpressionError(f"expected an expression string, got {type(text).__name__}", str(text), 1)
+    if len(text) > MAX_LENGTH:
+        raise ExpressionError(f"expression longer than {MAX_LENGTH} characters ({len(text)})", text, 1)
+    if not text.strip():
+        raise ExpressionError("empty expression", text, 1)
+    return text
+
+
+def parse_expression(text: str) -> Expression:
+    """Parse an arithmetic expression (no comparison)."""
+    text = _check_text(text)
+    p = _Parser(text)
+    tree = p.expr()
+    p.finish()
+    return Expression(text, tree)
+
+
+def parse_constraint(text: str) -> Constraint:
+    """Parse ``lhs <= rhs``, ``lhs >= rhs`` or ``lhs == rhs`` (exactly one relation)."""
+    text = _check_text(text)
+    p = _Parser(text)
+    lhs = p.expr()
+    tok = p.peek()
+    if not (tok.kind == "op" and tok.text in RELATIONS):
+        if tok.kind == "end":
+            raise p.error("a constraint needs a relation: lhs <= rhs, lhs >= rhs or lhs == rhs")
+        raise p.error(f"expected '<=', '>=' or '==', found {tok.text!r}")
+    p.advance()
+    rhs = p.expr()
+    nxt = p.peek()
+    if nxt.kind == "op" and nxt.text in RELATIONS:
+        raise p.error("chained comparisons are not allowed: write one constraint per relation")
+    p.finish()
+    return Constraint(text, lhs, tok.text, rhs)
+
+
+# ---------------------------------------------------------------------------------------------
+# Interpreter
+# ---------------------------------------------------------------------------------------------
+
+
+def _variadic(fn2: Callable[[Any, Any], Any]) -> Callable[..., Any]:
+    def f(*args: Any) -> Any:
+        out = args[0]
+        for a in args[1:]:
+            out = fn2(out, a)
+        return out
+
+    return f
+
+
+def numpy_functions() -> dict[str, Callable]:
+    """The function table for floats and numpy arrays."""
+    import numpy as np
+
+    table: dict[str, Callable] = {
+        "sqrt": np.sqrt,
+        "exp": np.exp,
+        "log": np.log,
+        "sin": np.sin,
+        "cos": np.cos,
+        "tan": np.tan,
+        "tanh": np.tanh,
+        "abs": np.abs,
+        "min": _variadic(np.minimum),
+        "max": _variadic(np.maximum),
+    }
+    return table
+
+
+def casadi_functions() -> dict[str, Callable]:
+    """The function table for CasADi symbols (exact derivatives by automatic differentiation)."""
+    import casadi as ca
+
+    return {
+        "sqrt": ca.sqrt,
+        "exp": ca.exp,
+        "log": ca.log,
+        "sin": ca.sin,
+        "cos": ca.cos,
+        "tan": ca.tan,
+        "tanh": ca.tanh,
+        "abs": ca.fabs,
+        "min": _variadic(ca.fmin),
+        "max": _variadic(ca.fmax),
+    }
+
+
+def evaluate(node: Node | Expression, env: Mapping[str, Any], functions: Mapping[str, Callable] | None = None):
+    """Interpret a syntax tree with names bound by ``env``.
+
+    Works for any values that support + - * / ** (floats, numpy arrays, CasADi SX/MX). The tree is
+    walked with an explicit stack, so the interpreter's depth does not grow with the expression.
+    """
+    if isinstance(node, Expression):
+        node = node.tree
+    fns = functions if functions is not None else numpy_functions()
+    # Post-order evaluation with an explicit stack: (node, visited) pairs and a value stack.
+    values: list[Any] = []
+    stack: list[tuple[Node, bool]] = [(node, False)]
+    while stack:
+        n, visited = stack.pop()
+        if isinstance(n, Num):
+            values.append(n.value)
+        elif isinstance(n, Name):
+            try:
+                values.append(env[n.id])
+            except KeyError:
+                raise KeyError(n.id) from None
+        elif not visited:
+            stack.append((n, True))
+            if isinstance(n, Unary):
+                stack.append((n.operand, False))
+            elif isinstance(n, Binary):
+                stack.append((n.right, False))
+                stack.append((n.left, False))
+            else:  # Call
+                for arg in reversed(n.args):
+                    stack.append((arg, False))
+        elif isinstance(n, Unary):
+            v = values.pop()
+            values.append(-v if n.op == "-" else v)
+        elif isinstance(n, Binary):
+            right = values.pop()
+            left = values.pop()
+            values.append(_BINARY[n.op](left, right))
+        else:  # Call
+            args = values[len(values) - len(n.args) :]
+            del values[len(values) - len(n.args) :]
+            values.append(fns[n.function](*args))
+    return values[0]
+
+
+_BINARY: dict[str, Callable[[Any, Any], Any]] = {
+    "+": lambda a, b: a + b,
+    "-": lambda a, b: a - b,
+    "*": lambda a, b: a * b,
+    "/": lambda a, b: a / b,
+    "**": lambda a, b: a**b,
+}
+
+
+def check_names(parsed: Expression | Constraint, allowed: Iterable[str], what: str = "name") -> None:
+    """Raise :class:`ExpressionError` at the first name that is not in ``allowed``."""
+    allowed = set(allowed)
+    tree_roots = [parsed.tree] if isinstance(parsed, Expression) else [parsed.lhs, parsed.rhs]
+    unknown: list[tuple[int, str]] = []
+    for root in tree_roots:
+        for name in names_in(root):
+            if name not in allowed:
+                unknown.append((first_column_of(root, name) or 1, name))
+    if unknown:
+        column, name = min(unknown)
+        known = ", ".join(sorted(allowed)) or "none"
+        raise ExpressionError(f"unknown {what} {name!r} (known here: {known})", parsed.text, column)

@@ -1,0 +1,377 @@
+"""Compiled games: the KKT system of a (generalized) Nash game with exact derivatives.
+
+``compile_game(cfg)`` parses every expression once, builds CasADi symbolic expressions from the
+syntax trees (never from Python source), differentiates them by automatic differentiation and wraps
+the result in CasADi Functions that the solvers evaluate at every iterate. Build once, solve many.
+
+Notation (paper §III, SPEC §1): the primal variable a = (a_1, ..., a_N); agent i's constraints
+g_i(a) <= 0 (equalities h_i(a) = 0 are allowed too) with multipliers lambda_i; z = (a, lambda) with
+lambda = (lambda_1, ..., lambda_N[, lambda_shared]). The parts the Newton methods need are
+
+- ``L(z)``   = (grad_{a_i} L_i(a, lambda_i))_i, L_i = J_i + lambda_i^T g_i  [KKT_concatenated]
+- ``c(a)``   = the constraint values, one per multiplier, in multiplier order (g or h)
+- ``dL/dz`` and ``dc/da`` (dense, exact)
+- the pseudogradient ``F(a)`` = (grad_{a_i} J_i)_i [P_gradient] and game Hessian ``H(a)`` [Hessian].
+
+Dynamic games (CG-MPC, [MPC_1]) are condensed: xi(0) = x, xi(tau+1) = f(xi(tau), a(tau)), and
+agent i's cost is sum_{tau=0..T} l_i(xi(tau+1), a(tau)) + Psi_i(xi(T+1)) (SPEC §3: each stage cost
+is charged on the state its input produces). Constraints are imposed at every stage tau = 0..T on
+(xi(tau+1), a(tau)). Every function then takes the current plant state x as a parameter. Within an
+agent, inputs are time-major: a_i = (u_i(0), u_i(1), ..., u_i(T)) with u_i(tau) the agent's inputs.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import casadi as ca
+import numpy as np
+import scipy.sparse as sp
+
+from .config import Config, DynamicGame, LinearDynamics, StaticGame
+from .expr import casadi_functions, evaluate, parse_constraint, parse_expression
+
+
+@dataclass(frozen=True)
+class ConstraintInfo:
+    """One row of c(a), i.e. one multiplier."""
+
+    label: str  # e.g. "u3 >= u1 + u2 [tau=4]"
+    owner: int | None  # agent index; None for a shared constraint with a common multiplier
+    equality: bool
+    stage: int | None = None
+
+
+@dataclass(frozen=True)
+class KKTParts:
+    """L, c and their exact derivatives at one point (dense numpy arrays)."""
+
+    L: np.ndarray  # (n,)
+    c: np.ndarray  # (m,)
+    dL_dz: np.ndarray  # (n, n + m)
+    dc_da: np.ndarray  # (m, n)
+
+
+@dataclass
+class CompiledGame:
+    """A game ready for the Newton methods. Create with :func:`compile_game`."""
+
+    kind: str  # "static" | "dynamic"
+    agent_names: list[str]
+    agent_slices: list[slice]  # primal block of each agent in a
+    multiplier_slices: list[slice]  # multiplier block of each agent in lambda
+    shared_slice: slice  # common multipliers of variational shared constraints (may be empty)
+    variable_names: list[list[str]]  # per agent: its variables (static) or inputs (dynamic)
+    constraints: list[ConstraintInfo]
+    a_start: np.ndarray
+    x0: np.ndarray  # current state of a dynamic game (empty for static games)
+    horizon: int | None
+    state_names: list[str]
+    equilibrium: str
+    _kkt: ca.Function
+    _costs: ca.Function
+    _pseudo: ca.Function
+    _agent_constraints: list[np.ndarray]  # per agent: row indices of c that constrain its own problem
+    _dynamics: ca.Function | None = None
+    _sparsity: tuple[ca.Sparsity, ca.Sparsity] | None = None
+    _cost_grads: ca.Function | None = field(default=None, repr=False)
+
+    # sizes --------------------------------------------------------------------------------
+    @property
+    def n(self) -> int:
+        """Number of primal unknowns (all agents' decisions)."""
+        return int(self.a_start.size)
+
+    @property
+    def m(self) -> int:
+        """Number of multipliers."""
+        return len(self.constraints)
+
+    @property
+    def size(self) -> int:
+        """Number of unknowns of the KKT system, n + m."""
+        return self.n + self.m
+
+    @property
+    def nx(self) -> int:
+        return int(self.x0.size)
+
+    @property
+    def equality_mask(self) -> np.ndarray:
+        return np.array([c.equality for c in self.constraints], dtype=bool)
+
+    def z_start(self) -> np.ndarray:
+        """The config's start values, multipliers zero."""
+        return np.concatenate([self.a_start, np.zeros(self.m)])
+
+    def _x(self, x: np.ndarray | None) -> np.ndarray:
+        if x is None:
+            return self.x0
+        x = np.asarray(x, dtype=float).reshape(-1)
+        if x.size != self.nx:
+            raise ValueError(f"state x has {x.size} entries, the game has {self.nx} states")
+        return x
+
+    # evaluation ---------------------------------------------------------------------------
+    def kkt_parts(self, z: np.ndarray, x: np.ndarray | None = None) -> KKTParts:
+        """L(z; x), c(a; x), dL/dz and dc/da at z = (a, lambda)."""
+        n = self.n
+        L, c, dL, dc = self._kkt(z[:n], z[n:], self._x(x))
+        return KKTParts(
+            np.asarray(L, dtype=float).reshape(-1),
+            np.asarray(c, dtype=float).reshape(-1),
+            np.asarray(dL, dtype=float).reshape(n, self.size),
+            np.asarray(dc, dtype=float).reshape(self.m, n),
+        )
+
+    def costs(self, a: np.ndarray, x: np.ndarray | None = None) -> np.ndarray:
+        """(J_1(a), ..., J_N(a)) at the state x."""
+        return np.asarray(self._costs(a, self._x(x)), dtype=float).reshape(-1)
+
+    def cost_gradients(self, a: np.ndarray, x: np.ndarray | None = None) -> np.ndarray:
+        """Rows: grad_a J_i(a) with respect to all of a (N x n)."""
+        return np.asarray(self._cost_grads(a, self._x(x)), dtype=float).reshape(len(self.agent_names), self.n)
+
+    def pseudogradient(self, a: np.ndarray, x: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """F(a) = (grad_{a_i} J_i)_i and the game Hessian H(a) = dF/da."""
+        F, H = self._pseudo(a, self._x(x))
+        return np.asarray(F, dtype=float).reshape(-1), np.asarray(H, dtype=float).reshape(self.n, self.n)
+
+    def constraint_rows(self, agent: int) -> np.ndarray:
+        """Indices of c that make up agent ``agent``'s own feasible set (for its best response)."""
+        return self._agent_constraints[agent]
+
+    def step_dynamics(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """The plant model f(x, u) (dynamic games)."""
+        if self._dynamics is None:
+            raise ValueError("a static game has no dynamics")
+        return np.asarray(self._dynamics(x, u), dtype=float).reshape(-1)
+
+    def jacobian_sparsity(self) -> sp.csr_matrix:
+        """Structural nonzeros of JPhi (the union over both branches of every complementarity row)."""
+        sL, sc = self._sparsity
+        n, m = self.n, self.m
+        rows, cols = [], []
+        r, cc = sL.get_triplet()
+        rows += list(r)
+        cols += list(cc)
+        r, cc = sc.get_triplet()
+        rows += [n + i for i in r]
+        cols += list(cc)
+        rows += [n + j for j in range(m)]
+        cols += [n + j for j in range(m)]
+        data = np.ones(len(rows), dtype=bool)
+        pattern = sp.coo_matrix((data, (rows, cols)), shape=(n + m, n + m)).tocsr()
+        pattern.sum_duplicates()
+        pattern.data[:] = True
+        return pattern
+
+    # solutions by name --------------------------------------------------------------------
+    def solution_by_agent(self, a: np.ndarray) -> dict[str, dict[str, float | list[float]]]:
+        out: dict[str, dict[str, float | list[float]]] = {}
+        for name, sl, vars_ in zip(self.agent_names, self.agent_slices, self.variable_names, strict=True):
+            block = np.asarray(a[sl], dtype=float)
+            if self.kind == "static":
+                out[name] = {v: _num(block[j]) for j, v in enumerate(vars_)}
+            else:
+                per_stage = block.reshape(self.horizon + 1, len(vars_))
+                out[name] = {v: [_num(t) for t in per_stage[:, j]] for j, v in enumerate(vars_)}
+        return out
+
+    def multipliers_by_agent(self, lam: np.ndarray) -> dict[str, list[float]]:
+        out = {name: [_num(v) for v in lam[sl]] for name, sl in zip(self.agent_names, self.multiplier_slices,
+                                                                    strict=True)}
+        if self.shared_slice.stop > self.shared_slice.start:
+            out["shared"] = [_num(v) for v in lam[self.shared_slice]]
+        return out
+
+    def first_inputs(self, a: np.ndarray) -> np.ndarray:
+        """u(0): every agent's first input, in agent order (what the plant receives)."""
+        parts = [a[sl][: len(v)] for sl, v in zip(self.agent_slices, self.variable_names, strict=True)]
+        return np.concatenate(parts)
+
+
+def _num(v: float) -> float | None:
+    v = float(v)
+    return v if math.isfinite(v) else None
+
+
+# ---------------------------------------------------------------------------------------------
+# Compilation
+# ---------------------------------------------------------------------------------------------
+
+
+@dataclass
+class _Row:
+    expr: ca.SX
+    info: ConstraintInfo
+
+
+def _bound_rows(var: ca.SX, name: str, lower: float | None, upper: float | None, owner: int,
+                stage: int | None) -> list[_Row]:
+    rows = []
+    suffix = f" [tau={stage}]" if stage is not None else ""
+    if lower is not None and math.isfinite(lower):
+        rows.append(_Row(lower - var, ConstraintInfo(f"{name} >= {lower:g}{suffix}", owner, False, stage)))
+    if upper is not None and math.isfinite(upper):
+        rows.append(_Row(var - upper, ConstraintInfo(f"{name} <= {upper:g}{suffix}", owner, False, stage)))
+    return rows
+
+
+def _constraint_rows(texts: list[str], env: dict, fns: dict, owner: int | None, stage: int | None) -> list[_Row]:
+    rows = []
+    suffix = f" [tau={stage}]" if stage is not None else ""
+    for text in texts:
+        con = parse_constraint(text)
+        rows.append(_Row(ca.SX(con.residual(env, fns)), ConstraintInfo(text + suffix, owner, con.is_equality, stage)))
+    return rows
+
+
+def compile_game(cfg: Config) -> CompiledGame:
+    """Parse, condense (dynamic games) and differentiate the game of ``cfg`` once."""
+    g = cfg.game
+    fns = casadi_functions()
+    params = dict(g.parameters)
+    N = len(g.agents)
+    agent_names = [a.name for a in g.agents]
+
+    if isinstance(g, StaticGame):
+        variable_names = [list(a.variables) for a in g.agents]
+        sizes = [len(v) for v in variable_names]
+        nx = 0
+        T = None
+    else:
+        variable_names = [list(a.inputs) for a in g.agents]
+        T = g.horizon
+        sizes = [len(v) * (T + 1) for v in variable_names]
+        nx = len(g.states)
+    offsets = np.cumsum([0] + sizes)
+    n = int(offsets[-1])
+    agent_slices = [slice(int(offsets[i]), int(offsets[i + 1])) for i in range(N)]
+    a = ca.SX.sym("a", n)
+    x = ca.SX.sym("x", nx)
+
+    costs: list[ca.SX] = []
+    own_rows: list[list[_Row]] = [[] for _ in range(N)]
+    shared_common: list[_Row] = []
+    generalized = g.equilibrium == "generalized"
+    dynamics_fn = None
+
+    if isinstance(g, StaticGame):
+        env: dict = dict(params)
+        a_start = []
+        for i, agent in enumerate(g.agents):
+            for j, (vname, var) in enumerate(agent.variables.items()):
+                env[vname] = a[agent_slices[i].start + j]
+                a_start.append(var.start)
+        for i, agent in enumerate(g.agents):
+            costs.append(ca.SX(evaluate(parse_expression(agent.cost), env, fns)))
+            for j, (vname, var) in enumerate(agent.variables.items()):
+                own_rows[i] += _bound_rows(env[vname], vname, var.lower, var.upper, i, None)
+            own_rows[i] += _constraint_rows(agent.constraints, env, fns, i, None)
+            if generalized:
+                own_rows[i] += _constraint_rows(g.shared_constraints, env, fns, i, None)
+        if not generalized:
+            shared_common += _constraint_rows(g.shared_constraints, env, fns, None, None)
+        x0 = np.zeros(0)
+    else:
+        inputs = [(i, j, u) for i, agent in enumerate(g.agents) for j, u in enumerate(agent.inputs)]
+        stage_cost = [parse_expression(agent.stage_cost) for agent in g.agents]
+        terminal_cost = [parse_expression(agent.terminal_cost) for agent in g.agents]
+        dyn_exprs = None if isinstance(g.dynamics, LinearDynamics) else {
+            s: parse_expression(g.dynamics[s]) for s in g.states}
+
+        def f(xi: ca.SX, u: ca.SX) -> ca.SX:
+            if isinstance(g.dynamics, LinearDynamics):
+                return ca.mtimes(ca.DM(g.dynamics.A), xi) + ca.mtimes(ca.DM(g.dynamics.B), u)
+            env_f = dict(params)
+            env_f.update({s: xi[k] for k, s in enumerate(g.states)})
+            env_f.update({name: u[k] for k, (_, _, name) in enumerate(inputs)})
+            return ca.vertcat(*[ca.SX(evaluate(dyn_exprs[s], env_f, fns)) for s in g.states])
+
+        xs, us = ca.SX.sym("xs", nx), ca.SX.sym("us", len(inputs))
+        dynamics_fn = ca.Function("f", [xs, us], [f(xs, us)])
+        stage_sum = [ca.SX(0) for _ in range(N)]
+        xi = x
+        for tau in range(T + 1):
+            u = ca.vertcat(*[a[agent_slices[i].start + tau * len(variable_names[i]) + j] for i, j, _ in inputs])
+            xi = f(xi, u)
+            env = dict(params)
+            env.update({s: xi[k] for k, s in enumerate(g.states)})
+            env.update({name: u[k] for k, (_, _, name) in enumerate(inputs)})
+            for i, agent in enumerate(g.agents):
+                stage_sum[i] += evaluate(stage_cost[i], env, fns)
+                for uname, var in agent.inputs.items():
+                    own_rows[i] += _bound_rows(env[uname], uname, var.lower, var.upper, i, tau)
+                own_rows[i] += _constraint_rows(agent.constraints, env, fns, i, tau)
+                if generalized:
+                    own_rows[i] += _constraint_rows(g.shared_constraints, env, fns, i, tau)
+            if not generalized:
+                shared_common += _constraint_rows(g.shared_constraints, env, fns, None, tau)
+        env_T = dict(params)
+        env_T.update({s: xi[k] for k, s in enumerate(g.states)})
+        for i in range(N):
+            costs.append(ca.SX(stage_sum[i] + evaluate(terminal_cost[i], env_T, fns)))
+        a_start = []
+        for i, agent in enumerate(g.agents):
+            a_start += [var.start for var in agent.inputs.values()] * (T + 1)
+        x0 = np.asarray(g.x0, dtype=float)
+
+    # multipliers: agent blocks, then the common block of variational shared constraints
+    rows: list[_Row] = [r for block in own_rows for r in block] + shared_common
+    m = len(rows)
+    counts = np.cumsum([0] + [len(b) for b in own_rows])
+    multiplier_slices = [slice(int(counts[i]), int(counts[i + 1])) for i in range(N)]
+    shared_slice = slice(int(counts[-1]), m)
+    lam = ca.SX.sym("lam", m)
+    c = ca.vertcat(*[r.expr for r in rows]) if rows else ca.SX(0, 1)
+
+    grads = []
+    for i in range(N):
+        Li = costs[i]
+        ms = multiplier_slices[i]
+        if ms.stop > ms.start:
+            Li = Li + ca.dot(lam[ms], c[ms])
+        if shared_slice.stop > shared_slice.start:
+            Li = Li + ca.dot(lam[shared_slice], c[shared_slice])
+        grads.append(ca.gradient(Li, a[agent_slices[i]]))
+    L = ca.vertcat(*grads)
+    z = ca.vertcat(a, lam)
+    dL = ca.jacobian(L, z)
+    dc = ca.jacobian(c, a) if m else ca.SX(0, n)
+    sparsity = (dL.sparsity(), dc.sparsity())
+    kkt = ca.Function("kkt", [a, lam, x], [L, c, ca.densify(dL), ca.densify(dc)], ["a", "lam", "x"],
+                      ["L", "c", "dL_dz", "dc_da"])
+
+    J = ca.vertcat(*costs)
+    F = ca.vertcat(*[ca.gradient(costs[i], a[agent_slices[i]]) for i in range(N)])
+    pseudo = ca.Function("pseudogradient", [a, x], [F, ca.densify(ca.jacobian(F, a))], ["a", "x"], ["F", "H"])
+    costs_fn = ca.Function("costs", [a, x], [J], ["a", "x"], ["J"])
+    cost_grads = ca.Function("cost_gradients", [a, x], [ca.densify(ca.jacobian(J, a))], ["a", "x"], ["dJ"])
+
+    # agent i's own problem: its own rows, plus the common shared rows (they constrain everyone)
+    agent_rows = [np.r_[np.arange(ms.start, ms.stop), np.arange(shared_slice.start, shared_slice.stop)].astype(int)
+                  for ms in multiplier_slices]
+
+    return CompiledGame(
+        kind=g.kind,
+        agent_names=agent_names,
+        agent_slices=agent_slices,
+        multiplier_slices=multiplier_slices,
+        shared_slice=shared_slice,
+        variable_names=variable_names,
+        constraints=[r.info for r in rows],
+        a_start=np.asarray(a_start, dtype=float),
+        x0=x0,
+        horizon=T,
+        state_names=list(g.states) if isinstance(g, DynamicGame) else [],
+        equilibrium=g.equilibrium,
+        _kkt=kkt,
+        _costs=costs_fn,
+        _pseudo=pseudo,
+        _agent_constraints=agent_rows,
+        _dynamics=dynamics_fn,
+        _sparsity=sparsity,
+        _cost_grads=cost_grads,
+    )

@@ -1,0 +1,261 @@
+"""Semismooth Newton on the KKT system of a GNE problem [semi_newton], step by step.
+
+Phi(z) = [L(z); phi(-g(a), lambda); h(a)] [system_equations] with the complementarity function
+phi either the min function (the paper's choice, default) or Fischer-Burmeister
+phi(a, b) = a + b - sqrt(a^2 + b^2). One step solves Phi(z^k) + JPhi(z^k)(z - z^k) = r^k with
+JPhi(z^k) an element of the limiting Jacobian [eq:inexact_seminewton].
+
+Jacobian element at ties (documented choice). A min-map row min(-g_j, lambda_j) is differentiable
+unless -g_j == lambda_j. We treat |-g_j - lambda_j| <= ``tie_tol`` as a tie and take the
+*multiplier row* e_{lambda_j} (the constraint is treated as inactive for this step). At the
+degenerate pair -g_j = lambda_j = 0 both rows belong to the limiting Jacobian; the g-row can be
+nearly singular there (condition ~1e17 on the paper's own Study 1 after one step) while the
+multiplier row is well conditioned, and an exact comparison would pick either one depending on
+rounding. For Fischer-Burmeister the only nondifferentiable point is (0, 0), where we take the
+element (1 - 1/sqrt 2, 1 - 1/sqrt 2).
+
+Perturbations (paper Study 1b and eq. inexact_seminewton), seeded: ``jacobian_noise`` adds i.i.d.
+noise of the given scale to every element of JPhi(z^k); ``residual`` uses a right-hand side r^k of
+norm ``scale`` in a random direction.
+
+Shape (see STYLE.md): ``init(z0, x) -> state``, ``step(state) -> state`` (exactly one iteration,
+nothing else), ``terminate(state) -> (done, status)``. Failure is a status, never an exception:
+a singular or ill-conditioned JPhi (the step is not taken), a non-finite Phi, divergence.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from enum import StrEnum
+
+import numpy as np
+from scipy.linalg import lapack
+
+from .config import DisturbanceConfig, SolverConfig
+from .game import CompiledGame, KKTParts
+
+_FB_TIE = 1.0 - 1.0 / math.sqrt(2.0)
+
+
+class Status(StrEnum):
+    RUNNING = "running"
+    CONVERGED = "converged"
+    MAX_ITER = "max_iter"
+    SINGULAR_JACOBIAN = "singular_jacobian"
+    DIVERGED = "diverged"
+    NAN = "nan"
+
+
+FAILURES = frozenset({Status.SINGULAR_JACOBIAN, Status.DIVERGED, Status.NAN})
+
+
+@dataclass(frozen=True)
+class SSNState:
+    """The iterate z^k and everything one step needs, evaluated once at z^k."""
+
+    z: np.ndarray
+    x: np.ndarray
+    k: int
+    phi: np.ndarray  # Phi(z^k)
+    residual_norm: float  # ||Phi(z^k)||_2
+    parts: KKTParts  # L, c and derivatives at z^k
+    active: np.ndarray  # rows whose g-branch is chosen at z^k (min map: -g_j < lambda_j - tie_tol)
+    step_norm: float  # ||z^k - z^{k-1}||_2 (nan at k = 0)
+    active_set_changes: int  # rows whose branch changed from z^{k-1} to z^k
+    status: Status
+    message: str
+    rng: np.random.Generator | None
+    rcond: float = math.nan  # reciprocal condition number of the last JPhi factorised
+
+    @property
+    def converged(self) -> bool:
+        return self.status == Status.CONVERGED
+
+
+class SemismoothNewton:
+    """The semismooth Newton method for a compiled game (see the module docstring)."""
+
+    def __init__(self, game: CompiledGame, solver: SolverConfig, disturbance: DisturbanceConfig | None = None):
+        self.game = game
+        self.options = solver
+        self.disturbance = disturbance or DisturbanceConfig()
+        self._eq = game.equality_mask
+        self._ineq = ~self._eq
+        self._fb = solver.complementarity == "fischer_burmeister"
+
+    # ------------------------------------------------------------------------------------
+    def residual(self, parts: KKTParts, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Phi(z) [system_equations] and the g-branch rows (for the Jacobian element)."""
+        n = self.game.n
+        lam = z[n:]
+        a = -parts.c
+        tol = self.options.tie_tol
+        if self._fb:
+            r = np.hypot(a, lam)
+            comp = a + lam - r
+            active = a < lam
+        else:
+            comp = np.minimum(a, lam)
+            active = a < lam - tol
+        comp = np.where(self._eq, parts.c, comp)
+        active &= self._ineq
+        return np.concatenate([parts.L, comp]), active
+
+    def jacobian(self, parts: KKTParts, z: np.ndarray, active: np.ndarray) -> np.ndarray:
+        """An element JPhi(z) of the limiting Jacobian of Phi (tie rule in the module docstring)."""
+        n, m = self.game.n, self.game.m
+        J = np.zeros((n + m, n + m))
+        J[:n] = parts.dL_dz
+        if m == 0:
+            return J
+        rows = np.arange(m)
+        if self._fb:
+            a = -parts.c
+            lam = z[n:]
+            r = np.hypot(a, lam)
+            smooth = r > self.options.tie_tol
+            with np.errstate(invalid="ignore", divide="ignore"):
+                da = np.where(smooth, 1.0 - a / np.where(smooth, r, 1.0), _FB_TIE)
+                db = np.where(smooth, 1.0 - lam / np.where(smooth, r, 1.0), _FB_TIE)
+            ineq = self._ineq
+            J[n:][ineq, :n] = -da[ineq, None] * parts.dc_da[ineq]
+            J[n + rows[ineq], n + rows[ineq]] = db[ineq]
+        else:
+            J[n:][active, :n] = -parts.dc_da[active]
+            mult = self._ineq & ~active
+            J[n + rows[mult], n + rows[mult]] = 1.0
+        J[n:][self._eq, :n] = parts.dc_da[self._eq]
+        return J
+
+    # ------------------------------------------------------------------------------------
+    def init(self, z0: np.ndarray | None = None, x: np.ndarray | None = None,
+             rng: np.random.Generator | None = None) -> SSNState:
+        """State at z0 (default: the config's start values, multipliers zero) and plant state x."""
+        game = self.game
+        z = game.z_start() if z0 is None else np.array(z0, dtype=float).reshape(-1)
+        if z.size != game.size:
+            raise ValueError(f"z0 has {z.size} entries; the KKT system has {game.size} unknowns")
+        xv = game.x0 if x is None else np.asarray(x, dtype=float).reshape(-1)
+        if rng is None and self.disturbance.kind in ("jacobian_noise", "residual"):
+            rng = np.random.default_rng(self.disturbance.seed)
+        parts = game.kkt_parts(z, xv)
+        phi, active = self.residual(parts, z)
+        state = SSNState(z=z, x=xv, k=0, phi=phi, residual_norm=_norm(phi), parts=parts, active=active,
+                         step_norm=math.nan, active_set_changes=0, status=Status.RUNNING, message="", rng=rng)
+        return self._check_finite(state)
+
+    def step(self, state: SSNState) -> SSNState:
+        """Exactly one (perturbed) semismooth Newton iteration; a failed state is returned unchanged."""
+        if state.status in FAILURES:
+            return state
+        game, opts = self.game, self.options
+        J = self.jacobian(state.parts, state.z, state.active)
+        rhs = -state.phi
+        d = self.disturbance
+        if d.kind == "jacobian_noise" and d.scale > 0:
+            J = J + d.scale * _noise(state.rng, J.shape, d.distribution)
+        elif d.kind == "residual" and d.scale > 0:
+            w = _noise(state.rng, rhs.shape, d.distribution)
+            rhs = rhs + d.scale * w / max(_norm(w), 1e-300)
+        lu, piv, info = lapack.dgetrf(J)
+        rcond = 0.0
+        if info == 0:
+            anorm = float(np.abs(J).sum(axis=0).max()) if J.size else 0.0
+            rcond, _ = lapack.dgecon(lu, anorm, norm="1")
+        if info != 0 or not rcond >= opts.min_rcond:
+            msg = (f"JPhi(z^{state.k}) is singular or ill-conditioned (reciprocal condition number "
+                   f"{rcond:.1e} < min_rcond {opts.min_rcond:.0e}); the step was not taken. A plain GNE whose "
+                   "agents share a constraint has a continuum of equilibria and a singular JPhi there: "
+                   "consider equilibrium: variational")
+            return replace(state, status=Status.SINGULAR_JACOBIAN, message=msg, rcond=float(rcond))
+        dz, info = lapack.dgetrs(lu, piv, rhs)
+        t = 1.0
+        if opts.line_search:
+            t = self._armijo(state, dz)
+        z = state.z + t * dz
+        parts = game.kkt_parts(z, state.x)
+        phi, active = self.residual(parts, z)
+        changes = int(np.count_nonzero(active != state.active))
+        new = SSNState(z=z, x=state.x, k=state.k + 1, phi=phi, residual_norm=_norm(phi), parts=parts,
+                       active=active, step_norm=t * _norm(dz), active_set_changes=changes,
+                       status=Status.RUNNING, message="", rng=state.rng, rcond=float(rcond))
+        new = self._check_finite(new)
+        if new.status == Status.RUNNING and float(np.max(np.abs(z), initial=0.0)) > opts.divergence_limit:
+            new = replace(new, status=Status.DIVERGED,
+                          message=f"diverged at iteration {new.k}: ||z||_inf = {np.max(np.abs(z)):.2e} exceeds "
+                                  f"divergence_limit {opts.divergence_limit:.0e}")
+        return new
+
+    def terminate(self, state: SSNState) -> tuple[bool, Status]:
+        if state.status in FAILURES:
+            return True, state.status
+        if state.residual_norm <= self.options.tol:
+            return True, Status.CONVERGED
+        if state.k >= self.options.max_iter:
+            return True, Status.MAX_ITER
+        return False, Status.RUNNING
+
+    def finish(self, state: SSNState) -> SSNState:
+        """The state with its final status and a human message (call when terminate says done)."""
+        done, status = self.terminate(state)
+        if not done:
+            return state
+        if status == Status.CONVERGED:
+            msg = (f"converged in {state.k} iteration{'s' if state.k != 1 else ''}: ||Phi|| = "
+                   f"{state.residual_norm:.2e} <= tol {self.options.tol:.0e}")
+        elif status == Status.MAX_ITER:
+            msg = (f"stopped after max_iter = {self.options.max_iter} iterations without convergence: "
+                   f"||Phi|| = {state.residual_norm:.2e} > tol {self.options.tol:.0e}")
+        else:
+            msg = state.message
+        return replace(state, status=status, message=msg)
+
+    # ------------------------------------------------------------------------------------
+    def _armijo(self, state: SSNState, dz: np.ndarray, sigma: float = 1e-4, beta: float = 0.5,
+                t_min: float = 1e-10) -> float:
+        """Backtracking on the merit 1/2||Phi||^2 along the Newton direction."""
+        theta0 = 0.5 * state.residual_norm**2
+        t = 1.0
+        while t >= t_min:
+            z = state.z + t * dz
+            phi, _ = self.residual(self.game.kkt_parts(z, state.x), z)
+            theta = 0.5 * float(phi @ phi)
+            if math.isfinite(theta) and theta <= (1.0 - 2.0 * sigma * t) * theta0:
+                return t
+            t *= beta
+        return t / beta
+
+    def _check_finite(self, state: SSNState) -> SSNState:
+        bad = ~np.isfinite(state.phi)
+        if not bad.any():
+            return state
+        row = int(np.flatnonzero(bad)[0])
+        return replace(state, status=Status.NAN,
+                       message=f"Phi(z^{state.k}) is not finite (first at {describe_row(self.game, row)}): an "
+                               "expression is undefined or overflows there (e.g. log or sqrt of a negative number)")
+
+
+def describe_row(game: CompiledGame, row: int) -> str:
+    """Human name of row ``row`` of Phi."""
+    n = game.n
+    if row < n:
+        for name, sl, vars_ in zip(game.agent_names, game.agent_slices, game.variable_names, strict=True):
+            if sl.start <= row < sl.stop:
+                j = row - sl.start
+                var = vars_[j % len(vars_)]
+                stage = "" if game.kind == "static" else f" [tau={j // len(vars_)}]"
+                return f"the stationarity of {name} in {var}{stage}"
+    info = game.constraints[row - n]
+    owner = "shared" if info.owner is None else game.agent_names[info.owner]
+    return f"the constraint of {owner}: {info.label}"
+
+
+def _norm(v: np.ndarray) -> float:
+    return float(np.sqrt(v @ v)) if v.size else 0.0
+
+
+def _noise(rng: np.random.Generator, shape: tuple[int, ...], distribution: str) -> np.ndarray:
+    if distribution == "uniform":
+        return rng.uniform(-1.0, 1.0, size=shape)
+    return rng.standard_normal(size=shape)
