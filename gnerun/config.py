@@ -99,7 +99,7 @@ class LinearDynamics(Strict):
 
 
 def _dynamics_tag(v: Any) -> str:
-    if isinstance(v, dict) and ("A" in v or "B" in v):
+    if isinstance(v, LinearDynamics) or (isinstance(v, dict) and ("A" in v or "B" in v)):
         return "linear"
     return "expressions"
 

@@ -69,6 +69,7 @@ class CompiledGame:
     horizon: int | None
     state_names: list[str]
     equilibrium: str
+    n_shared: int  # shared constraints declared per stage
     _kkt: ca.Function
     _costs: ca.Function
     _pseudo: ca.Function
@@ -100,6 +101,11 @@ class CompiledGame:
     @property
     def equality_mask(self) -> np.ndarray:
         return np.array([c.equality for c in self.constraints], dtype=bool)
+
+    @property
+    def shares_constraints_generalized(self) -> bool:
+        """True for a plain GNE whose shared constraints each agent carries with its own multiplier."""
+        return self.equilibrium == "generalized" and self.n_shared > 0
 
     def z_start(self) -> np.ndarray:
         """The config's start values, multipliers zero."""
@@ -367,6 +373,7 @@ def compile_game(cfg: Config) -> CompiledGame:
         horizon=T,
         state_names=list(g.states) if isinstance(g, DynamicGame) else [],
         equilibrium=g.equilibrium,
+        n_shared=len(g.shared_constraints),
         _kkt=kkt,
         _costs=costs_fn,
         _pseudo=pseudo,

@@ -165,9 +165,13 @@ class SemismoothNewton:
             rcond, _ = lapack.dgecon(lu, anorm, norm="1")
         if info != 0 or not rcond >= opts.min_rcond:
             msg = (f"JPhi(z^{state.k}) is singular or ill-conditioned (reciprocal condition number "
-                   f"{rcond:.1e} < min_rcond {opts.min_rcond:.0e}); the step was not taken. A plain GNE whose "
-                   "agents share a constraint has a continuum of equilibria and a singular JPhi there: "
-                   "consider equilibrium: variational")
+                   f"{rcond:.1e} < min_rcond {opts.min_rcond:.0e}); the step was not taken")
+            if game.shares_constraints_generalized:
+                msg += ("; this plain GNE has constraints shared by several agents, each with its own "
+                        "multiplier: such games have a continuum of equilibria with a singular JPhi there "
+                        "(consider equilibrium: variational)")
+            elif not opts.line_search:
+                msg += "; the pure method may have left the region of convergence (try solver.line_search: true)"
             return replace(state, status=Status.SINGULAR_JACOBIAN, message=msg, rcond=float(rcond))
         dz, info = lapack.dgetrs(lu, piv, rhs)
         t = 1.0

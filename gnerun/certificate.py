@@ -1,0 +1,117 @@
+"""Equilibrium certificates: is z = (a, lambda) really a (generalized) Nash equilibrium?
+
+Two independent checks. The KKT residuals are read off the compiled KKT parts. The best-response
+gaps do not use the Newton machinery at all: each agent's own problem
+
+    min_{a_i} J_i(a_i, a_-i)  s.t. its own constraints g_i(a_i, a_-i) <= 0 (and h_i = 0)
+
+is solved by scipy's SLSQP with the other agents fixed at a_-i, from the candidate and from the
+config's start values, and gap_i = J_i(a) - (best value found) is reported. A gap near zero (or
+slightly negative, at the level of SLSQP's tolerance) says that no agent can improve unilaterally;
+for nonconvex agent problems it is a local statement.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+
+import numpy as np
+from scipy.optimize import minimize
+
+from .game import CompiledGame
+
+FEASIBILITY_TOL = 1e-9
+
+
+def kkt_residuals(game: CompiledGame, z: np.ndarray, x: np.ndarray | None = None) -> dict[str, float]:
+    """Natural KKT residual (infinity norm of [L; min(-g, lambda); h]) and its parts."""
+    n = game.n
+    parts = game.kkt_parts(z, x)
+    lam = z[n:]
+    eq = game.equality_mask
+    ineq = ~eq
+    c = parts.c
+    stationarity = float(np.max(np.abs(parts.L), initial=0.0))
+    primal = float(max(np.max(c[ineq], initial=0.0), np.max(np.abs(c[eq]), initial=0.0), 0.0))
+    dual = float(max(np.max(-lam[ineq], initial=0.0), 0.0)) + 0.0  # no -0.0
+    comp = float(np.max(np.abs(lam[ineq] * c[ineq]), initial=0.0))
+    natural = float(max(stationarity, np.max(np.abs(np.minimum(-c[ineq], lam[ineq])), initial=0.0),
+                        np.max(np.abs(c[eq]), initial=0.0)))
+    return {
+        "kkt_residual": natural,
+        "stationarity": stationarity,
+        "primal_infeasibility": primal,
+        "dual_infeasibility": dual,
+        "complementarity": comp,
+    }
+
+
+def best_response(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | None = None,
+                  starts: list[np.ndarray] | None = None) -> tuple[float | None, np.ndarray | None, str]:
+    """Agent ``agent``'s best response to a_-i: (value, its decision, a note)."""
+    sl = game.agent_slices[agent]
+    rows = game.constraint_rows(agent)
+    eq_rows = rows[game.equality_mask[rows]]
+    in_rows = rows[~game.equality_mask[rows]]
+    m = game.m
+    zeros = np.zeros(m)
+
+    def full(ai: np.ndarray) -> np.ndarray:
+        b = a.copy()
+        b[sl] = ai
+        return b
+
+    def parts(ai: np.ndarray):
+        return game.kkt_parts(np.concatenate([full(ai), zeros]), x)
+
+    def objective(ai: np.ndarray) -> tuple[float, np.ndarray]:
+        b = full(ai)
+        return float(game.costs(b, x)[agent]), game.cost_gradients(b, x)[agent, sl]
+
+    constraints = []
+    if in_rows.size:
+        constraints.append({"type": "ineq", "fun": lambda ai: -parts(ai).c[in_rows],
+                            "jac": lambda ai: -parts(ai).dc_da[in_rows][:, sl]})
+    if eq_rows.size:
+        constraints.append({"type": "eq", "fun": lambda ai: parts(ai).c[eq_rows],
+                            "jac": lambda ai: parts(ai).dc_da[eq_rows][:, sl]})
+    candidates = starts if starts is not None else [a[sl], game.a_start[sl]]
+    best_val, best_x, notes = None, None, []
+    for s in candidates:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            res = minimize(objective, np.array(s, dtype=float), jac=True, method="SLSQP", constraints=constraints,
+                           options={"ftol": 1e-15, "maxiter": 1000})
+        ai = np.asarray(res.x, dtype=float)
+        c = parts(ai).c
+        viol = max(float(np.max(c[in_rows], initial=0.0)), float(np.max(np.abs(c[eq_rows]), initial=0.0)))
+        val = objective(ai)[0]
+        if not math.isfinite(val) or viol > FEASIBILITY_TOL * max(1.0, float(np.max(np.abs(ai), initial=0.0))):
+            notes.append(f"SLSQP from a start ended infeasible ({res.message})")
+            continue
+        if best_val is None or val < best_val:
+            best_val, best_x = val, ai
+    note = "; ".join(notes) if best_val is None else "ok"
+    return best_val, best_x, note
+
+
+def certificate(game: CompiledGame, z: np.ndarray, x: np.ndarray | None = None) -> dict:
+    """KKT residuals and every agent's best-response gap at z (SPEC §4 ``certificate``)."""
+    n = game.n
+    a = np.asarray(z[:n], dtype=float)
+    out: dict = kkt_residuals(game, z, x)
+    if not np.all(np.isfinite(z)):
+        out["best_response_gap"] = {name: None for name in game.agent_names}
+        out["best_response_note"] = {name: "the candidate is not finite" for name in game.agent_names}
+        return out
+    values = game.costs(a, x)
+    gaps: dict[str, float | None] = {}
+    notes: dict[str, str] = {}
+    for i, name in enumerate(game.agent_names):
+        best, _, note = best_response(game, i, a, x)
+        gaps[name] = None if best is None else float(values[i] - best)
+        notes[name] = note
+    out["best_response_gap"] = gaps
+    out["best_response_note"] = notes
+    return out

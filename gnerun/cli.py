@@ -1,0 +1,153 @@
+"""The `gnerun` command line: thin commands over the library (SPEC §2).
+
+Exit codes: 0 success (a run that ended without converging is still a success: its status says so),
+2 bad input (config, arguments, unreadable file), 1 anything else. Errors are one line on stderr;
+``--debug`` shows the traceback. Heavy modules (numpy, CasADi, scipy, mcap) are imported inside
+the commands, so that ``gnerun --help`` stays fast.
+"""
+
+from __future__ import annotations
+
+import sys
+import traceback
+from pathlib import Path
+from typing import Annotated, NoReturn
+
+import typer
+
+from . import __version__
+from .errors import InputError
+
+app = typer.Typer(
+    add_completion=False,
+    no_args_is_help=True,
+    pretty_exceptions_enable=False,
+    rich_markup_mode=None,
+    help="Newton-type equilibrium seeking in games and game-theoretic MPC (semismooth Newton on the "
+    "KKT system of generalized Nash games). Every iterate is logged to MCAP.",
+)
+
+_options = {"debug": False}
+
+ConfigArg = Annotated[Path, typer.Argument(help="Experiment config (YAML).", show_default=False)]
+SetOpt = Annotated[
+    list[str] | None,
+    typer.Option("--set", help="Override a config field: key.path=value (value read as YAML, e.g. run.K=[1,7]).",
+                 show_default=False),
+]
+OutOpt = Annotated[
+    Path | None,
+    typer.Option("--out", help="Run directory (default: runs/<config name>-<UTC timestamp>/).", show_default=False),
+]
+QuietOpt = Annotated[bool, typer.Option("--quiet", "-q", help="Print nothing but errors.")]
+ForceOpt = Annotated[bool, typer.Option("--force", help="Write into an existing, non-empty run directory.")]
+
+
+def _version(value: bool) -> None:
+    if value:
+        typer.echo(f"gnerun {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _main(
+    debug: Annotated[bool, typer.Option("--debug", help="Show Python tracebacks for errors.")] = False,
+    version: Annotated[bool | None, typer.Option("--version", callback=_version, is_eager=True,
+                                                 help="Print the version and exit.")] = None,
+) -> None:
+    _options["debug"] = debug
+
+
+def _fail(exc: BaseException) -> NoReturn:
+    if _options["debug"]:
+        traceback.print_exception(exc)
+    if isinstance(exc, InputError):
+        typer.echo(f"error: {exc}", err=True)
+        raise typer.Exit(2)
+    typer.echo(f"error: {type(exc).__name__}: {exc} (run with --debug for the traceback)", err=True)
+    raise typer.Exit(1)
+
+
+def _load(config: Path, overrides: list[str] | None):
+    from .config import load_config
+
+    return load_config(config, overrides or [])
+
+
+def _fmt(v: float | None, spec: str = ".3e") -> str:
+    if v is None or v != v:
+        return "-"
+    return format(v, spec)
+
+
+@app.command()
+def validate(config: ConfigArg, set_: SetOpt = None, quiet: QuietOpt = False) -> None:
+    """Check a config without running it; print every problem found."""
+    from .errors import ConfigError
+
+    try:
+        cfg = _load(config, set_)
+        from .game import compile_game
+
+        game = compile_game(cfg)
+    except ConfigError as e:
+        for p in e.problems:
+            typer.echo(f"error: {p}", err=True)
+        raise typer.Exit(2) from None
+    except BaseException as e:  # noqa: BLE001 - every failure becomes one message
+        if isinstance(e, typer.Exit):
+            raise
+        _fail(e)
+    if not quiet:
+        typer.echo(f"{config}: ok ({cfg.game.kind} game '{cfg.name}': {len(game.agent_names)} agents, "
+                   f"{game.n} decisions, {game.m} multipliers)")
+
+
+@app.command()
+def solve(config: ConfigArg, out: OutOpt = None, set_: SetOpt = None, quiet: QuietOpt = False,
+          force: ForceOpt = False) -> None:
+    """Solve one equilibrium problem (a static game, or a dynamic game at its x0)."""
+    try:
+        cfg = _load(config, set_)
+        from .rundir import default_run_dir
+        from .solving import solve as run_solve
+
+        out_dir = out if out is not None else default_run_dir(cfg)
+
+        def show(state, error_norm: float | None) -> None:
+            if quiet:
+                return
+            if state.k == 0:
+                typer.echo(f"gnerun solve {config}: {cfg.solver.kind} ({cfg.solver.complementarity} map), "
+                           f"tol {cfg.solver.tol:.0e}, disturbance {cfg.disturbance.kind}")
+                typer.echo(f"{'k':>4}  {'||Phi||':>10}  {'||z-z*||':>10}  {'||dz||':>10}  {'changes':>7}")
+            typer.echo(f"{state.k:>4}  {_fmt(state.residual_norm):>10}  {_fmt(error_norm):>10}  "
+                       f"{_fmt(state.step_norm):>10}  {state.active_set_changes:>7}")
+
+        result = run_solve(cfg, out=out_dir, force=force, on_iterate=show)
+    except BaseException as e:  # noqa: BLE001
+        if isinstance(e, typer.Exit):
+            raise
+        _fail(e)
+    if quiet:
+        return
+    cert = result.certificate
+    typer.echo(f"status: {result.status}: {result.message}")
+    gaps = ", ".join(f"{k} {_fmt(v, '.1e')}" for k, v in cert["best_response_gap"].items())
+    typer.echo(f"certificate: KKT residual {_fmt(cert['kkt_residual'], '.1e')}; best-response gaps: {gaps}")
+    typer.echo(f"solver time {result.time_s * 1e3:.2f} ms ({result.iterations} iterations); "
+               f"compile {result.compile_time_s * 1e3:.0f} ms")
+    typer.echo(f"run directory: {result.run_dir}")
+
+
+def main() -> None:
+    """Entry point of the `gnerun` console script."""
+    try:
+        app(standalone_mode=True)
+    except KeyboardInterrupt:
+        typer.echo("interrupted", err=True)
+        sys.exit(130)
+
+
+if __name__ == "__main__":
+    main()

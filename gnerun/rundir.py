@@ -1,0 +1,95 @@
+"""Run directories (SPEC §4): config.yaml, run.mcap, summary.json."""
+
+from __future__ import annotations
+
+import datetime as dt
+import functools
+import json
+import math
+import subprocess
+from pathlib import Path
+
+from . import __version__
+from .config import Config
+from .errors import InputError
+from .mcap_log import RunLog
+from .messages import SolveIterate
+
+
+def default_run_dir(cfg: Config, root: str | Path = "runs") -> Path:
+    stamp = dt.datetime.now(dt.UTC).strftime("%Y%m%dT%H%M%SZ")
+    return Path(root) / f"{cfg.name}-{stamp}"
+
+
+@functools.lru_cache(maxsize=1)
+def git_describe() -> str:
+    """``git describe`` of the gnerun sources, or "unknown" outside a checkout."""
+    here = Path(__file__).resolve().parent
+    try:
+        out = subprocess.run(["git", "-C", str(here), "describe", "--always", "--dirty", "--tags"],
+                             capture_output=True, text=True, timeout=5, check=False)
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+    return out.stdout.strip() if out.returncode == 0 and out.stdout.strip() else "unknown"
+
+
+class RunDirectory:
+    """An open run directory and its MCAP log."""
+
+    def __init__(self, path: Path, log: RunLog):
+        self.path = path
+        self.log_sink = log
+
+    @classmethod
+    def create(cls, out: str | Path, cfg: Config, *, command: str, force: bool = False) -> RunDirectory:
+        path = Path(out)
+        if path.exists() and not path.is_dir():
+            raise InputError(f"{path}: exists and is not a directory")
+        if path.is_dir() and any(path.iterdir()) and not force:
+            raise InputError(f"{path}: the run directory exists and is not empty (use --force to overwrite)")
+        try:
+            path.mkdir(parents=True, exist_ok=True)
+            config_yaml = cfg.resolved_yaml()
+            (path / "config.yaml").write_text(config_yaml)
+            for stale in ("summary.json",):
+                (path / stale).unlink(missing_ok=True)
+            metadata = {
+                "version": __version__,
+                "config_hash": cfg.config_hash(),
+                "seed": str(cfg.disturbance.seed),
+                "git_describe": git_describe(),
+                "command": command,
+                "config_name": cfg.name,
+                "created_utc": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
+            }
+            log = RunLog(path / "run.mcap", config_yaml=config_yaml, metadata=metadata)
+        except PermissionError as e:
+            raise InputError(f"{path}: cannot write the run directory: {e.strerror or e}") from None
+        except OSError as e:
+            raise InputError(f"{path}: cannot write the run directory: {e.strerror or e}") from None
+        return cls(path, log)
+
+    def write_iterate(self, state, error_norm: float | None) -> None:
+        r = state.residual_norm
+        self.log_sink.write("/solve/iterate", SolveIterate(
+            k=state.k,
+            z=state.z.tolist(),
+            residual_norm=r,
+            log10_residual_norm=math.log10(r) if r > 0 and math.isfinite(r) else None,
+            error_norm=error_norm,
+            step_norm=state.step_norm,
+            active_set_changes=state.active_set_changes,
+        ))
+        self.log_sink.flush()
+
+    def log(self, level: str, text: str) -> None:
+        self.log_sink.log(level, text)
+        self.log_sink.flush()
+
+    def write_summary(self, summary: dict) -> None:
+        tmp = self.path / "summary.json.tmp"
+        tmp.write_text(json.dumps(summary, indent=2, allow_nan=False) + "\n")
+        tmp.replace(self.path / "summary.json")
+
+    def close(self) -> None:
+        self.log_sink.close()

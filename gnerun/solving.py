@@ -1,0 +1,249 @@
+"""`gnerun solve`: one equilibrium problem, every iterate logged, a certificate at the end.
+
+The driver loop is the only place where the solver meets the log: the solver steps, the loop
+writes each iterate to the :class:`~gnerun.mcap_log.RunLog` sink and flushes it.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .config import Config
+from .game import CompiledGame, compile_game
+from .rundir import RunDirectory
+from .ssn import SemismoothNewton, SSNState, Status
+
+
+def make_solver(cfg: Config, game: CompiledGame) -> SemismoothNewton:
+    """The solver the config asks for (``solver.kind``), with its disturbance model."""
+    if cfg.solver.kind == "ssn":
+        return SemismoothNewton(game, cfg.solver, cfg.disturbance)
+    raise ValueError(f"unknown solver kind {cfg.solver.kind!r}")
+
+
+def iterate(solver: SemismoothNewton, state: SSNState,
+            on_iterate: Callable[[SSNState], None] | None = None) -> SSNState:
+    """Step until ``terminate`` says done; ``on_iterate`` sees z^0, z^1, ... (the sink hook)."""
+    if on_iterate is not None:
+        on_iterate(state)
+    while True:
+        done, _ = solver.terminate(state)
+        if done:
+            return solver.finish(state)
+        previous = state.k
+        state = solver.step(state)
+        if on_iterate is not None and state.k != previous:  # a failed step makes no new iterate
+            on_iterate(state)
+
+
+@dataclass
+class Reference:
+    """z*: a converged, undisturbed re-solve (the yardstick of error histories)."""
+
+    z: np.ndarray
+    status: Status
+    residual_norm: float
+    iterations: int
+    message: str
+
+    @property
+    def converged(self) -> bool:
+        return self.status == Status.CONVERGED
+
+
+def reference_solution(game: CompiledGame, cfg: Config, z0: np.ndarray, x: np.ndarray | None = None,
+                       polish: int = 3) -> Reference:
+    """Solve undisturbed from z0 (pure method, then with line search if that fails) and polish.
+
+    Polishing takes up to ``polish`` further Newton steps while ||Phi|| keeps decreasing, so that z*
+    is accurate to rounding, not just to ``solver.tol``.
+    """
+    last: SSNState | None = None
+    for line_search in dict.fromkeys([cfg.solver.line_search, True]):
+        opts = cfg.solver.model_copy(update={"max_iter": max(cfg.solver.max_iter, 100), "line_search": line_search})
+        solver = SemismoothNewton(game, opts, None)
+        state = iterate(solver, solver.init(z0, x))
+        last = state
+        if state.converged:
+            for _ in range(polish):
+                nxt = solver.step(state)
+                if nxt.status != Status.RUNNING or not nxt.residual_norm < state.residual_norm:
+                    break
+                state = nxt
+            return Reference(state.z, Status.CONVERGED, state.residual_norm, state.k, state.message)
+    assert last is not None
+    return Reference(last.z, last.status, last.residual_norm, last.k, last.message)
+
+
+@dataclass
+class SolveResult:
+    """The outcome of :func:`solve` (scipy-style: status, message, success, iterations, z)."""
+
+    status: str
+    message: str
+    iterations: int
+    z: np.ndarray
+    residual_norm: float
+    residual_history: list[float]
+    error_history: list[float] | None
+    step_norms: list[float]
+    active_set_changes: list[int]
+    solution: dict
+    multipliers: dict
+    z_star: np.ndarray | None
+    reference_status: str
+    certificate: dict
+    time_s: float
+    compile_time_s: float
+    x: np.ndarray
+    game: CompiledGame = field(repr=False)
+    run_dir: Path | None = None
+
+    @property
+    def success(self) -> bool:
+        return self.status == Status.CONVERGED
+
+    @property
+    def a(self) -> np.ndarray:
+        return self.z[: self.game.n]
+
+    @property
+    def lam(self) -> np.ndarray:
+        return self.z[self.game.n :]
+
+    def summary(self) -> dict:
+        """summary.json (SPEC §4)."""
+        g = self.game
+        return _clean({
+            "status": self.status,
+            "message": self.message,
+            "iterations": self.iterations,
+            "residual_norm": self.residual_norm,
+            "solution": self.solution,
+            "multipliers": self.multipliers,
+            "constraints": {
+                name: [c.label for c in g.constraints[sl]] for name, sl in zip(g.agent_names, g.multiplier_slices,
+                                                                              strict=True)
+            } | ({"shared": [c.label for c in g.constraints[g.shared_slice]]} if g.shared_slice.stop > g.shared_slice.start
+                 else {}),
+            "residual_history": self.residual_history,
+            "error_history": self.error_history,
+            "step_norm_history": self.step_norms,
+            "active_set_changes": self.active_set_changes,
+            "reference": {"status": self.reference_status},
+            "certificate": self.certificate,
+            "x": self.x.tolist(),
+            "z": self.z.tolist(),
+            "z_star": None if self.z_star is None else self.z_star.tolist(),
+            "time_s": self.time_s,
+            "compile_time_s": self.compile_time_s,
+        })
+
+
+def _clean(obj):
+    if isinstance(obj, float | np.floating):
+        v = float(obj)
+        return v if math.isfinite(v) else None
+    if isinstance(obj, np.integer):
+        return int(obj)
+    if isinstance(obj, dict):
+        return {str(k): _clean(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_clean(v) for v in obj]
+    return obj
+
+
+def solve(cfg: Config, out: str | Path | None = None, *, force: bool = False,
+          on_iterate: Callable[[SSNState, float | None], None] | None = None) -> SolveResult:
+    """Solve the config's game (a static game, or a dynamic game at its x0).
+
+    ``out=None`` writes nothing; otherwise ``out`` becomes a run directory (SPEC §4) with
+    ``config.yaml``, ``run.mcap`` (every iterate, flushed as it is made) and ``summary.json``.
+    ``on_iterate(state, error_norm)`` sees every iterate as it is made (error_norm = ||z^k - z*||).
+    """
+    from .certificate import certificate
+
+    t0 = time.perf_counter()
+    game = compile_game(cfg)
+    compile_time = time.perf_counter() - t0
+    solver = make_solver(cfg, game)
+    x = game.x0
+    z0 = game.z_start()
+    run = RunDirectory.create(out, cfg, command="solve", force=force) if out is not None else None
+    try:
+        ref = reference_solution(game, cfg, z0, x)
+    except BaseException:
+        if run is not None:
+            run.close()
+        raise
+    z_star = ref.z if ref.converged else None
+    history: list[SSNState] = []
+    sink_time = 0.0
+
+    def record(state: SSNState) -> None:
+        nonlocal sink_time
+        t = time.perf_counter()
+        history.append(state)
+        error = None if z_star is None else float(np.linalg.norm(state.z - z_star))
+        if run is not None:
+            run.write_iterate(state, error)
+        if on_iterate is not None:
+            on_iterate(state, error)
+        sink_time += time.perf_counter() - t
+
+    try:
+        if run is not None:
+            run.log("info", f"solve {cfg.name}: {game.n} decisions, {game.m} multipliers, {cfg.solver.kind} "
+                            f"({cfg.solver.complementarity}), disturbance {cfg.disturbance.kind}")
+            if not ref.converged:
+                run.log("warning", f"the undisturbed reference solve did not converge ({ref.message}); "
+                                   "error norms are not available")
+        t = time.perf_counter()
+        state = iterate(solver, solver.init(z0, x), record)
+        elapsed = time.perf_counter() - t - sink_time  # the solver alone: the sink's I/O is excluded
+        cert = certificate(game, state.z, x)
+        errors = None if z_star is None else [float(np.linalg.norm(s.z - z_star)) for s in history]
+        result = SolveResult(
+            status=str(state.status),
+            message=state.message,
+            iterations=state.k,
+            z=state.z,
+            residual_norm=state.residual_norm,
+            residual_history=[s.residual_norm for s in history],
+            error_history=errors,
+            step_norms=[s.step_norm for s in history],
+            active_set_changes=[s.active_set_changes for s in history],
+            solution=game.solution_by_agent(state.z[: game.n]),
+            multipliers=game.multipliers_by_agent(state.z[game.n :]),
+            z_star=z_star,
+            reference_status=str(ref.status),
+            certificate=cert,
+            time_s=elapsed,
+            compile_time_s=compile_time,
+            x=np.asarray(x, dtype=float),
+            game=game,
+            run_dir=run.path if run is not None else None,
+        )
+        if run is not None:
+            level = "info" if result.success else "warning"
+            run.log(level, f"status {result.status}: {result.message}")
+            run.write_summary(result.summary())
+        return result
+    except BaseException as exc:
+        if run is not None:
+            run.log("error", f"the run stopped: {type(exc).__name__}: {exc}")
+        raise
+    finally:
+        if run is not None:
+            run.close()
+
+
+def summary_json(summary: dict) -> str:
+    return json.dumps(summary, indent=2, allow_nan=False)
