@@ -168,6 +168,12 @@ class Config(Strict):
 
     _source: str | None = PrivateAttr(default=None)
 
+    def __eq__(self, other: object) -> bool:
+        # the same experiment, wherever it was loaded from
+        return isinstance(other, Config) and self.model_dump() == other.model_dump()
+
+    __hash__ = None  # type: ignore[assignment]
+
     @property
     def source(self) -> str | None:
         """The file this config was loaded from, if any."""
@@ -386,117 +392,109 @@ def _field_model(model: Any, part: Any, node: Any) -> Any:
 # ---------------------------------------------------------------------------------------------
 
 
-def _check_identifier(name: str, path: PathKey, smap: SourceMap, problems: list[str], what: str,
-                      *, key: bool = False) -> None:
-    dotted = ".".join(str(p) for p in path)
-    if not _IDENTIFIER.match(name):
-        problems.append(f"{smap.locate(path, key=key)}: {dotted}: {what} {name!r} is not a valid name "
-                        "(letters, digits and _, not starting with a digit)")
-    elif name in FUNCTIONS:
-        problems.append(f"{smap.locate(path, key=key)}: {dotted}: {what} {name!r} is the name of a function")
-
-
 def check_semantics(cfg: Config, smap: SourceMap) -> list[str]:
     """Every problem a schema cannot see, as ``file:line:column: path: message`` lines."""
     problems: list[str] = []
+
+    def report(path: PathKey, message: str, *, key: bool = False, column: int | None = None) -> None:
+        where = smap.locate_in_text(path, column) if column is not None else smap.locate(path, key=key)
+        problems.append(f"{where}: {'.'.join(str(p) for p in path)}: {message}")
+
     g = cfg.game
     seen: dict[str, str] = {}
 
     def declare(name: str, path: PathKey, what: str, *, key: bool = False) -> None:
-        dotted = ".".join(str(p) for p in path)
-        _check_identifier(name, path, smap, problems, what, key=key)
-        if name in seen:
-            problems.append(f"{smap.locate(path, key=key)}: {dotted}: {what} {name!r} is already declared as {seen[name]}")
+        if not _IDENTIFIER.match(name):
+            report(path, f"{what} {name!r} is not a valid name (letters, digits and _, not starting with a digit)",
+                   key=key)
+        elif name in FUNCTIONS:
+            report(path, f"{what} {name!r} is the name of a function", key=key)
+        elif name in seen:
+            report(path, f"{what} {name!r} is already declared as {seen[name]}", key=key)
         else:
             seen[name] = what
 
     for pname, value in g.parameters.items():
         declare(pname, ("game", "parameters", pname), "parameter", key=True)
         if not math.isfinite(value):
-            problems.append(f"{smap.locate(('game', 'parameters', pname))}: game.parameters.{pname}: must be finite")
+            report(("game", "parameters", pname), "must be finite")
 
     agent_names: set[str] = set()
     for i, agent in enumerate(g.agents):
         if agent.name in agent_names:
-            problems.append(f"{smap.locate(('game', 'agents', i, 'name'))}: game.agents.{i}.name: "
-                            f"agent {agent.name!r} is declared twice")
+            report(("game", "agents", i, "name"), f"agent {agent.name!r} is declared twice")
         agent_names.add(agent.name)
 
-    variable_field = "variables" if isinstance(g, StaticGame) else "inputs"
-    if isinstance(g, DynamicGame):
+    static = isinstance(g, StaticGame)
+    variable_field = "variables" if static else "inputs"
+    if not static:
         for j, s in enumerate(g.states):
             declare(s, ("game", "states", j), "state")
     for i, agent in enumerate(g.agents):
-        variables = agent.variables if isinstance(agent, StaticAgent) else agent.inputs
+        variables = agent.variables if static else agent.inputs
         if not variables:
-            problems.append(f"{smap.locate(('game', 'agents', i, variable_field))}: game.agents.{i}.{variable_field}: "
-                            f"agent {agent.name!r} has no {variable_field}")
+            report(("game", "agents", i, variable_field), f"agent {agent.name!r} has no {variable_field}")
         for vname, var in variables.items():
             path = ("game", "agents", i, variable_field, vname)
-            declare(vname, path, "variable" if isinstance(g, StaticGame) else "input", key=True)
+            declare(vname, path, "variable" if static else "input", key=True)
             lo = var.lower if var.lower is not None else -math.inf
             hi = var.upper if var.upper is not None else math.inf
-            if lo > hi:
-                problems.append(f"{smap.locate(path)}: {'.'.join(map(str, path))}: lower bound {lo} exceeds upper bound {hi}")
             if math.isnan(lo) or math.isnan(hi) or not math.isfinite(var.start):
-                problems.append(f"{smap.locate(path)}: {'.'.join(map(str, path))}: bounds and start must be numbers")
-
-    params = set(g.parameters)
+                report(path, "bounds and start must be numbers (start finite)")
+            elif lo > hi:
+                report(path, f"lower bound {lo} exceeds upper bound {hi}")
 
     def check(text: str, path: PathKey, names: set[str], constraint: bool) -> None:
-        dotted = ".".join(str(p) for p in path)
         try:
             parsed = parse_constraint(text) if constraint else parse_expression(text)
             check_names(parsed, names)
         except ExpressionError as e:
-            problems.append(f"{smap.locate_in_text(path, e.column)}: {dotted}: {e.describe()}")
+            report(path, e.describe(), column=e.column)
 
-    if isinstance(g, StaticGame):
-        all_vars = {v for a in g.agents for v in a.variables}
-        scope = all_vars | params
+    params = set(g.parameters)
+    decisions = {v for a in g.agents for v in (a.variables if static else a.inputs)}
+    if static:
+        scope = decisions | params
         for i, agent in enumerate(g.agents):
             check(agent.cost, ("game", "agents", i, "cost"), scope, False)
             for j, c in enumerate(agent.constraints):
                 check(c, ("game", "agents", i, "constraints", j), scope, True)
     else:
-        inputs = [u for a in g.agents for u in a.inputs]
         states = set(g.states)
-        full = states | set(inputs) | params
+        scope = states | decisions | params
         for i, agent in enumerate(g.agents):
-            check(agent.stage_cost, ("game", "agents", i, "stage_cost"), full, False)
+            check(agent.stage_cost, ("game", "agents", i, "stage_cost"), scope, False)
             check(agent.terminal_cost, ("game", "agents", i, "terminal_cost"), states | params, False)
             for j, c in enumerate(agent.constraints):
-                check(c, ("game", "agents", i, "constraints", j), full, True)
+                check(c, ("game", "agents", i, "constraints", j), scope, True)
+        inputs = [u for a in g.agents for u in a.inputs]
         nx, nu = len(g.states), len(inputs)
         if len(g.x0) != nx:
-            problems.append(f"{smap.locate(('game', 'x0'))}: game.x0: has {len(g.x0)} entries for {nx} states")
+            report(("game", "x0"), f"has {len(g.x0)} entries for {nx} states")
         elif not all(math.isfinite(v) for v in g.x0):
-            problems.append(f"{smap.locate(('game', 'x0'))}: game.x0: must be finite")
+            report(("game", "x0"), "must be finite")
         if isinstance(g.dynamics, LinearDynamics):
             A, B = g.dynamics.A, g.dynamics.B
             if len(A) != nx or any(len(r) != nx for r in A):
-                problems.append(f"{smap.locate(('game', 'dynamics', 'A'))}: game.dynamics.A: must be {nx} x {nx} "
-                                f"(states {', '.join(g.states)})")
+                report(("game", "dynamics", "A"), f"must be {nx} x {nx} (states {', '.join(g.states)})")
             if len(B) != nx or any(len(r) != nu for r in B):
-                problems.append(f"{smap.locate(('game', 'dynamics', 'B'))}: game.dynamics.B: must be {nx} x {nu} "
-                                f"(inputs in agent order: {', '.join(inputs)})")
+                report(("game", "dynamics", "B"), f"must be {nx} x {nu} (inputs in agent order: {', '.join(inputs)})")
+            if not all(math.isfinite(v) for row in A + B for v in row):
+                report(("game", "dynamics"), "A and B must be finite")
         else:
             for s in g.states:
                 if s not in g.dynamics:
-                    problems.append(f"{smap.locate(('game', 'dynamics'))}: game.dynamics: no equation for state {s!r}")
+                    report(("game", "dynamics"), f"no equation for state {s!r}")
             for s, text in g.dynamics.items():
                 if s not in states:
-                    problems.append(f"{smap.locate(('game', 'dynamics', s), key=True)}: game.dynamics.{s}: "
-                                    f"{s!r} is not a declared state (states: {', '.join(g.states)})")
-                    continue
-                check(text, ("game", "dynamics", s), full, False)
-    scope_shared = ({v for a in g.agents for v in a.variables} | params) if isinstance(g, StaticGame) else (
-        set(g.states) | {u for a in g.agents for u in a.inputs} | params)
+                    report(("game", "dynamics", s), f"{s!r} is not a declared state (states: {', '.join(g.states)})",
+                           key=True)
+                else:
+                    check(text, ("game", "dynamics", s), scope, False)
     for j, c in enumerate(g.shared_constraints):
-        check(c, ("game", "shared_constraints", j), scope_shared, True)
+        check(c, ("game", "shared_constraints", j), scope, True)
 
-    d = cfg.disturbance
-    if d.kind == "pseudogradient" and cfg.solver.kind == "ssn":
-        problems.append(f"{smap.locate(('disturbance', 'kind'))}: disturbance.kind: 'pseudogradient' perturbs "
-                        "the Josephy-Newton method; with solver.kind 'ssn' use 'jacobian_noise' or 'residual'")
+    if cfg.disturbance.kind == "pseudogradient" and cfg.solver.kind == "ssn":
+        report(("disturbance", "kind"), "'pseudogradient' perturbs the Josephy-Newton method; with solver.kind "
+               "'ssn' use 'jacobian_noise' or 'residual'")
     return problems

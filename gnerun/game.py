@@ -273,7 +273,7 @@ def compile_game(cfg: Config) -> CompiledGame:
                 a_start.append(var.start)
         for i, agent in enumerate(g.agents):
             costs.append(ca.SX(evaluate(parse_expression(agent.cost), env, fns)))
-            for j, (vname, var) in enumerate(agent.variables.items()):
+            for vname, var in agent.variables.items():
                 own_rows[i] += _bound_rows(env[vname], vname, var.lower, var.upper, i, None)
             own_rows[i] += _constraint_rows(agent.constraints, env, fns, i, None)
             if generalized:
@@ -320,7 +320,7 @@ def compile_game(cfg: Config) -> CompiledGame:
         for i in range(N):
             costs.append(ca.SX(stage_sum[i] + evaluate(terminal_cost[i], env_T, fns)))
         a_start = []
-        for i, agent in enumerate(g.agents):
+        for agent in g.agents:
             a_start += [var.start for var in agent.inputs.values()] * (T + 1)
         x0 = np.asarray(g.x0, dtype=float)
 

@@ -118,9 +118,16 @@ class SolveResult:
     def lam(self) -> np.ndarray:
         return self.z[self.game.n :]
 
+    def _constraint_labels(self) -> dict[str, list[str]]:
+        g = self.game
+        labels = {name: [c.label for c in g.constraints[sl]]
+                  for name, sl in zip(g.agent_names, g.multiplier_slices, strict=True)}
+        if g.shared_slice.stop > g.shared_slice.start:
+            labels["shared"] = [c.label for c in g.constraints[g.shared_slice]]
+        return labels
+
     def summary(self) -> dict:
         """summary.json (SPEC §4)."""
-        g = self.game
         return _clean({
             "status": self.status,
             "message": self.message,
@@ -128,11 +135,7 @@ class SolveResult:
             "residual_norm": self.residual_norm,
             "solution": self.solution,
             "multipliers": self.multipliers,
-            "constraints": {
-                name: [c.label for c in g.constraints[sl]] for name, sl in zip(g.agent_names, g.multiplier_slices,
-                                                                              strict=True)
-            } | ({"shared": [c.label for c in g.constraints[g.shared_slice]]} if g.shared_slice.stop > g.shared_slice.start
-                 else {}),
+            "constraints": self._constraint_labels(),
             "residual_history": self.residual_history,
             "error_history": self.error_history,
             "step_norm_history": self.step_norms,

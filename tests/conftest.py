@@ -1,0 +1,36 @@
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+CONFIGS = ROOT / "configs"
+
+# Small dense systems: BLAS threads only add overhead.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+
+@pytest.fixture(scope="session")
+def configs_dir() -> Path:
+    return CONFIGS
+
+
+def gnerun_command() -> list[str]:
+    """The installed console script (the real CLI), next to this interpreter when possible."""
+    script = Path(sys.executable).parent / "gnerun"
+    if script.exists():
+        return [str(script)]
+    found = shutil.which("gnerun")
+    if found:
+        return [found]
+    return [sys.executable, "-m", "gnerun.cli"]
+
+
+def run_cli(*args: str, cwd: Path | None = None, timeout: float = 120) -> subprocess.CompletedProcess:
+    return subprocess.run([*gnerun_command(), *args], capture_output=True, text=True, cwd=cwd, timeout=timeout,
+                          stdin=subprocess.DEVNULL)
