@@ -140,6 +140,71 @@ def solve(config: ConfigArg, out: OutOpt = None, set_: SetOpt = None, quiet: Qui
     typer.echo(f"run directory: {result.run_dir}")
 
 
+@app.command()
+def simulate(config: ConfigArg, out: OutOpt = None, set_: SetOpt = None, quiet: QuietOpt = False,
+             force: ForceOpt = False) -> None:
+    """Run the closed loop (time-distributed CG-MPC) for every K in run.K."""
+    try:
+        cfg = _load(config, set_)
+        from .closed_loop import simulate as run_simulate
+        from .rundir import default_run_dir
+
+        out_dir = out if out is not None else default_run_dir(cfg)
+        if not quiet:
+            typer.echo(f"gnerun simulate {config}: K = {cfg.run.K}, {cfg.run.steps} steps, {cfg.solver.kind} "
+                       f"({cfg.solver.complementarity} map), warm start {cfg.run.warm_start}, solver disturbance "
+                       f"{cfg.disturbance.kind}, plant {cfg.disturbance.plant.kind}")
+        with _progress(cfg, enabled=not quiet and sys.stdout.isatty()) as progress:
+            sim = run_simulate(cfg, out=out_dir, force=force, progress=progress)
+    except BaseException as e:  # noqa: BLE001
+        if isinstance(e, typer.Exit):
+            raise
+        _fail(e)
+    if quiet:
+        return
+    typer.echo(f"{'K':>4}  {'max e':>10}  {'final e':>10}  {'median step':>12}  {'max step':>10}  {'failed':>6}")
+    for K, r in sim.items():
+        failed = sum(s in ("singular_jacobian", "diverged", "nan") for s in r.status)
+        finite = r.e_norm[r.e_norm == r.e_norm]
+        typer.echo(f"{K:>4}  {_fmt(float(finite.max()) if finite.size else None):>10}  {_fmt(float(r.e_norm[-1])):>10}"
+                   f"  {_ms(float(sorted(r.solve_time_s)[len(r.solve_time_s) // 2])):>12}"
+                   f"  {_ms(float(r.solve_time_s.max())):>10}  {failed:>6}")
+    typer.echo(f"run directory: {sim.run_dir}")
+
+
+def _ms(seconds: float) -> str:
+    return f"{seconds * 1e3:.3f} ms"
+
+
+class _progress:
+    """A progress bar per K on a terminal; nothing otherwise."""
+
+    def __init__(self, cfg, enabled: bool):
+        self.cfg = cfg
+        self.enabled = enabled
+        self.bar = None
+        self.tasks: dict[int, int] = {}
+
+    def __enter__(self):
+        if not self.enabled:
+            return None
+        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+        self.bar = Progress(TextColumn("K={task.fields[K]:<3}"), BarColumn(), MofNCompleteColumn(),
+                            TextColumn("e(t) {task.fields[e]}"), TimeElapsedColumn())
+        self.bar.__enter__()
+        for K in dict.fromkeys(self.cfg.run.K):
+            self.tasks[K] = self.bar.add_task("", total=self.cfg.run.steps, K=K, e="-")
+        return self.update
+
+    def update(self, K: int, t: int, steps: int, e: float) -> None:
+        self.bar.update(self.tasks[K], completed=t + 1, e=_fmt(e, ".2e"))
+
+    def __exit__(self, *exc) -> None:
+        if self.bar is not None:
+            self.bar.__exit__(*exc)
+
+
 def main() -> None:
     """Entry point of the `gnerun` console script."""
     try:

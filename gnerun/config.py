@@ -146,16 +146,28 @@ class SolverConfig(Strict):
     divergence_limit: float = Field(1e12, gt=0, description="||z||_inf beyond this is divergence")
 
 
+class PlantDisturbance(Strict):
+    """w(t) in x(t+1) = f(x(t), u(t)) + w(t): gaussian (standard deviation ``scale``), uniform on
+    [-scale, scale], or the constant ``scale``; ``scale`` is one number or one per state."""
+
+    kind: Literal["none", "gaussian", "uniform", "constant"] = "none"
+    scale: float | list[float] = 0.0
+    seed: int = 0
+
+
 class DisturbanceConfig(Strict):
     kind: Literal["none", "jacobian_noise", "residual", "pseudogradient"] = "none"
     scale: float = Field(0.0, ge=0)
     seed: int = 0
     distribution: Literal["normal", "uniform"] = "normal"
+    plant: PlantDisturbance = Field(default_factory=PlantDisturbance)
 
 
 class RunConfig(Strict):
-    K: list[Annotated[int, Field(ge=1)]] = Field(default_factory=lambda: [5], min_length=1)
-    steps: int = Field(30, ge=1)
+    K: list[Annotated[int, Field(ge=1, le=100_000)]] = Field(default_factory=lambda: [5], min_length=1)
+    steps: int = Field(30, ge=1, le=10_000_000)
+    warm_start: Literal["previous", "shift"] = Field(
+        "previous", description="previous: the last iterate (the paper's rule); shift: drop stage 0, repeat the last")
 
 
 class Config(Strict):
@@ -378,6 +390,7 @@ def _field_model(model: Any, part: Any, node: Any) -> Any:
         (Config, "solver"): SolverConfig,
         (Config, "disturbance"): DisturbanceConfig,
         (Config, "run"): RunConfig,
+        (DisturbanceConfig, "plant"): PlantDisturbance,
         (DynamicGame, "dynamics"): LinearDynamics,
         (StaticAgent, "variables"): _VariableMap,
         (DynamicAgent, "inputs"): _VariableMap,
@@ -494,6 +507,16 @@ def check_semantics(cfg: Config, smap: SourceMap) -> list[str]:
     for j, c in enumerate(g.shared_constraints):
         check(c, ("game", "shared_constraints", j), scope, True)
 
+    plant = cfg.disturbance.plant
+    scales = plant.scale if isinstance(plant.scale, list) else [plant.scale]
+    if not all(math.isfinite(v) for v in scales) or (plant.kind != "constant" and any(v < 0 for v in scales)):
+        report(("disturbance", "plant", "scale"), "must be finite" + (" and >= 0" if plant.kind != "constant" else ""))
+    if isinstance(plant.scale, list):
+        nx = 0 if static else len(g.states)
+        if len(plant.scale) != nx:
+            report(("disturbance", "plant", "scale"), f"has {len(plant.scale)} entries for {nx} states")
+    if plant.kind != "none" and static:
+        report(("disturbance", "plant", "kind"), "a static game has no plant")
     if cfg.disturbance.kind == "pseudogradient" and cfg.solver.kind == "ssn":
         report(("disturbance", "kind"), "'pseudogradient' perturbs the Josephy-Newton method; with solver.kind "
                "'ssn' use 'jacobian_noise' or 'residual'")

@@ -192,6 +192,28 @@ class CompiledGame:
             out["shared"] = [_num(v) for v in lam[self.shared_slice]]
         return out
 
+    def agent_indices(self, agent: int) -> np.ndarray:
+        """Indices of z_i = (a_i, lambda_i) in z (common multipliers of shared constraints excluded)."""
+        ms = self.multiplier_slices[agent]
+        return np.r_[np.arange(self.agent_slices[agent].start, self.agent_slices[agent].stop),
+                     self.n + np.arange(ms.start, ms.stop)].astype(int)
+
+    def shift(self, z: np.ndarray) -> np.ndarray:
+        """Shifted warm start of a dynamic game: every stage-major block drops stage 0, repeats stage T."""
+        out = np.array(z, dtype=float)
+        if self.kind != "dynamic":
+            return out
+        stages = self.horizon + 1
+        n = self.n
+        blocks = list(self.agent_slices) + [slice(n + s.start, n + s.stop)
+                                            for s in [*self.multiplier_slices, self.shared_slice]]
+        for sl in blocks:
+            length = sl.stop - sl.start
+            if length:
+                b = out[sl].reshape(stages, length // stages)
+                out[sl] = np.concatenate([b[1:], b[-1:]]).reshape(-1)
+        return out
+
     def first_inputs(self, a: np.ndarray) -> np.ndarray:
         """u(0): every agent's first input, in agent order (what the plant receives)."""
         parts = [a[sl][: len(v)] for sl, v in zip(self.agent_slices, self.variable_names, strict=True)]

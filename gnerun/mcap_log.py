@@ -15,6 +15,7 @@ import time
 from pathlib import Path
 from typing import IO, Any
 
+import numpy as np
 from mcap.writer import CompressionType, Writer
 
 from .messages import TOPICS, LogEntry, Message
@@ -22,14 +23,19 @@ from .messages import TOPICS, LogEntry, Message
 PROFILE = "gnerun"
 
 
-def _finite(obj: Any) -> Any:
-    """Replace NaN and Inf by None, recursively (JSON has no NaN)."""
-    if isinstance(obj, float):
-        return obj if math.isfinite(obj) else None
+def json_ready(obj: Any) -> Any:
+    """numpy values to Python, NaN and Inf to None, recursively (JSON has no NaN)."""
+    if isinstance(obj, float | np.floating):
+        v = float(obj)
+        return v if math.isfinite(v) else None
+    if isinstance(obj, np.integer):
+        return int(obj)
+    if isinstance(obj, np.ndarray):
+        return json_ready(obj.tolist())
     if isinstance(obj, dict):
-        return {k: _finite(v) for k, v in obj.items()}
+        return {str(k): json_ready(v) for k, v in obj.items()}
     if isinstance(obj, list | tuple):
-        return [_finite(v) for v in obj]
+        return [json_ready(v) for v in obj]
     return obj
 
 
@@ -67,7 +73,7 @@ class RunLog:
         if expected is not None and expected is not model:
             raise TypeError(f"topic {topic} carries {expected.__name__}, not {model.__name__}")
         t = time.time_ns() if log_time is None else log_time
-        data = json.dumps(_finite(message.model_dump()), separators=(",", ":"), allow_nan=False).encode()
+        data = json.dumps(json_ready(message.model_dump()), separators=(",", ":"), allow_nan=False).encode()
         self._writer.add_message(channel_id=self._channel(topic, model), log_time=t, publish_time=t, data=data,
                                  sequence=self._sequence)
         self._sequence += 1

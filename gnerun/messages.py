@@ -28,7 +28,35 @@ class LogEntry(Message):
     message: str
 
 
+class MpcState(Message):
+    """The plant at sampling time t and the input applied (``/K<k>/mpc/state``); u is null at the last t."""
+
+    t: int
+    x: list[float | None]
+    u: list[float | None] | None
+
+
+class MpcIterate(Message):
+    """Iterate k of the K solver steps at sampling time t (``/K<k>/mpc/iterate``); k = 0 is the warm start."""
+
+    t: int
+    k: int
+    residual_norm: float | None
+    error_norm: float | None  # ||z^k(t) - z*(t)||
+
+
+class MpcError(Message):
+    """The tracking error e(t) = z^K(t) - z*(t) (``/K<k>/mpc/error``)."""
+
+    t: int
+    e_norm: float | None
+    e_norm_agent: dict[str, float | None]
+
+
 TOPICS: dict[str, type[Message]] = {
     "/solve/iterate": SolveIterate,
+    "/mpc/state": MpcState,
+    "/mpc/iterate": MpcIterate,
+    "/mpc/error": MpcError,
     "/log": LogEntry,
 }

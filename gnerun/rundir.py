@@ -12,8 +12,8 @@ from pathlib import Path
 from . import __version__
 from .config import Config
 from .errors import InputError
-from .mcap_log import RunLog
-from .messages import SolveIterate
+from .mcap_log import RunLog, json_ready
+from .messages import Message, SolveIterate
 
 
 def default_run_dir(cfg: Config, root: str | Path = "runs") -> Path:
@@ -82,13 +82,19 @@ class RunDirectory:
         ))
         self.log_sink.flush()
 
+    def write(self, topic: str, message: Message) -> None:
+        self.log_sink.write(topic, message)
+
+    def flush(self) -> None:
+        self.log_sink.flush()
+
     def log(self, level: str, text: str) -> None:
         self.log_sink.log(level, text)
         self.log_sink.flush()
 
     def write_summary(self, summary: dict) -> None:
         tmp = self.path / "summary.json.tmp"
-        tmp.write_text(json.dumps(summary, indent=2, allow_nan=False) + "\n")
+        tmp.write_text(json.dumps(json_ready(summary), indent=2, allow_nan=False) + "\n")
         tmp.replace(self.path / "summary.json")
 
     def close(self) -> None:

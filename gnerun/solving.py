@@ -6,8 +6,6 @@ writes each iterate to the :class:`~gnerun.mcap_log.RunLog` sink and flushes it.
 
 from __future__ import annotations
 
-import json
-import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -17,6 +15,7 @@ import numpy as np
 
 from .config import Config
 from .game import CompiledGame, compile_game
+from .mcap_log import json_ready
 from .rundir import RunDirectory
 from .ssn import SemismoothNewton, SSNState, Status
 
@@ -128,7 +127,7 @@ class SolveResult:
 
     def summary(self) -> dict:
         """summary.json (SPEC §4)."""
-        return _clean({
+        return json_ready({
             "status": self.status,
             "message": self.message,
             "iterations": self.iterations,
@@ -148,19 +147,6 @@ class SolveResult:
             "time_s": self.time_s,
             "compile_time_s": self.compile_time_s,
         })
-
-
-def _clean(obj):
-    if isinstance(obj, float | np.floating):
-        v = float(obj)
-        return v if math.isfinite(v) else None
-    if isinstance(obj, np.integer):
-        return int(obj)
-    if isinstance(obj, dict):
-        return {str(k): _clean(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [_clean(v) for v in obj]
-    return obj
 
 
 def solve(cfg: Config, out: str | Path | None = None, *, force: bool = False,
@@ -246,7 +232,3 @@ def solve(cfg: Config, out: str | Path | None = None, *, force: bool = False,
     finally:
         if run is not None:
             run.close()
-
-
-def summary_json(summary: dict) -> str:
-    return json.dumps(summary, indent=2, allow_nan=False)

@@ -22,7 +22,7 @@ def _no_traceback(proc) -> None:
 def test_help_lists_the_commands() -> None:
     proc = run_cli("--help")
     assert proc.returncode == 0
-    for command in ("solve", "validate"):
+    for command in ("solve", "simulate", "validate"):
         assert command in proc.stdout
 
 

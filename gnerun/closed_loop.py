@@ -1,0 +1,259 @@
+"""`gnerun simulate`: time-distributed CG-MPC with a fixed iteration budget K [eq:TDO].
+
+At every sampling time t the solver takes at most K steps from the warm start, every agent's first
+input u(t) is applied, and the plant moves to x(t+1) = f(x(t), u(t)) + w(t). Alongside, z*(t), the
+exact solution at x(t), is computed (to tolerance, outside the K budget, warm-started from z*(t-1))
+to measure the tracking error e(t) = z^K(t) - z*(t) of Theorem "bounded error".
+
+The budget K is a maximum: once ||Phi|| <= tol the remaining steps are skipped, because a solution
+is a fixed point of the Newton step.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .config import Config, PlantDisturbance
+from .errors import InputError
+from .game import CompiledGame, compile_game
+from .mcap_log import json_ready
+from .messages import MpcError, MpcIterate, MpcState
+from .rundir import RunDirectory
+from .solving import make_solver, reference_solution
+from .ssn import FAILURES, Status
+
+
+@dataclass
+class ClosedLoopResult:
+    """One closed loop (one K). Arrays are indexed by sampling time t."""
+
+    K: int
+    x: np.ndarray  # (steps + 1, nx): x(0) .. x(steps)
+    u: np.ndarray  # (steps, nu): the inputs applied
+    w: np.ndarray  # (steps, nx): the plant disturbances
+    e_norm: np.ndarray  # (steps,): ||z^K(t) - z*(t)|| (nan where z* is unknown)
+    e_norm_agent: dict[str, np.ndarray]  # ||z_i^K(t) - z_i^*(t)||, z_i = (a_i, lambda_i)
+    residual_norm: np.ndarray  # (steps,): ||Phi(z^K(t); x(t))||
+    iterations: np.ndarray  # (steps,): solver steps taken (<= K)
+    solve_time_s: np.ndarray  # (steps,): time of the solver steps alone
+    status: list[str]  # per t: converged | incomplete (K steps, tol not met) | a failure status
+    reference_status: list[str]  # per t: the status of the z*(t) solve
+    z: np.ndarray = field(repr=False)  # (steps, size): z^K(t)
+    z_star: np.ndarray = field(repr=False)  # (steps, size): z*(t)
+
+    @property
+    def steps(self) -> int:
+        return int(self.u.shape[0])
+
+    def summary(self, game: CompiledGame) -> dict:
+        failed = [t for t, s in enumerate(self.status) if s in {str(f) for f in FAILURES}]
+        return json_ready({
+            "K": self.K,
+            "x": self.x.tolist(),
+            "u": self.u.tolist(),
+            "w": self.w.tolist(),
+            "e_norm": self.e_norm.tolist(),
+            "e_norm_agent": {k: v.tolist() for k, v in self.e_norm_agent.items()},
+            "residual_norm": self.residual_norm.tolist(),
+            "iterations": self.iterations.tolist(),
+            "solve_time_s": self.solve_time_s.tolist(),
+            "status": self.status,
+            "reference_status": self.reference_status,
+            "failed_steps": failed,
+            "max_e_norm": _nanmax(self.e_norm),
+            "final_e_norm": float(self.e_norm[-1]),
+            "median_solve_time_s": float(np.median(self.solve_time_s)),
+            "max_solve_time_s": float(np.max(self.solve_time_s)),
+        })
+
+
+def _nanmax(v: np.ndarray) -> float:
+    finite = v[np.isfinite(v)]
+    return float(finite.max()) if finite.size else math.nan
+
+
+class Simulation(dict[int, ClosedLoopResult]):
+    """Closed-loop results indexed by K (``sim[7].e_norm``), and where they were written."""
+
+    run_dir: Path | None = None
+    game: CompiledGame | None = None
+
+    def summary(self) -> dict:
+        assert self.game is not None
+        return {
+            "command": "simulate",
+            "status": "completed",
+            "K": list(self),
+            "steps": next(iter(self.values())).steps if self else 0,
+            "state_names": self.game.state_names,
+            "input_names": [u for names in self.game.variable_names for u in names],
+            "agents": self.game.agent_names,
+            "by_K": {str(k): r.summary(self.game) for k, r in self.items()},
+        }
+
+
+class PlantNoise:
+    """w(t), seeded: gaussian, uniform on [-scale, scale], or constant."""
+
+    def __init__(self, spec: PlantDisturbance, nx: int):
+        self.spec = spec
+        self.scale = np.broadcast_to(np.asarray(spec.scale, dtype=float), (nx,)).copy()
+        self.rng = np.random.default_rng(spec.seed)
+
+    def __call__(self) -> np.ndarray:
+        kind = self.spec.kind
+        if kind == "gaussian":
+            return self.scale * self.rng.standard_normal(self.scale.size)
+        if kind == "uniform":
+            return self.scale * self.rng.uniform(-1.0, 1.0, self.scale.size)
+        if kind == "constant":
+            return self.scale.copy()
+        return np.zeros(self.scale.size)
+
+
+# progress(K, t, steps, e_norm) is called after every sampling time
+Progress = Callable[[int, int, int, float], None]
+
+
+def closed_loop(cfg: Config, game: CompiledGame, K: int, run: RunDirectory | None = None,
+                progress: Progress | None = None) -> ClosedLoopResult:
+    """One closed loop of ``cfg.run.steps`` sampling times with at most K solver steps each."""
+    solver = make_solver(cfg, game)
+    steps = cfg.run.steps
+    nx, size = game.nx, game.size
+    nu = sum(len(v) for v in game.variable_names)
+    plant = PlantNoise(cfg.disturbance.plant, nx)
+    agents = game.agent_names
+    agent_idx = [game.agent_indices(i) for i in range(len(agents))]
+
+    x = np.array(game.x0, dtype=float)
+    xs = np.full((steps + 1, nx), np.nan)
+    us = np.full((steps, nu), np.nan)
+    ws = np.zeros((steps, nx))
+    e = np.full(steps, np.nan)
+    e_agent = {a: np.full(steps, np.nan) for a in agents}
+    res = np.full(steps, np.nan)
+    its = np.zeros(steps, dtype=int)
+    times = np.zeros(steps)
+    status: list[str] = []
+    ref_status: list[str] = []
+    zs = np.full((steps, size), np.nan)
+    zstars = np.full((steps, size), np.nan)
+
+    z_warm = game.z_start()
+    z_star_prev = game.z_start()
+    rng = None
+    topic = f"/K{K}/mpc"
+    for t in range(steps):
+        xs[t] = x
+        ref = reference_solution(game, cfg, z_star_prev, x)
+        if not ref.converged:  # a cold start may find what a warm start from z*(t-1) did not
+            cold = reference_solution(game, cfg, game.z_start(), x)
+            ref = cold if cold.converged else ref
+        z_star = ref.z if ref.converged else None
+        ref_status.append(str(ref.status))
+        if z_star is not None:
+            z_star_prev = z_star
+        elif run is not None:
+            run.log("warning", f"K={K} t={t}: the exact solution z*(t) was not found ({ref.message}); "
+                               "e(t) is not available")
+
+        t0 = time.perf_counter()
+        state = solver.init(z_warm, x, rng)
+        elapsed = time.perf_counter() - t0
+        trace = [(0, state.residual_norm, state.z)]
+        for _ in range(K):
+            if solver.terminate(state)[1] in FAILURES | {Status.CONVERGED}:
+                break
+            t0 = time.perf_counter()
+            state = solver.step(state)
+            elapsed += time.perf_counter() - t0
+            if state.status in FAILURES:
+                break
+            trace.append((state.k, state.residual_norm, state.z))
+        rng = state.rng
+        done, final = solver.terminate(state)
+        if final == Status.CONVERGED:
+            status.append("converged")
+        elif final in FAILURES:
+            status.append(str(final))
+            if run is not None:
+                run.log("warning", f"K={K} t={t}: {state.message}")
+        else:
+            status.append("incomplete")
+
+        z = state.z
+        zs[t] = z
+        res[t] = state.residual_norm
+        its[t] = state.k
+        times[t] = elapsed
+        if z_star is not None:
+            zstars[t] = z_star
+            e[t] = np.linalg.norm(z - z_star)
+            for a, idx in zip(agents, agent_idx, strict=True):
+                e_agent[a][t] = np.linalg.norm(z[idx] - z_star[idx])
+        u = game.first_inputs(z[: game.n])
+        us[t] = u
+        w = plant()
+        ws[t] = w
+
+        if run is not None:
+            for k, r, zk in trace:
+                err = None if z_star is None else float(np.linalg.norm(zk - z_star))
+                run.write(f"{topic}/iterate", MpcIterate(t=t, k=k, residual_norm=r, error_norm=err))
+            run.write(f"{topic}/state", MpcState(t=t, x=x.tolist(), u=u.tolist()))
+            run.write(f"{topic}/error", MpcError(t=t, e_norm=float(e[t]),
+                                                  e_norm_agent={a: float(v[t]) for a, v in e_agent.items()}))
+            run.flush()
+        if progress is not None:
+            progress(K, t, steps, float(e[t]))
+
+        x = game.step_dynamics(x, u) + w
+        z_warm = game.shift(z) if cfg.run.warm_start == "shift" else z
+    xs[steps] = x
+    if run is not None:
+        run.write(f"{topic}/state", MpcState(t=steps, x=x.tolist(), u=None))
+        run.flush()
+    return ClosedLoopResult(K=K, x=xs, u=us, w=ws, e_norm=e, e_norm_agent=e_agent, residual_norm=res,
+                            iterations=its, solve_time_s=times, status=status, reference_status=ref_status,
+                            z=zs, z_star=zstars)
+
+
+def simulate(cfg: Config, out: str | Path | None = None, *, force: bool = False,
+             progress: Progress | None = None) -> Simulation:
+    """One closed loop per K in ``cfg.run.K`` (SPEC §7); ``out`` as in :func:`gnerun.solve`."""
+    if cfg.game.kind != "dynamic":
+        raise InputError(f"{cfg.source or cfg.name}: simulate needs a dynamic game (game.kind: dynamic); "
+                         "use `gnerun solve` for a static game")
+    game = compile_game(cfg)
+    run = RunDirectory.create(out, cfg, command="simulate", force=force) if out is not None else None
+    sim = Simulation()
+    sim.game = game
+    sim.run_dir = run.path if run is not None else None
+    try:
+        if run is not None:
+            run.log("info", f"simulate {cfg.name}: K = {cfg.run.K}, {cfg.run.steps} steps, warm start "
+                            f"{cfg.run.warm_start}, solver disturbance {cfg.disturbance.kind}, plant "
+                            f"{cfg.disturbance.plant.kind}")
+        for K in dict.fromkeys(cfg.run.K):
+            sim[K] = closed_loop(cfg, game, K, run, progress)
+            if run is not None:
+                r = sim[K]
+                run.log("info", f"K={K}: max e {_nanmax(r.e_norm):.3e}, final e {r.e_norm[-1]:.3e}, "
+                                f"failed steps {r.summary(game)['failed_steps']}")
+        if run is not None:
+            run.write_summary(sim.summary())
+        return sim
+    except BaseException as exc:
+        if run is not None:
+            run.log("error", f"the run stopped: {type(exc).__name__}: {exc}")
+        raise
+    finally:
+        if run is not None:
+            run.close()
