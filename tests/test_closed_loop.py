@@ -1,0 +1,230 @@
+"""Time-distributed CG-MPC (`gnerun simulate`): tracking error, the bounded-error theorem, disturbances, log."""
+
+from __future__ import annotations
+
+import json
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.optimize import linprog
+
+from gnerun.closed_loop import simulate
+from gnerun.config import load_config
+from gnerun.errors import InputError
+from gnerun.game import compile_game
+from gnerun.mcap_log import read_messages
+from gnerun.solving import solve
+
+from .conftest import CONFIGS, run_cli
+
+STUDY2 = CONFIGS / "paper_study2.yaml"
+
+
+@pytest.fixture(scope="module")
+def study2_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("runs") / "study2"
+    sim = simulate(load_config(STUDY2), out=out)
+    return out, sim
+
+
+def _exact_closed_loop(steps: int) -> tuple[np.ndarray, np.ndarray]:
+    """The exact CG-MPC loop, independently: a cold solve from scratch at every x(t), first inputs applied."""
+    A = np.diag([0.5, 0.3, 0.2])
+    x = np.array([1.0, 3.0, 5.0])
+    xs, us = [x], []
+    for _ in range(steps):
+        res = solve(load_config(STUDY2, {"game.x0": x.tolist(), "solver.line_search": True}))
+        assert res.status == "converged"
+        u = np.array([res.solution[f"agent{i}"][f"u{i}"][0] for i in (1, 2, 3)])
+        x = A @ x + u
+        xs.append(x)
+        us.append(u)
+    return np.array(xs), np.array(us)
+
+
+def test_large_K_tracks_the_exact_solution_and_trajectory() -> None:
+    steps = 12
+    sim = simulate(load_config(STUDY2, {"run.K": [20], "run.steps": steps}))
+    r = sim[20]
+    assert np.all(r.e_norm <= 1e-10), r.e_norm
+    x_exact, u_exact = _exact_closed_loop(steps)
+    np.testing.assert_allclose(r.x, x_exact, atol=1e-10)
+    np.testing.assert_allclose(r.u, u_exact, atol=1e-10)
+    assert all(s == "converged" for s in r.status)
+
+
+def test_K1_starts_with_an_error_that_vanishes_as_the_state_settles(study2_run) -> None:
+    _, sim = study2_run
+    r = sim[1]
+    assert r.e_norm[0] > 1.0  # one Newton step from z = 0 is far from z*(0)
+    assert np.all(r.e_norm[-10:] <= 1e-10)  # the paper's observation: e(t) -> 0 regardless of K
+    assert np.all(r.iterations <= 1)
+    # the states converge to constants (x1 geometrically, with factor 0.5)
+    dx = np.linalg.norm(np.diff(r.x, axis=0), axis=1)
+    assert dx[-1] <= 1e-7 and np.all(np.diff(dx[-10:]) < 0)
+
+
+def test_error_shrinks_with_K(study2_run) -> None:
+    _, sim = study2_run
+    max_e = [float(np.max(sim[K].e_norm)) for K in (1, 2, 3, 5, 7)]
+    assert max_e == sorted(max_e, reverse=True)
+    assert max_e[0] > 1.0 and max_e[-1] <= 1e-10  # K = 7 keeps e(t) at zero, as in the paper
+
+
+def _logged(out: Path) -> dict[int, dict[str, list]]:
+    by_k: dict[int, dict[str, list]] = defaultdict(lambda: defaultdict(list))
+    for topic, msg, _ in read_messages(out / "run.mcap"):
+        if topic.startswith("/K"):
+            K = int(topic.split("/")[1][1:])
+            by_k[K][topic.split("/", 2)[2]].append(msg)
+    return by_k
+
+
+def _fit_bound(e: np.ndarray, dx: np.ndarray, floor: float = 1e-12) -> tuple[float, float]:
+    """Smallest alpha + theta with e(t+1) <= alpha e(t) + theta ||dx(t)|| + floor for all t (an LP)."""
+    A_ub = -np.column_stack([e[:-1], dx[: len(e) - 1]])
+    b_ub = floor - e[1:]
+    res = linprog(c=[1.0, 1.0], A_ub=A_ub, b_ub=b_ub, bounds=[(0, None), (0, None)], method="highs")
+    assert res.status == 0
+    return float(res.x[0]), float(res.x[1])
+
+
+def test_bounded_error_theorem_holds_on_the_logged_data(study2_run) -> None:
+    out, sim = study2_run
+    logged = _logged(out)
+    alphas = {}
+    for K in sim:
+        errors = logged[K]["mpc/error"]
+        states = logged[K]["mpc/state"]
+        e = np.array([m["e_norm"] for m in errors])
+        x = np.array([m["x"] for m in states])
+        dx = np.linalg.norm(np.diff(x, axis=0), axis=1)
+        alpha, theta = _fit_bound(e, dx)
+        assert np.all(e[1:] <= alpha * e[:-1] + theta * dx[: len(e) - 1] + 1e-12 * (1 + 1e-9))
+        assert alpha < 1.0  # a contraction: the error is bounded
+        alphas[K] = alpha
+    ks = sorted(alphas)
+    assert [alphas[k] for k in ks] == sorted(alphas.values(), reverse=True), alphas
+    assert alphas[ks[0]] > alphas[ks[-1]]
+
+
+def test_per_K_topics_equal_the_summary(study2_run) -> None:
+    out, sim = study2_run
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["K"] == [1, 2, 3, 5, 7]
+    logged = _logged(out)
+    assert sorted(logged) == [1, 2, 3, 5, 7]
+    for K, r in sim.items():
+        s = summary["by_K"][str(K)]
+        states = logged[K]["mpc/state"]
+        errors = logged[K]["mpc/error"]
+        iterates = logged[K]["mpc/iterate"]
+        assert [m["t"] for m in states] == list(range(31))
+        assert [m["x"] for m in states] == s["x"]
+        assert [m["u"] for m in states[:-1]] == s["u"] and states[-1]["u"] is None
+        assert [m["e_norm"] for m in errors] == s["e_norm"]
+        for agent in ("agent1", "agent2", "agent3"):
+            assert [m["e_norm_agent"][agent] for m in errors] == s["e_norm_agent"][agent]
+        # every iterate of every sampling time, k = 0 being the warm start
+        assert len(iterates) == sum(it + 1 for it in s["iterations"])
+        last = {m["t"]: m for m in iterates}
+        np.testing.assert_allclose([last[t]["error_norm"] for t in range(30)], s["e_norm"], rtol=0, atol=0)
+        assert len(s["solve_time_s"]) == 30 and s["failed_steps"] == []
+        np.testing.assert_array_equal(np.array(s["x"]), r.x)
+
+
+def test_agent_errors_split_the_error(study2_run) -> None:
+    _, sim = study2_run
+    r = sim[1]
+    total = np.sqrt(sum(v**2 for v in r.e_norm_agent.values()))
+    # z = (a_1, a_2, a_3, lambda_1, lambda_2, lambda_3): the agents' blocks partition z
+    np.testing.assert_allclose(total, r.e_norm, rtol=1e-12)
+
+
+def test_plant_disturbance_is_seeded_and_enters_the_dynamics() -> None:
+    over = {"run.K": [2], "run.steps": 8, "disturbance.plant": {"kind": "gaussian", "scale": 0.05, "seed": 3}}
+    a = simulate(load_config(STUDY2, over))[2]
+    b = simulate(load_config(STUDY2, over))[2]
+    c = simulate(load_config(STUDY2, {**over, "disturbance.plant.seed": 4}))[2]
+    np.testing.assert_array_equal(a.x, b.x)
+    np.testing.assert_array_equal(a.e_norm, b.e_norm)
+    assert not np.array_equal(a.x, c.x)
+    A = np.diag([0.5, 0.3, 0.2])
+    np.testing.assert_allclose(a.x[1:] - (a.x[:-1] @ A.T + a.u), a.w, atol=1e-14)
+    assert 0.01 < np.std(a.w) < 0.1
+
+
+@pytest.mark.parametrize("kind, check", [
+    ("constant", lambda w: np.allclose(w, [0.1, -0.2, 0.0])),
+    ("uniform", lambda w: np.all(np.abs(w) <= np.array([0.1, 0.2, 0.0])) and np.all(w[:, 2] == 0)),
+])
+def test_plant_disturbance_kinds(kind, check) -> None:
+    scale = [0.1, -0.2, 0.0] if kind == "constant" else [0.1, 0.2, 0.0]
+    r = simulate(load_config(STUDY2, {"run.K": [3], "run.steps": 5,
+                                      "disturbance.plant": {"kind": kind, "scale": scale}}))[3]
+    assert check(r.w)
+
+
+def test_solver_disturbance_applies_at_every_step_and_is_seeded() -> None:
+    over = {"run.K": [1], "run.steps": 10, "disturbance.kind": "jacobian_noise", "disturbance.scale": 1e-2,
+            "disturbance.seed": 5}
+    a = simulate(load_config(STUDY2, over))[1]
+    b = simulate(load_config(STUDY2, over))[1]
+    clean = simulate(load_config(STUDY2, {"run.K": [1], "run.steps": 10}))[1]
+    np.testing.assert_array_equal(a.e_norm, b.e_norm)
+    # the noise perturbs every sampling time, so e(t) never drops to zero as in the clean loop
+    late = slice(5, 10)
+    assert np.all(clean.e_norm[late] <= 1e-10)
+    assert np.all(a.e_norm[late] > 1e-10)
+
+
+def test_shift_warm_start() -> None:
+    cfg = load_config(STUDY2, {"game.horizon": 3})
+    game = compile_game(cfg)
+    z = np.arange(game.size, dtype=float)
+    shifted = game.shift(z)
+    # agent 1's inputs u1(0..3) sit at z[0:4]: drop u1(0), repeat u1(3)
+    np.testing.assert_array_equal(shifted[0:4], [1, 2, 3, 3])
+    # agent 3's multipliers: two constraints per stage (u3 >= u1 + u2, u3 >= 0), stage-major
+    ms = game.multiplier_slices[2]
+    block = z[game.n + ms.start: game.n + ms.stop].reshape(4, 2)
+    np.testing.assert_array_equal(shifted[game.n + ms.start: game.n + ms.stop].reshape(4, 2),
+                                  np.vstack([block[1:], block[-1:]]))
+    sim = simulate(load_config(STUDY2, {"run.K": [1, 20], "run.steps": 10, "run.warm_start": "shift"}))
+    exact = simulate(load_config(STUDY2, {"run.K": [20], "run.steps": 10}))[20]
+    np.testing.assert_allclose(sim[20].x, exact.x, atol=1e-10)
+    assert sim[1].e_norm[0] > 0 and sim[1].e_norm[-1] <= 1e-10
+
+
+def test_simulate_needs_a_dynamic_game() -> None:
+    with pytest.raises(InputError, match="dynamic game"):
+        simulate(load_config(CONFIGS / "fk_a12.yaml"))
+    proc = run_cli("simulate", str(CONFIGS / "fk_a12.yaml"))
+    assert proc.returncode == 2
+    assert "Traceback" not in proc.stderr and "dynamic game" in proc.stderr
+
+
+def test_cli_simulate(tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    proc = run_cli("simulate", str(STUDY2), "--out", str(out), "--set", "run.steps=6", "--set", "run.K=[1,7]")
+    assert proc.returncode == 0, proc.stderr
+    lines = proc.stdout.splitlines()
+    header = next(i for i, s in enumerate(lines) if s.split()[:3] == ["K", "max", "e"])
+    rows = [s.split() for s in lines[header + 1: header + 3]]
+    assert [r[0] for r in rows] == ["1", "7"]
+    summary = json.loads((out / "summary.json").read_text())
+    assert float(rows[0][1]) == pytest.approx(summary["by_K"]["1"]["max_e_norm"], rel=1e-3)
+    assert "━" not in proc.stdout  # no progress bar when stdout is not a terminal
+    quiet = run_cli("simulate", str(STUDY2), "--out", str(tmp_path / "q"), "--set", "run.steps=2", "--quiet")
+    assert quiet.returncode == 0 and quiet.stdout == ""
+
+
+def test_bad_plant_disturbance_is_a_config_error() -> None:
+    from gnerun.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="disturbance.plant.scale: has 2 entries for 3 states"):
+        load_config(STUDY2, {"disturbance.plant": {"kind": "gaussian", "scale": [0.1, 0.1]}})
+    with pytest.raises(ConfigError, match="disturbance.plant.kind"):
+        load_config(STUDY2, {"disturbance.plant.kind": "brownian"})
