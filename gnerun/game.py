@@ -33,6 +33,32 @@ from .config import Config, DynamicGame, LinearDynamics, StaticGame
 from .expr import casadi_functions, evaluate, parse_constraint, parse_expression
 
 
+class Evaluator:
+    """A CasADi Function evaluated into preallocated numpy buffers (no per-call DM conversions).
+
+    Calling it copies the arguments into the input buffers, evaluates, and returns fresh numpy arrays
+    shaped like the Function's (dense) outputs.
+    """
+
+    def __init__(self, f: ca.Function):
+        self.function = f
+        self._args = [np.zeros(f.nnz_in(i)) for i in range(f.n_in())]
+        self._res = [np.zeros(f.nnz_out(i)) for i in range(f.n_out())]
+        self._shapes = [f.size_out(i) for i in range(f.n_out())]
+        self._buffer, self._eval = f.buffer()
+        for i, arr in enumerate(self._args):
+            self._buffer.set_arg(i, memoryview(arr))
+        for i, arr in enumerate(self._res):
+            self._buffer.set_res(i, memoryview(arr))
+
+    def __call__(self, *args: np.ndarray) -> list[np.ndarray]:
+        for buf, arg in zip(self._args, args, strict=True):
+            buf[:] = arg
+        self._eval()
+        # CasADi stores dense matrices column by column
+        return [r.reshape(shape, order="F").copy() for r, shape in zip(self._res, self._shapes, strict=True)]
+
+
 @dataclass(frozen=True)
 class ConstraintInfo:
     """One row of c(a), i.e. one multiplier."""
@@ -70,13 +96,13 @@ class CompiledGame:
     state_names: list[str]
     equilibrium: str
     n_shared: int  # shared constraints declared per stage
-    _kkt: ca.Function
-    _costs: ca.Function
-    _pseudo: ca.Function
+    _kkt: Evaluator
+    _costs: Evaluator
+    _pseudo: Evaluator
+    _cost_grads: Evaluator
     _agent_constraints: list[np.ndarray]  # per agent: row indices of c that constrain its own problem
-    _dynamics: ca.Function | None = None
-    _sparsity: tuple[ca.Sparsity, ca.Sparsity] | None = None
-    _cost_grads: ca.Function | None = field(default=None, repr=False)
+    _sparsity: tuple[ca.Sparsity, ca.Sparsity]
+    _dynamics: Evaluator | None = field(default=None, repr=False)
 
     # sizes --------------------------------------------------------------------------------
     @property
@@ -124,25 +150,20 @@ class CompiledGame:
         """L(z; x), c(a; x), dL/dz and dc/da at z = (a, lambda)."""
         n = self.n
         L, c, dL, dc = self._kkt(z[:n], z[n:], self._x(x))
-        return KKTParts(
-            np.asarray(L, dtype=float).reshape(-1),
-            np.asarray(c, dtype=float).reshape(-1),
-            np.asarray(dL, dtype=float).reshape(n, self.size),
-            np.asarray(dc, dtype=float).reshape(self.m, n),
-        )
+        return KKTParts(L.reshape(-1), c.reshape(-1), dL, dc)
 
     def costs(self, a: np.ndarray, x: np.ndarray | None = None) -> np.ndarray:
         """(J_1(a), ..., J_N(a)) at the state x."""
-        return np.asarray(self._costs(a, self._x(x)), dtype=float).reshape(-1)
+        return self._costs(a, self._x(x))[0].reshape(-1)
 
     def cost_gradients(self, a: np.ndarray, x: np.ndarray | None = None) -> np.ndarray:
         """Rows: grad_a J_i(a) with respect to all of a (N x n)."""
-        return np.asarray(self._cost_grads(a, self._x(x)), dtype=float).reshape(len(self.agent_names), self.n)
+        return self._cost_grads(a, self._x(x))[0]
 
     def pseudogradient(self, a: np.ndarray, x: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """F(a) = (grad_{a_i} J_i)_i and the game Hessian H(a) = dF/da."""
         F, H = self._pseudo(a, self._x(x))
-        return np.asarray(F, dtype=float).reshape(-1), np.asarray(H, dtype=float).reshape(self.n, self.n)
+        return F.reshape(-1), H
 
     def constraint_rows(self, agent: int) -> np.ndarray:
         """Indices of c that make up agent ``agent``'s own feasible set (for its best response)."""
@@ -152,7 +173,7 @@ class CompiledGame:
         """The plant model f(x, u) (dynamic games)."""
         if self._dynamics is None:
             raise ValueError("a static game has no dynamics")
-        return np.asarray(self._dynamics(x, u), dtype=float).reshape(-1)
+        return self._dynamics(x, u)[0].reshape(-1)
 
     def jacobian_sparsity(self) -> sp.csr_matrix:
         """Structural nonzeros of JPhi (the union over both branches of every complementarity row)."""
@@ -319,7 +340,7 @@ def compile_game(cfg: Config) -> CompiledGame:
             return ca.vertcat(*[ca.SX(evaluate(dyn_exprs[s], env_f, fns)) for s in g.states])
 
         xs, us = ca.SX.sym("xs", nx), ca.SX.sym("us", len(inputs))
-        dynamics_fn = ca.Function("f", [xs, us], [f(xs, us)])
+        dynamics_fn = ca.Function("f", [xs, us], [ca.densify(f(xs, us))])
         stage_sum = [ca.SX(0) for _ in range(N)]
         xi = x
         for tau in range(T + 1):
@@ -369,13 +390,14 @@ def compile_game(cfg: Config) -> CompiledGame:
     dL = ca.jacobian(L, z)
     dc = ca.jacobian(c, a) if m else ca.SX(0, n)
     sparsity = (dL.sparsity(), dc.sparsity())
-    kkt = ca.Function("kkt", [a, lam, x], [L, c, ca.densify(dL), ca.densify(dc)], ["a", "lam", "x"],
+    kkt = ca.Function("kkt", [a, lam, x], [ca.densify(v) for v in (L, c, dL, dc)], ["a", "lam", "x"],
                       ["L", "c", "dL_dz", "dc_da"])
 
     J = ca.vertcat(*costs)
     F = ca.vertcat(*[ca.gradient(costs[i], a[agent_slices[i]]) for i in range(N)])
-    pseudo = ca.Function("pseudogradient", [a, x], [F, ca.densify(ca.jacobian(F, a))], ["a", "x"], ["F", "H"])
-    costs_fn = ca.Function("costs", [a, x], [J], ["a", "x"], ["J"])
+    H = ca.jacobian(F, a)
+    pseudo = ca.Function("pseudogradient", [a, x], [ca.densify(F), ca.densify(H)], ["a", "x"], ["F", "H"])
+    costs_fn = ca.Function("costs", [a, x], [ca.densify(J)], ["a", "x"], ["J"])
     cost_grads = ca.Function("cost_gradients", [a, x], [ca.densify(ca.jacobian(J, a))], ["a", "x"], ["dJ"])
 
     # agent i's own problem: its own rows, plus the common shared rows (they constrain everyone)
@@ -396,11 +418,11 @@ def compile_game(cfg: Config) -> CompiledGame:
         state_names=list(g.states) if isinstance(g, DynamicGame) else [],
         equilibrium=g.equilibrium,
         n_shared=len(g.shared_constraints),
-        _kkt=kkt,
-        _costs=costs_fn,
-        _pseudo=pseudo,
+        _kkt=Evaluator(kkt),
+        _costs=Evaluator(costs_fn),
+        _pseudo=Evaluator(pseudo),
+        _cost_grads=Evaluator(cost_grads),
         _agent_constraints=agent_rows,
-        _dynamics=dynamics_fn,
         _sparsity=sparsity,
-        _cost_grads=cost_grads,
+        _dynamics=Evaluator(dynamics_fn) if dynamics_fn is not None else None,
     )
