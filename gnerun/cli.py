@@ -88,8 +88,10 @@ def validate(config: ConfigArg, set_: SetOpt = None, quiet: QuietOpt = False) ->
     try:
         cfg = _load(config, set_)
         from .game import compile_game
+        from .solving import make_solver
 
         game = compile_game(cfg)
+        make_solver(cfg, game)  # refuses what the configured method cannot solve
     except ConfigError as e:
         for p in e.problems:
             typer.echo(f"error: {p}", err=True)

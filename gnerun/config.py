@@ -134,7 +134,7 @@ Game = Annotated[StaticGame | DynamicGame, Field(discriminator="kind")]
 
 
 class SolverConfig(Strict):
-    kind: Literal["ssn"] = "ssn"
+    kind: Literal["ssn", "jn"] = "ssn"
     tol: float = Field(1e-10, gt=0, description="stop when ||Phi(z)||_2 <= tol")
     max_iter: int = Field(50, ge=0, le=1_000_000)
     complementarity: Literal["min", "fischer_burmeister"] = "min"
@@ -520,4 +520,7 @@ def check_semantics(cfg: Config, smap: SourceMap) -> list[str]:
     if cfg.disturbance.kind == "pseudogradient" and cfg.solver.kind == "ssn":
         report(("disturbance", "kind"), "'pseudogradient' perturbs the Josephy-Newton method; with solver.kind "
                "'ssn' use 'jacobian_noise' or 'residual'")
+    if cfg.disturbance.kind in ("jacobian_noise", "residual") and cfg.solver.kind == "jn":
+        report(("disturbance", "kind"), f"{cfg.disturbance.kind!r} perturbs semismooth Newton; with solver.kind "
+               "'jn' use 'pseudogradient' (noise on F and H)")
     return problems

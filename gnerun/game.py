@@ -96,6 +96,7 @@ class CompiledGame:
     state_names: list[str]
     equilibrium: str
     n_shared: int  # shared constraints declared per stage
+    linear_rows: np.ndarray  # rows of c that are affine in a (polyhedral constraints)
     _kkt: Evaluator
     _costs: Evaluator
     _pseudo: Evaluator
@@ -127,6 +128,20 @@ class CompiledGame:
     @property
     def equality_mask(self) -> np.ndarray:
         return np.array([c.equality for c in self.constraints], dtype=bool)
+
+    def coupled_rows(self) -> list[int]:
+        """Rows of c owned by one agent that involve another agent's decisions (what makes a GNE)."""
+        pattern = self._sparsity[1]
+        rows, cols = pattern.get_triplet()
+        owner_of_col = np.empty(self.n, dtype=int)
+        for i, sl in enumerate(self.agent_slices):
+            owner_of_col[sl] = i
+        coupled = set()
+        for r, col in zip(rows, cols, strict=True):
+            owner = self.constraints[r].owner
+            if owner is not None and owner_of_col[col] != owner:
+                coupled.add(int(r))
+        return sorted(coupled)
 
     @property
     def shares_constraints_generalized(self) -> bool:
@@ -277,6 +292,18 @@ def _constraint_rows(texts: list[str], env: dict, fns: dict, owner: int | None, 
     return rows
 
 
+def _affine_rows(c: ca.SX, a: ca.SX, m: int) -> np.ndarray:
+    """Which rows of c(a) are affine in a: their second derivatives vanish structurally."""
+    linear = np.ones(m, dtype=bool)
+    if m == 0:
+        return linear
+    second = ca.jacobian(ca.vec(ca.jacobian(c, a)), a)  # rows: vec of dc/da, column-major (row index j + m*col)
+    rows, _ = second.sparsity().get_triplet()
+    for r in rows:
+        linear[r % m] = False
+    return linear
+
+
 def compile_game(cfg: Config) -> CompiledGame:
     """Parse, condense (dynamic games) and differentiate the game of ``cfg`` once."""
     g = cfg.game
@@ -418,6 +445,7 @@ def compile_game(cfg: Config) -> CompiledGame:
         state_names=list(g.states) if isinstance(g, DynamicGame) else [],
         equilibrium=g.equilibrium,
         n_shared=len(g.shared_constraints),
+        linear_rows=_affine_rows(c, a, m),
         _kkt=Evaluator(kkt),
         _costs=Evaluator(costs_fn),
         _pseudo=Evaluator(pseudo),

@@ -20,11 +20,14 @@ from .rundir import RunDirectory
 from .ssn import SemismoothNewton, SSNState, Status
 
 
-def make_solver(cfg: Config, game: CompiledGame) -> SemismoothNewton:
-    """The solver the config asks for (``solver.kind``), with its disturbance model."""
-    if cfg.solver.kind == "ssn":
-        return SemismoothNewton(game, cfg.solver, cfg.disturbance)
-    raise ValueError(f"unknown solver kind {cfg.solver.kind!r}")
+def make_solver(cfg: Config, game: CompiledGame, *, disturbed: bool = True) -> SemismoothNewton:
+    """The solver the config asks for (``solver.kind``), with its disturbance model (unless not ``disturbed``)."""
+    disturbance = cfg.disturbance if disturbed else None
+    if cfg.solver.kind == "jn":
+        from .josephy_newton import JosephyNewton
+
+        return JosephyNewton(game, cfg.solver, disturbance)
+    return SemismoothNewton(game, cfg.solver, disturbance)
 
 
 def iterate(solver: SemismoothNewton, state: SSNState,
@@ -59,15 +62,18 @@ class Reference:
 
 def reference_solution(game: CompiledGame, cfg: Config, z0: np.ndarray, x: np.ndarray | None = None,
                        polish: int = 3) -> Reference:
-    """Solve undisturbed from z0 (pure method, then with line search if that fails) and polish.
+    """Solve undisturbed from z0 with the configured method, then by semismooth Newton with line search if
+    that fails, and polish.
 
     Polishing takes up to ``polish`` further Newton steps while ||Phi|| keeps decreasing, so that z*
     is accurate to rounding, not just to ``solver.tol``.
     """
     last: SSNState | None = None
-    for line_search in dict.fromkeys([cfg.solver.line_search, True]):
-        opts = cfg.solver.model_copy(update={"max_iter": max(cfg.solver.max_iter, 100), "line_search": line_search})
-        solver = SemismoothNewton(game, opts, None)
+    attempts = [cfg.solver] + ([cfg.solver.model_copy(update={"kind": "ssn", "line_search": True})]
+                               if cfg.solver.kind != "ssn" or not cfg.solver.line_search else [])
+    for options in attempts:
+        opts = options.model_copy(update={"max_iter": max(options.max_iter, 100)})
+        solver = make_solver(cfg.model_copy(update={"solver": opts}), game, disturbed=False)
         state = iterate(solver, solver.init(z0, x))
         last = state
         if state.converged:

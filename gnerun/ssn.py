@@ -45,9 +45,10 @@ class Status(StrEnum):
     SINGULAR_JACOBIAN = "singular_jacobian"
     DIVERGED = "diverged"
     NAN = "nan"
+    SUBPROBLEM_FAILED = "subproblem_failed"  # a Josephy-Newton step whose LCP has no solution found
 
 
-FAILURES = frozenset({Status.SINGULAR_JACOBIAN, Status.DIVERGED, Status.NAN})
+FAILURES = frozenset({Status.SINGULAR_JACOBIAN, Status.DIVERGED, Status.NAN, Status.SUBPROBLEM_FAILED})
 
 
 @dataclass(frozen=True)
