@@ -134,7 +134,7 @@ Game = Annotated[StaticGame | DynamicGame, Field(discriminator="kind")]
 
 
 class SolverConfig(Strict):
-    kind: Literal["ssn", "jn"] = "ssn"
+    kind: Literal["ssn", "jn", "distributed"] = "ssn"
     tol: float = Field(1e-10, gt=0, description="stop when ||Phi(z)||_2 <= tol")
     max_iter: int = Field(50, ge=0, le=1_000_000)
     complementarity: Literal["min", "fischer_burmeister"] = "min"
@@ -144,6 +144,11 @@ class SolverConfig(Strict):
     min_rcond: float = Field(1e-14, ge=0, description="JPhi with reciprocal condition below this is singular")
     line_search: bool = Field(False, description="Armijo backtracking on 1/2||Phi||^2 (off: the paper's pure method)")
     divergence_limit: float = Field(1e12, gt=0, description="||z||_inf beyond this is divergence")
+    # kind: distributed (agent-distributed proximal response); ignored by ssn and jn
+    scheme: Literal["jacobi", "gauss_seidel"] = "jacobi"
+    tau: float = Field(1.0, ge=0, description="proximal weight: tau/2 ||a_i - abar_i||^2")
+    inner: Literal["ssn", "jn"] = "ssn"
+    inner_max_iter: int = Field(20, ge=1, description="inner Newton iterations per proximal response")
 
 
 class PlantDisturbance(Strict):

@@ -23,7 +23,7 @@ agent, inputs are time-major: a_i = (u_i(0), u_i(1), ..., u_i(T)) with u_i(tau) 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import casadi as ca
 import numpy as np
@@ -304,102 +304,128 @@ def _affine_rows(c: ca.SX, a: ca.SX, m: int) -> np.ndarray:
     return linear
 
 
-def compile_game(cfg: Config) -> CompiledGame:
-    """Parse, condense (dynamic games) and differentiate the game of ``cfg`` once."""
-    g = cfg.game
+@dataclass
+class _Layout:
+    """Sizes and positions of the agents' decisions in a."""
+
+    variable_names: list[list[str]]
+    agent_slices: list[slice]
+    n: int
+    nx: int
+    horizon: int | None
+    a_start: np.ndarray
+    x0: np.ndarray
+
+
+def _layout(g: StaticGame | DynamicGame) -> _Layout:
+    if isinstance(g, StaticGame):
+        names = [list(a.variables) for a in g.agents]
+        sizes = [len(v) for v in names]
+        starts = [var.start for a in g.agents for var in a.variables.values()]
+        return _Layout(names, _slices(sizes), sum(sizes), 0, None, np.asarray(starts, dtype=float), np.zeros(0))
+    T = g.horizon
+    names = [list(a.inputs) for a in g.agents]
+    sizes = [len(v) * (T + 1) for v in names]
+    starts = [s for a in g.agents for s in [var.start for var in a.inputs.values()] * (T + 1)]
+    return _Layout(names, _slices(sizes), sum(sizes), len(g.states), T, np.asarray(starts, dtype=float),
+                   np.asarray(g.x0, dtype=float))
+
+
+def _slices(sizes: list[int]) -> list[slice]:
+    offsets = np.cumsum([0, *sizes])
+    return [slice(int(offsets[i]), int(offsets[i + 1])) for i in range(len(sizes))]
+
+
+@dataclass
+class _Expressions:
+    costs: dict[int, ca.SX]  # J_i(a; x) of the agents asked for
+    own_rows: dict[int, list[_Row]]  # their constraint rows, stage by stage
+    shared_common: list[_Row]  # variational shared constraints (one common multiplier each)
+    dynamics: ca.Function | None
+
+
+def _expressions(g: StaticGame | DynamicGame, lay: _Layout, a: ca.SX, x: ca.SX, agents: list[int],
+                 *, shared_as_own: bool = False) -> _Expressions:
+    """Costs and constraints of ``agents`` only, as CasADi expressions in (a, x).
+
+    Other agents' costs and constraints are not even parsed: what is built from here can reach only
+    the chosen agents' own data, the common dynamics and parameters. Shared constraints go to each
+    chosen agent's own rows when the equilibrium is generalized (or ``shared_as_own``), otherwise to
+    the common block.
+    """
     fns = casadi_functions()
     params = dict(g.parameters)
-    N = len(g.agents)
-    agent_names = [a.name for a in g.agents]
+    slices, names = lay.agent_slices, lay.variable_names
+    own_shared = g.equilibrium == "generalized" or shared_as_own
+    costs: dict[int, ca.SX] = {}
+    own: dict[int, list[_Row]] = {i: [] for i in agents}
+    common: list[_Row] = []
 
-    if isinstance(g, StaticGame):
-        variable_names = [list(a.variables) for a in g.agents]
-        sizes = [len(v) for v in variable_names]
-        nx = 0
-        T = None
-    else:
-        variable_names = [list(a.inputs) for a in g.agents]
-        T = g.horizon
-        sizes = [len(v) * (T + 1) for v in variable_names]
-        nx = len(g.states)
-    offsets = np.cumsum([0] + sizes)
-    n = int(offsets[-1])
-    agent_slices = [slice(int(offsets[i]), int(offsets[i + 1])) for i in range(N)]
-    a = ca.SX.sym("a", n)
-    x = ca.SX.sym("x", nx)
-
-    costs: list[ca.SX] = []
-    own_rows: list[list[_Row]] = [[] for _ in range(N)]
-    shared_common: list[_Row] = []
-    generalized = g.equilibrium == "generalized"
-    dynamics_fn = None
+    def constrain(env: dict, stage: int | None) -> None:
+        for i in agents:
+            agent = g.agents[i]
+            variables = agent.variables if isinstance(g, StaticGame) else agent.inputs
+            for vname, var in variables.items():
+                own[i] += _bound_rows(env[vname], vname, var.lower, var.upper, i, stage)
+            own[i] += _constraint_rows(agent.constraints, env, fns, i, stage)
+            if own_shared:
+                own[i] += _constraint_rows(g.shared_constraints, env, fns, i, stage)
+        if not own_shared:
+            common.extend(_constraint_rows(g.shared_constraints, env, fns, None, stage))
 
     if isinstance(g, StaticGame):
         env: dict = dict(params)
-        a_start = []
-        for i, agent in enumerate(g.agents):
-            for j, (vname, var) in enumerate(agent.variables.items()):
-                env[vname] = a[agent_slices[i].start + j]
-                a_start.append(var.start)
-        for i, agent in enumerate(g.agents):
-            costs.append(ca.SX(evaluate(parse_expression(agent.cost), env, fns)))
-            for vname, var in agent.variables.items():
-                own_rows[i] += _bound_rows(env[vname], vname, var.lower, var.upper, i, None)
-            own_rows[i] += _constraint_rows(agent.constraints, env, fns, i, None)
-            if generalized:
-                own_rows[i] += _constraint_rows(g.shared_constraints, env, fns, i, None)
-        if not generalized:
-            shared_common += _constraint_rows(g.shared_constraints, env, fns, None, None)
-        x0 = np.zeros(0)
-    else:
-        inputs = [(i, j, u) for i, agent in enumerate(g.agents) for j, u in enumerate(agent.inputs)]
-        stage_cost = [parse_expression(agent.stage_cost) for agent in g.agents]
-        terminal_cost = [parse_expression(agent.terminal_cost) for agent in g.agents]
-        dyn_exprs = None if isinstance(g.dynamics, LinearDynamics) else {
-            s: parse_expression(g.dynamics[s]) for s in g.states}
+        for i, vars_ in enumerate(names):
+            env.update({v: a[slices[i].start + j] for j, v in enumerate(vars_)})
+        for i in agents:
+            costs[i] = ca.SX(evaluate(parse_expression(g.agents[i].cost), env, fns))
+        constrain(env, None)
+        return _Expressions(costs, own, common, None)
 
-        def f(xi: ca.SX, u: ca.SX) -> ca.SX:
-            if isinstance(g.dynamics, LinearDynamics):
-                return ca.mtimes(ca.DM(g.dynamics.A), xi) + ca.mtimes(ca.DM(g.dynamics.B), u)
-            env_f = dict(params)
-            env_f.update({s: xi[k] for k, s in enumerate(g.states)})
-            env_f.update({name: u[k] for k, (_, _, name) in enumerate(inputs)})
-            return ca.vertcat(*[ca.SX(evaluate(dyn_exprs[s], env_f, fns)) for s in g.states])
+    inputs = [(i, j, u) for i, vars_ in enumerate(names) for j, u in enumerate(vars_)]
+    dyn = None if isinstance(g.dynamics, LinearDynamics) else {s: parse_expression(g.dynamics[s]) for s in g.states}
 
-        xs, us = ca.SX.sym("xs", nx), ca.SX.sym("us", len(inputs))
-        dynamics_fn = ca.Function("f", [xs, us], [ca.densify(f(xs, us))])
-        stage_sum = [ca.SX(0) for _ in range(N)]
-        xi = x
-        for tau in range(T + 1):
-            u = ca.vertcat(*[a[agent_slices[i].start + tau * len(variable_names[i]) + j] for i, j, _ in inputs])
-            xi = f(xi, u)
-            env = dict(params)
-            env.update({s: xi[k] for k, s in enumerate(g.states)})
-            env.update({name: u[k] for k, (_, _, name) in enumerate(inputs)})
-            for i, agent in enumerate(g.agents):
-                stage_sum[i] += evaluate(stage_cost[i], env, fns)
-                for uname, var in agent.inputs.items():
-                    own_rows[i] += _bound_rows(env[uname], uname, var.lower, var.upper, i, tau)
-                own_rows[i] += _constraint_rows(agent.constraints, env, fns, i, tau)
-                if generalized:
-                    own_rows[i] += _constraint_rows(g.shared_constraints, env, fns, i, tau)
-            if not generalized:
-                shared_common += _constraint_rows(g.shared_constraints, env, fns, None, tau)
-        env_T = dict(params)
-        env_T.update({s: xi[k] for k, s in enumerate(g.states)})
-        for i in range(N):
-            costs.append(ca.SX(stage_sum[i] + evaluate(terminal_cost[i], env_T, fns)))
-        a_start = []
-        for agent in g.agents:
-            a_start += [var.start for var in agent.inputs.values()] * (T + 1)
-        x0 = np.asarray(g.x0, dtype=float)
+    def f(xi: ca.SX, u: ca.SX) -> ca.SX:
+        if isinstance(g.dynamics, LinearDynamics):
+            return ca.mtimes(ca.DM(g.dynamics.A), xi) + ca.mtimes(ca.DM(g.dynamics.B), u)
+        env_f = dict(params)
+        env_f.update({s: xi[k] for k, s in enumerate(g.states)})
+        env_f.update({name: u[k] for k, (_, _, name) in enumerate(inputs)})
+        return ca.vertcat(*[ca.SX(evaluate(dyn[s], env_f, fns)) for s in g.states])
 
-    # multipliers: agent blocks, then the common block of variational shared constraints
+    xs, us = ca.SX.sym("xs", lay.nx), ca.SX.sym("us", len(inputs))
+    dynamics = ca.Function("f", [xs, us], [ca.densify(f(xs, us))])
+    stage_cost = {i: parse_expression(g.agents[i].stage_cost) for i in agents}
+    terminal_cost = {i: parse_expression(g.agents[i].terminal_cost) for i in agents}
+    total = {i: ca.SX(0) for i in agents}
+    xi = x
+    for tau in range(lay.horizon + 1):
+        u = ca.vertcat(*[a[slices[i].start + tau * len(names[i]) + j] for i, j, _ in inputs])
+        xi = f(xi, u)  # the state that the inputs of stage tau produce
+        env = dict(params)
+        env.update({s: xi[k] for k, s in enumerate(g.states)})
+        env.update({name: u[k] for k, (_, _, name) in enumerate(inputs)})
+        for i in agents:
+            total[i] += evaluate(stage_cost[i], env, fns)
+        constrain(env, tau)
+    env_T = dict(params)
+    env_T.update({s: xi[k] for k, s in enumerate(g.states)})
+    for i in agents:
+        costs[i] = ca.SX(total[i] + evaluate(terminal_cost[i], env_T, fns))
+    return _Expressions(costs, own, common, dynamics)
+
+
+def _assemble(*, kind: str, a: ca.SX, x: ca.SX, costs: list[ca.SX], own_rows: list[list[_Row]],
+              shared_common: list[_Row], agent_names: list[str], lay: _Layout, equilibrium: str, n_shared: int,
+              state_names: list[str], dynamics: ca.Function | None) -> CompiledGame:
+    """The KKT system of the agents' problems [KKT_concatenated] and its exact derivatives."""
+    N = len(costs)
+    n = lay.n
+    agent_slices = lay.agent_slices
     rows: list[_Row] = [r for block in own_rows for r in block] + shared_common
     m = len(rows)
-    counts = np.cumsum([0] + [len(b) for b in own_rows])
-    multiplier_slices = [slice(int(counts[i]), int(counts[i + 1])) for i in range(N)]
-    shared_slice = slice(int(counts[-1]), m)
+    multiplier_slices = _slices([len(b) for b in own_rows])
+    shared_slice = slice(multiplier_slices[-1].stop if N else 0, m)
     lam = ca.SX.sym("lam", m)
     c = ca.vertcat(*[r.expr for r in rows]) if rows else ca.SX(0, 1)
 
@@ -419,7 +445,6 @@ def compile_game(cfg: Config) -> CompiledGame:
     sparsity = (dL.sparsity(), dc.sparsity())
     kkt = ca.Function("kkt", [a, lam, x], [ca.densify(v) for v in (L, c, dL, dc)], ["a", "lam", "x"],
                       ["L", "c", "dL_dz", "dc_da"])
-
     J = ca.vertcat(*costs)
     F = ca.vertcat(*[ca.gradient(costs[i], a[agent_slices[i]]) for i in range(N)])
     H = ca.jacobian(F, a)
@@ -430,21 +455,20 @@ def compile_game(cfg: Config) -> CompiledGame:
     # agent i's own problem: its own rows, plus the common shared rows (they constrain everyone)
     agent_rows = [np.r_[np.arange(ms.start, ms.stop), np.arange(shared_slice.start, shared_slice.stop)].astype(int)
                   for ms in multiplier_slices]
-
     return CompiledGame(
-        kind=g.kind,
+        kind=kind,
         agent_names=agent_names,
         agent_slices=agent_slices,
         multiplier_slices=multiplier_slices,
         shared_slice=shared_slice,
-        variable_names=variable_names,
+        variable_names=lay.variable_names,
         constraints=[r.info for r in rows],
-        a_start=np.asarray(a_start, dtype=float),
-        x0=x0,
-        horizon=T,
-        state_names=list(g.states) if isinstance(g, DynamicGame) else [],
-        equilibrium=g.equilibrium,
-        n_shared=len(g.shared_constraints),
+        a_start=lay.a_start,
+        x0=lay.x0,
+        horizon=lay.horizon,
+        state_names=state_names,
+        equilibrium=equilibrium,
+        n_shared=n_shared,
         linear_rows=_affine_rows(c, a, m),
         _kkt=Evaluator(kkt),
         _costs=Evaluator(costs_fn),
@@ -452,5 +476,48 @@ def compile_game(cfg: Config) -> CompiledGame:
         _cost_grads=Evaluator(cost_grads),
         _agent_constraints=agent_rows,
         _sparsity=sparsity,
-        _dynamics=Evaluator(dynamics_fn) if dynamics_fn is not None else None,
+        _dynamics=Evaluator(dynamics) if dynamics is not None else None,
     )
+
+
+def compile_game(cfg: Config) -> CompiledGame:
+    """Parse, condense (dynamic games) and differentiate the game of ``cfg`` once."""
+    g = cfg.game
+    lay = _layout(g)
+    N = len(g.agents)
+    a = ca.SX.sym("a", lay.n)
+    x = ca.SX.sym("x", lay.nx)
+    ex = _expressions(g, lay, a, x, list(range(N)))
+    return _assemble(kind=g.kind, a=a, x=x, costs=[ex.costs[i] for i in range(N)],
+                     own_rows=[ex.own_rows[i] for i in range(N)], shared_common=ex.shared_common,
+                     agent_names=[ag.name for ag in g.agents], lay=lay, equilibrium=g.equilibrium,
+                     n_shared=len(g.shared_constraints),
+                     state_names=list(g.states) if isinstance(g, DynamicGame) else [], dynamics=ex.dynamics)
+
+
+def compile_agent_problem(cfg: Config, agent: int, tau: float) -> CompiledGame:
+    """Agent ``agent``'s proximal response problem [eq:proximal_response, eq:Semi_proximal]:
+
+        min_{a_i} J_i(a_i, abar_-i) + tau/2 ||a_i - abar_i||^2  s.t.  g_i(a_i, abar_-i) <= 0,
+
+    compiled as a one-agent problem whose parameter vector is p = (x, abar_-i, abar_i): the plant state,
+    the other agents' last decisions (a without agent i's block) and the proximal centre. It is built
+    from agent i's own cost and constraints only (shared constraints count as its own).
+    """
+    g = cfg.game
+    lay = _layout(g)
+    sl = lay.agent_slices[agent]
+    ni = sl.stop - sl.start
+    ai = ca.SX.sym("a_i", ni)
+    others = ca.SX.sym("abar_others", lay.n - ni)
+    centre = ca.SX.sym("abar_i", ni)
+    xs = ca.SX.sym("x", lay.nx)
+    a_full = ca.vertcat(others[: sl.start], ai, others[sl.start :])
+    ex = _expressions(g, lay, a_full, xs, [agent], shared_as_own=True)
+    cost = ex.costs[agent] + 0.5 * tau * ca.sumsqr(ai - centre)
+    own_lay = _Layout([lay.variable_names[agent]], [slice(0, ni)], ni, lay.nx + lay.n, None,
+                      lay.a_start[sl].copy(), np.concatenate([lay.x0, np.zeros(lay.n)]))
+    return _assemble(kind="static", a=ai, x=ca.vertcat(xs, others, centre), costs=[cost],
+                     own_rows=[[_Row(r.expr, replace(r.info, owner=0)) for r in ex.own_rows[agent]]],
+                     shared_common=[], agent_names=[g.agents[agent].name],
+                     lay=own_lay, equilibrium="generalized", n_shared=0, state_names=[], dynamics=None)

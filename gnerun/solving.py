@@ -23,6 +23,11 @@ from .ssn import SemismoothNewton, SSNState, Status
 def make_solver(cfg: Config, game: CompiledGame, *, disturbed: bool = True) -> SemismoothNewton:
     """The solver the config asks for (``solver.kind``), with its disturbance model (unless not ``disturbed``)."""
     disturbance = cfg.disturbance if disturbed else None
+    if cfg.solver.kind == "distributed":
+        from .proximal_response import ProximalResponse
+
+        return ProximalResponse(cfg if disturbed else cfg.model_copy(update={"disturbance": type(cfg.disturbance)()}),
+                                game)
     if cfg.solver.kind == "jn":
         from .josephy_newton import JosephyNewton
 
@@ -69,8 +74,10 @@ def reference_solution(game: CompiledGame, cfg: Config, z0: np.ndarray, x: np.nd
     is accurate to rounding, not just to ``solver.tol``.
     """
     last: SSNState | None = None
-    attempts = [cfg.solver] + ([cfg.solver.model_copy(update={"kind": "ssn", "line_search": True})]
-                               if cfg.solver.kind != "ssn" or not cfg.solver.line_search else [])
+    # the exact solution is the centralised one: a distributed run is measured against SSN's
+    first = cfg.solver.model_copy(update={"kind": "ssn"}) if cfg.solver.kind == "distributed" else cfg.solver
+    attempts = [first] + ([first.model_copy(update={"kind": "ssn", "line_search": True})]
+                          if first.kind != "ssn" or not first.line_search else [])
     for options in attempts:
         opts = options.model_copy(update={"max_iter": max(options.max_iter, 100)})
         solver = make_solver(cfg.model_copy(update={"solver": opts}), game, disturbed=False)

@@ -1,0 +1,111 @@
+"""Agent-distributed proximal response [eq:proximal_response, eq:Semi_proximal].
+
+Given the current decisions abar, agent i computes
+
+    abar_i^+ = argmin_{a_i} J_i(a_i, abar_-i) + tau/2 ||a_i - abar_i||^2  s.t.  g_i(a_i, abar_-i) <= 0
+
+with an inner Newton method (semismooth Newton on its own KKT system, or Josephy-Newton when its
+feasible set is polyhedral), warm-started from its last decision and multipliers. One *round*
+updates every agent once: all from the same abar (``jacobi``) or one after the other, each seeing
+the others' newest decisions (``gauss_seidel``). In a closed loop K counts rounds.
+
+Information isolation: each :class:`Agent` holds only its own compiled proximal problem
+(:func:`gnerun.game.compile_agent_problem`, built from its own cost and constraints, the common
+dynamics and parameters) and its inner solver; a round hands it the plant state, the others' last
+decisions and its own last decision and multipliers, nothing else.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+
+from .config import Config, SolverConfig
+from .errors import InputError
+from .game import CompiledGame, compile_agent_problem
+from .ssn import FAILURES, SemismoothNewton, SSNState, Status, _norm
+
+
+class Agent:
+    """One agent's computation: its proximal response problem and the inner Newton method."""
+
+    def __init__(self, name: str, problem: CompiledGame, inner: SemismoothNewton, max_iter: int):
+        self.name = name
+        self.problem = problem
+        self.inner = inner
+        self.max_iter = max_iter
+
+    def respond(self, x: np.ndarray, others: np.ndarray, own: np.ndarray, multipliers: np.ndarray) -> SSNState:
+        """The proximal response to the others' last decisions, from the agent's own last (a_i, lambda_i)."""
+        p = np.concatenate([x, others, own])
+        state = self.inner.init(np.concatenate([own, multipliers]), p)
+        for _ in range(self.max_iter):
+            done, _ = self.inner.terminate(state)
+            if done:
+                break
+            state = self.inner.step(state)
+        return self.inner.finish(state)
+
+
+def make_agents(cfg: Config, game: CompiledGame) -> list[Agent]:
+    opts = cfg.solver
+    # responses are solved tighter than the rounds' tolerance, or the rounds stall at the inner one
+    inner_opts = SolverConfig(**{**opts.model_dump(), "kind": opts.inner, "max_iter": opts.inner_max_iter,
+                                 "tol": opts.tol / 100})
+    agents = []
+    for i, name in enumerate(game.agent_names):
+        problem = compile_agent_problem(cfg, i, opts.tau)
+        if opts.inner == "jn":
+            from .josephy_newton import JosephyNewton
+
+            inner: SemismoothNewton = JosephyNewton(problem, inner_opts)
+        else:
+            inner = SemismoothNewton(problem, inner_opts)
+        agents.append(Agent(name, problem, inner, opts.inner_max_iter))
+    return agents
+
+
+class ProximalResponse(SemismoothNewton):
+    """Rounds of proximal responses. ``init``, ``terminate`` and ``finish`` are those of SSN: the
+    coordinator measures ||Phi(z)|| of the whole game to decide convergence, the agents never see it."""
+
+    def __init__(self, cfg: Config, game: CompiledGame):
+        if game.shared_slice.stop > game.shared_slice.start:
+            raise InputError("solver.kind 'distributed' needs each agent to carry its own constraints: with "
+                             "equilibrium: variational the shared constraints have common multipliers; use "
+                             "equilibrium: generalized, or solver.kind 'ssn' / 'jn'")
+        if cfg.disturbance.kind != "none":
+            raise InputError("solver.kind 'distributed' takes no solver-side disturbance yet (disturbance.kind "
+                             f"{cfg.disturbance.kind!r}); plant disturbances work")
+        super().__init__(game, cfg.solver, None)
+        self.agents = make_agents(cfg, game)
+        self.gauss_seidel = cfg.solver.scheme == "gauss_seidel"
+
+    def step(self, state: SSNState) -> SSNState:
+        """One round: every agent's proximal response once."""
+        if state.status in FAILURES:
+            return state
+        game = self.game
+        n = game.n
+        a, lam = state.z[:n], state.z[n:]
+        new_a, new_lam = a.copy(), lam.copy()
+        for agent, sl, ms in zip(self.agents, game.agent_slices, game.multiplier_slices, strict=True):
+            seen = new_a if self.gauss_seidel else a
+            others = np.concatenate([seen[: sl.start], seen[sl.stop :]])
+            response = agent.respond(state.x, others, a[sl], lam[ms])
+            if response.status in FAILURES:
+                return replace(state, status=response.status,
+                               message=f"{agent.name}'s proximal response failed in round {state.k + 1}: "
+                                       f"{response.message}")
+            new_a[sl] = response.z[: sl.stop - sl.start]
+            new_lam[ms] = response.z[sl.stop - sl.start :]
+        z = np.concatenate([new_a, new_lam])
+        parts = game.kkt_parts(z, state.x)
+        phi, active = self.residual(parts, z)
+        new = SSNState(z=z, x=state.x, k=state.k + 1, phi=phi, residual_norm=_norm(phi), parts=parts,
+                       active=active, step_norm=_norm(z - state.z),
+                       active_set_changes=int(np.count_nonzero(active != state.active)), status=Status.RUNNING,
+                       message="", rng=None, rcond=math.nan)
+        return self._check_finite(new)

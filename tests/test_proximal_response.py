@@ -1,0 +1,111 @@
+"""Agent-distributed proximal response: same equilibria as the centralised methods, Study 3, isolation."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from gnerun.closed_loop import simulate
+from gnerun.config import load_config
+from gnerun.errors import InputError
+from gnerun.game import compile_agent_problem, compile_game
+from gnerun.solving import make_solver, solve
+
+from .conftest import CONFIGS
+
+STUDY3 = CONFIGS / "paper_study3.yaml"
+
+
+@pytest.mark.parametrize("scheme, inner", [("jacobi", "jn"), ("gauss_seidel", "jn"), ("gauss_seidel", "ssn")])
+def test_distributed_cournot_equals_the_centralised_equilibrium(scheme: str, inner: str) -> None:
+    central = solve(load_config(CONFIGS / "cournot_mss.yaml"))
+    dist = solve(load_config(CONFIGS / "cournot_mss.yaml", {
+        "solver.kind": "distributed", "solver.scheme": scheme, "solver.inner": inner, "solver.tau": 0.0,
+        "solver.tol": 1e-10, "solver.max_iter": 100}))
+    assert dist.status == "converged", dist.message
+    np.testing.assert_allclose(dist.a, central.a, atol=1e-8)
+
+
+@pytest.mark.parametrize("scheme, rounds", [("gauss_seidel", 60), ("jacobi", 400)])
+def test_distributed_study3_equals_the_centralised_gne(scheme: str, rounds: int) -> None:
+    central = solve(load_config(CONFIGS / "paper_study1.yaml"))
+    dist = solve(load_config(STUDY3, {"solver.scheme": scheme, "solver.max_iter": rounds}))
+    assert dist.status == "converged", dist.message
+    np.testing.assert_allclose(dist.z, central.z, atol=1e-9)  # decisions and every agent's multipliers
+
+
+def test_study3_per_agent_errors_vanish_faster_with_more_rounds() -> None:
+    sim = simulate(load_config(STUDY3))
+    assert sorted(sim) == [2, 5]
+    settle = {}
+    for K, r in sim.items():
+        assert not any(s in ("singular_jacobian", "diverged", "nan", "subproblem_failed") for s in r.status)
+        for agent, e in r.e_norm_agent.items():
+            assert e[0] > 1e-4, agent  # the first sampling time starts far from z*
+            assert np.all(e[-10:] <= 1e-9), (K, agent, e[-10:])  # e_i(t) -> 0
+        worst = np.max(np.vstack(list(r.e_norm_agent.values())), axis=0)
+        settle[K] = int(np.argmax(worst <= 1e-8))
+        assert worst[settle[K]] <= 1e-8
+    assert settle[5] < settle[2]
+    assert np.sum(sim[5].e_norm[:5]) < 0.1 * np.sum(sim[2].e_norm[:5])
+
+
+def test_an_agent_computes_with_its_own_cost_and_constraints_only() -> None:
+    # change everything that belongs to agents 2 and 3: agent 1's proximal problem must not change at all,
+    # even where the others' costs are undefined (NaN everywhere)
+    cfg = load_config(STUDY3)
+    other = load_config(STUDY3, {
+        "game.agents.1.stage_cost": "sqrt(-1 - x2**2)",
+        "game.agents.1.constraints": ["u2 <= -7"],
+        "game.agents.2.stage_cost": "exp(u3) * x1",
+        "game.agents.2.constraints": ["u3 == u1"],
+    })
+    mine = compile_agent_problem(cfg, 0, 0.3)
+    theirs = compile_agent_problem(other, 0, 0.3)
+    game = compile_game(cfg)
+    assert mine.n == game.agent_slices[0].stop  # its own inputs only
+    assert mine.nx == game.nx + game.n  # parameters: the plant state, the others' decisions, its own centre
+    assert mine.m == game.multiplier_slices[0].stop - game.multiplier_slices[0].start
+    rng = np.random.default_rng(0)
+    for _ in range(5):
+        z = rng.standard_normal(mine.size)
+        p = rng.standard_normal(mine.nx)
+        a, b = mine.kkt_parts(z, p), theirs.kkt_parts(z, p)
+        for field in ("L", "c", "dL_dz", "dc_da"):
+            np.testing.assert_array_equal(getattr(a, field), getattr(b, field))
+            assert np.all(np.isfinite(getattr(a, field)))
+    # and the proximal term is the only addition to its own cost: tau enters the Hessian as tau * I
+    plain = compile_agent_problem(cfg, 0, 0.0)
+    z = rng.standard_normal(mine.size)
+    p = rng.standard_normal(mine.nx)
+    diff = mine.kkt_parts(z, p).dL_dz[:, : mine.n] - plain.kkt_parts(z, p).dL_dz[:, : mine.n]
+    np.testing.assert_allclose(diff, 0.3 * np.eye(mine.n), atol=1e-12)
+
+
+def test_the_round_hands_each_agent_only_the_others_last_decisions() -> None:
+    cfg = load_config(STUDY3, {"solver.scheme": "jacobi"})
+    game = compile_game(cfg)
+    solver = make_solver(cfg, game)
+    seen = []
+    for agent in solver.agents:
+        original = agent.respond
+
+        def spy(x, others, own, multipliers, _original=original, _name=agent.name):
+            seen.append((_name, others.copy(), own.copy()))
+            return _original(x, others, own, multipliers)
+
+        agent.respond = spy
+    state = solver.init()
+    a0 = state.z[: game.n].copy()
+    solver.step(state)
+    assert [name for name, _, _ in seen] == game.agent_names
+    for (_, others, own), sl in zip(seen, game.agent_slices, strict=True):
+        np.testing.assert_array_equal(own, a0[sl])
+        np.testing.assert_array_equal(others, np.delete(a0, np.arange(sl.start, sl.stop)))
+
+
+def test_distributed_refuses_what_it_cannot_do() -> None:
+    with pytest.raises(InputError, match="variational"):
+        solve(load_config(CONFIGS / "fk_a11.yaml", {"solver.kind": "distributed"}))
+    with pytest.raises(InputError, match="disturbance"):
+        solve(load_config(STUDY3, {"disturbance.kind": "jacobian_noise", "disturbance.scale": 1e-3}))
