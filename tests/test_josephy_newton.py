@@ -62,13 +62,15 @@ def test_semicopositive_remark_example() -> None:
     assert np.linalg.eigvalsh((H + H.T) / 2).min() < 0
 
 
-@pytest.mark.parametrize("name", ["fk_a12.yaml", "fk_a11.yaml"])
+@pytest.mark.parametrize("name", ["fk_a12.yaml", "fk_a11.yaml", "variational_gne.yaml"])
 def test_jn_and_ssn_give_the_same_equilibrium(name: str) -> None:
-    # fk_a11 is a variational GNE: JN on the joint feasible set equals SSN's variational solution
+    # fk_a11 and variational_gne are variational GNEs: JN on the joint feasible set equals SSN's solution
     jn = solve(load_config(CONFIGS / name, {"solver.kind": "jn"}))
-    ssn = solve(load_config(CONFIGS / name))
+    ssn = solve(load_config(CONFIGS / name, {"solver.kind": "ssn"}))
     assert jn.status == ssn.status == "converged"
     np.testing.assert_allclose(jn.z, ssn.z, atol=1e-10)
+    if name == "variational_gne.yaml":  # the shared constraint binds: a common multiplier is positive
+        assert max(jn.multipliers["shared"]) > 0.5
 
 
 def test_perturbed_jn_error_grows_linearly_with_the_disturbance() -> None:
