@@ -8,8 +8,10 @@ the commands, so that ``gnerun --help`` stays fast.
 
 from __future__ import annotations
 
+import contextlib
 import sys
 import traceback
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Annotated, NoReturn
 
@@ -68,6 +70,17 @@ def _fail(exc: BaseException) -> NoReturn:
     raise typer.Exit(1)
 
 
+@contextlib.contextmanager
+def _reported() -> Iterator[None]:
+    """Every failure inside becomes one message and an exit code (Ctrl-C is left to main)."""
+    try:
+        yield
+    except (typer.Exit, KeyboardInterrupt):
+        raise
+    except Exception as e:  # noqa: BLE001 - the one place where errors become messages
+        _fail(e)
+
+
 def _load(config: Path, overrides: list[str] | None):
     from .config import load_config
 
@@ -85,21 +98,18 @@ def validate(config: ConfigArg, set_: SetOpt = None, quiet: QuietOpt = False) ->
     """Check a config without running it; print every problem found."""
     from .errors import ConfigError
 
-    try:
-        cfg = _load(config, set_)
+    with _reported():
+        try:
+            cfg = _load(config, set_)
+        except ConfigError as e:
+            for p in e.problems:
+                typer.echo(f"error: {p}", err=True)
+            raise typer.Exit(2) from None
         from .game import compile_game
         from .solving import make_solver
 
         game = compile_game(cfg)
         make_solver(cfg, game)  # refuses what the configured method cannot solve
-    except ConfigError as e:
-        for p in e.problems:
-            typer.echo(f"error: {p}", err=True)
-        raise typer.Exit(2) from None
-    except BaseException as e:  # noqa: BLE001 - every failure becomes one message
-        if isinstance(e, typer.Exit):
-            raise
-        _fail(e)
     if not quiet:
         typer.echo(f"{config}: ok ({cfg.game.kind} game '{cfg.name}': {len(game.agent_names)} agents, "
                    f"{game.n} decisions, {game.m} multipliers)")
@@ -109,7 +119,7 @@ def validate(config: ConfigArg, set_: SetOpt = None, quiet: QuietOpt = False) ->
 def solve(config: ConfigArg, out: OutOpt = None, set_: SetOpt = None, quiet: QuietOpt = False,
           force: ForceOpt = False) -> None:
     """Solve one equilibrium problem (a static game, or a dynamic game at its x0)."""
-    try:
+    with _reported():
         cfg = _load(config, set_)
         from .rundir import default_run_dir
         from .solving import solve as run_solve
@@ -127,10 +137,6 @@ def solve(config: ConfigArg, out: OutOpt = None, set_: SetOpt = None, quiet: Qui
                        f"{_fmt(state.step_norm):>10}  {state.active_set_changes:>7}")
 
         result = run_solve(cfg, out=out_dir, force=force, on_iterate=show)
-    except BaseException as e:  # noqa: BLE001
-        if isinstance(e, typer.Exit):
-            raise
-        _fail(e)
     if quiet:
         return
     cert = result.certificate
@@ -146,7 +152,7 @@ def solve(config: ConfigArg, out: OutOpt = None, set_: SetOpt = None, quiet: Qui
 def simulate(config: ConfigArg, out: OutOpt = None, set_: SetOpt = None, quiet: QuietOpt = False,
              force: ForceOpt = False) -> None:
     """Run the closed loop (time-distributed CG-MPC) for every K in run.K."""
-    try:
+    with _reported():
         cfg = _load(config, set_)
         from .closed_loop import simulate as run_simulate
         from .rundir import default_run_dir
@@ -158,10 +164,6 @@ def simulate(config: ConfigArg, out: OutOpt = None, set_: SetOpt = None, quiet: 
                        f"{cfg.disturbance.kind}, plant {cfg.disturbance.plant.kind}")
         with _progress(cfg, enabled=not quiet and sys.stdout.isatty()) as progress:
             sim = run_simulate(cfg, out=out_dir, force=force, progress=progress)
-    except BaseException as e:  # noqa: BLE001
-        if isinstance(e, typer.Exit):
-            raise
-        _fail(e)
     if quiet:
         return
     typer.echo(f"{'K':>4}  {'max e':>10}  {'final e':>10}  {'median step':>12}  {'max step':>10}  {'failed':>6}")

@@ -24,7 +24,7 @@ from .errors import InputError
 from .game import CompiledGame, compile_game
 from .mcap_log import json_ready
 from .messages import MpcError, MpcIterate, MpcState
-from .rundir import RunDirectory
+from .rundir import RunDirectory, recording
 from .solving import make_solver, reference_solution
 from .ssn import FAILURES, Status
 
@@ -236,11 +236,11 @@ def simulate(cfg: Config, out: str | Path | None = None, *, force: bool = False,
     sim = Simulation()
     sim.game = game
     sim.run_dir = run.path if run is not None else None
-    try:
+    with recording(run):
         if run is not None:
             run.log("info", f"simulate {cfg.name}: K = {cfg.run.K}, {cfg.run.steps} steps, warm start "
-                            f"{cfg.run.warm_start}, solver disturbance {cfg.disturbance.kind}, plant "
-                            f"{cfg.disturbance.plant.kind}")
+                            f"{cfg.run.warm_start}, solver {cfg.solver.kind}, solver disturbance "
+                            f"{cfg.disturbance.kind}, plant {cfg.disturbance.plant.kind}")
         for K in dict.fromkeys(cfg.run.K):
             sim[K] = closed_loop(cfg, game, K, run, progress)
             if run is not None:
@@ -250,10 +250,3 @@ def simulate(cfg: Config, out: str | Path | None = None, *, force: bool = False,
         if run is not None:
             run.write_summary(sim.summary())
         return sim
-    except BaseException as exc:
-        if run is not None:
-            run.log("error", f"the run stopped: {type(exc).__name__}: {exc}")
-        raise
-    finally:
-        if run is not None:
-            run.close()

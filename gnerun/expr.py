@@ -128,13 +128,14 @@ class Constraint:
         return rhs - lhs if self.relation == ">=" else lhs - rhs
 
 
-def names_in(node: Node) -> set[str]:
-    out: set[str] = set()
+def _names(node: Node) -> list[Name]:
+    """Every Name node of the tree (explicit stack: no recursion)."""
+    out: list[Name] = []
     stack = [node]
     while stack:
         n = stack.pop()
         if isinstance(n, Name):
-            out.add(n.id)
+            out.append(n)
         elif isinstance(n, Unary):
             stack.append(n.operand)
         elif isinstance(n, Binary):
@@ -144,21 +145,13 @@ def names_in(node: Node) -> set[str]:
     return out
 
 
+def names_in(node: Node) -> set[str]:
+    return {n.id for n in _names(node)}
+
+
 def first_column_of(node: Node, name: str) -> int | None:
     """Column of the first occurrence of ``name`` in the tree (for error messages)."""
-    stack = [node]
-    best: int | None = None
-    while stack:
-        n = stack.pop()
-        if isinstance(n, Name) and n.id == name:
-            best = n.column if best is None else min(best, n.column)
-        elif isinstance(n, Unary):
-            stack.append(n.operand)
-        elif isinstance(n, Binary):
-            stack.extend((n.left, n.right))
-        elif isinstance(n, Call):
-            stack.extend(n.args)
-    return best
+    return min((n.column for n in _names(node) if n.id == name), default=None)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -18,7 +18,6 @@ adds seeded i.i.d. noise of the given scale to every element of F(a^k) and H(a^k
 
 from __future__ import annotations
 
-import math
 from dataclasses import replace
 
 import numpy as np
@@ -27,7 +26,7 @@ from .config import DisturbanceConfig, SolverConfig
 from .errors import InputError
 from .game import CompiledGame
 from .lcp import lemke
-from .ssn import FAILURES, SemismoothNewton, SSNState, Status, _noise, _norm
+from .ssn import FAILURES, SemismoothNewton, SSNState, Status, _noise
 
 
 def check_nash_problem(game: CompiledGame) -> None:
@@ -138,15 +137,4 @@ class JosephyNewton(SemismoothNewton):
             return replace(state, status=Status.SUBPROBLEM_FAILED,
                            message=f"the Josephy-Newton subproblem at a^{state.k} has no solution found by Lemke's "
                                    f"method: {sub.message}; the step was not taken")
-        z = np.concatenate([a_new, lam_new])
-        parts = game.kkt_parts(z, state.x)
-        phi, active = self.residual(parts, z)
-        new = SSNState(z=z, x=state.x, k=state.k + 1, phi=phi, residual_norm=_norm(phi), parts=parts,
-                       active=active, step_norm=_norm(z - state.z),
-                       active_set_changes=int(np.count_nonzero(active != state.active)), status=Status.RUNNING,
-                       message="", rng=state.rng, rcond=math.nan)
-        new = self._check_finite(new)
-        if new.status == Status.RUNNING and float(np.max(np.abs(z), initial=0.0)) > self.options.divergence_limit:
-            new = replace(new, status=Status.DIVERGED,
-                          message=f"diverged at iteration {new.k}: ||z||_inf exceeds divergence_limit")
-        return new
+        return self.advance(state, np.concatenate([a_new, lam_new]))

@@ -17,7 +17,6 @@ decisions and its own last decision and multipliers, nothing else.
 
 from __future__ import annotations
 
-import math
 from dataclasses import replace
 
 import numpy as np
@@ -25,7 +24,7 @@ import numpy as np
 from .config import Config, SolverConfig
 from .errors import InputError
 from .game import CompiledGame, compile_agent_problem
-from .ssn import FAILURES, SemismoothNewton, SSNState, Status, _norm
+from .ssn import FAILURES, SemismoothNewton, SSNState
 
 
 class Agent:
@@ -101,11 +100,4 @@ class ProximalResponse(SemismoothNewton):
                                        f"{response.message}")
             new_a[sl] = response.z[: sl.stop - sl.start]
             new_lam[ms] = response.z[sl.stop - sl.start :]
-        z = np.concatenate([new_a, new_lam])
-        parts = game.kkt_parts(z, state.x)
-        phi, active = self.residual(parts, z)
-        new = SSNState(z=z, x=state.x, k=state.k + 1, phi=phi, residual_norm=_norm(phi), parts=parts,
-                       active=active, step_norm=_norm(z - state.z),
-                       active_set_changes=int(np.count_nonzero(active != state.active)), status=Status.RUNNING,
-                       message="", rng=None, rcond=math.nan)
-        return self._check_finite(new)
+        return self.advance(state, np.concatenate([new_a, new_lam]))

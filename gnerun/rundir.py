@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import contextlib
 import datetime as dt
 import functools
 import json
 import math
 import subprocess
+from collections.abc import Iterator
 from pathlib import Path
 
 from . import __version__
@@ -99,3 +101,17 @@ class RunDirectory:
 
     def close(self) -> None:
         self.log_sink.close()
+
+
+@contextlib.contextmanager
+def recording(run: RunDirectory | None) -> Iterator[RunDirectory | None]:
+    """Log an exception that ends the run to ``/log`` and always close the log (a finished MCAP)."""
+    try:
+        yield run
+    except BaseException as exc:
+        if run is not None:
+            run.log("error", f"the run stopped: {type(exc).__name__}: {exc}")
+        raise
+    finally:
+        if run is not None:
+            run.close()

@@ -16,7 +16,7 @@ import numpy as np
 from .config import Config
 from .game import CompiledGame, compile_game
 from .mcap_log import json_ready
-from .rundir import RunDirectory
+from .rundir import RunDirectory, recording
 from .ssn import SemismoothNewton, SSNState, Status
 
 
@@ -170,21 +170,22 @@ def solve(cfg: Config, out: str | Path | None = None, *, force: bool = False,
     ``config.yaml``, ``run.mcap`` (every iterate, flushed as it is made) and ``summary.json``.
     ``on_iterate(state, error_norm)`` sees every iterate as it is made (error_norm = ||z^k - z*||).
     """
-    from .certificate import certificate
-
     t0 = time.perf_counter()
     game = compile_game(cfg)
     compile_time = time.perf_counter() - t0
     solver = make_solver(cfg, game)
+    run = RunDirectory.create(out, cfg, command="solve", force=force) if out is not None else None
+    with recording(run):
+        return _solve(cfg, game, solver, run, compile_time, on_iterate)
+
+
+def _solve(cfg: Config, game: CompiledGame, solver: SemismoothNewton, run: RunDirectory | None,
+           compile_time: float, on_iterate: Callable[[SSNState, float | None], None] | None) -> SolveResult:
+    from .certificate import certificate
+
     x = game.x0
     z0 = game.z_start()
-    run = RunDirectory.create(out, cfg, command="solve", force=force) if out is not None else None
-    try:
-        ref = reference_solution(game, cfg, z0, x)
-    except BaseException:
-        if run is not None:
-            run.close()
-        raise
+    ref = reference_solution(game, cfg, z0, x)
     z_star = ref.z if ref.converged else None
     history: list[SSNState] = []
     sink_time = 0.0
@@ -200,48 +201,38 @@ def solve(cfg: Config, out: str | Path | None = None, *, force: bool = False,
             on_iterate(state, error)
         sink_time += time.perf_counter() - t
 
-    try:
-        if run is not None:
-            run.log("info", f"solve {cfg.name}: {game.n} decisions, {game.m} multipliers, {cfg.solver.kind} "
-                            f"({cfg.solver.complementarity}), disturbance {cfg.disturbance.kind}")
-            if not ref.converged:
-                run.log("warning", f"the undisturbed reference solve did not converge ({ref.message}); "
-                                   "error norms are not available")
-        t = time.perf_counter()
-        state = iterate(solver, solver.init(z0, x), record)
-        elapsed = time.perf_counter() - t - sink_time  # the solver alone: the sink's I/O is excluded
-        cert = certificate(game, state.z, x)
-        errors = None if z_star is None else [float(np.linalg.norm(s.z - z_star)) for s in history]
-        result = SolveResult(
-            status=str(state.status),
-            message=state.message,
-            iterations=state.k,
-            z=state.z,
-            residual_norm=state.residual_norm,
-            residual_history=[s.residual_norm for s in history],
-            error_history=errors,
-            step_norms=[s.step_norm for s in history],
-            active_set_changes=[s.active_set_changes for s in history],
-            solution=game.solution_by_agent(state.z[: game.n]),
-            multipliers=game.multipliers_by_agent(state.z[game.n :]),
-            z_star=z_star,
-            reference_status=str(ref.status),
-            certificate=cert,
-            time_s=elapsed,
-            compile_time_s=compile_time,
-            x=np.asarray(x, dtype=float),
-            game=game,
-            run_dir=run.path if run is not None else None,
-        )
-        if run is not None:
-            level = "info" if result.success else "warning"
-            run.log(level, f"status {result.status}: {result.message}")
-            run.write_summary(result.summary())
-        return result
-    except BaseException as exc:
-        if run is not None:
-            run.log("error", f"the run stopped: {type(exc).__name__}: {exc}")
-        raise
-    finally:
-        if run is not None:
-            run.close()
+    if run is not None:
+        run.log("info", f"solve {cfg.name}: {game.n} decisions, {game.m} multipliers, {cfg.solver.kind} "
+                        f"({cfg.solver.complementarity}), disturbance {cfg.disturbance.kind}")
+        if not ref.converged:
+            run.log("warning", f"the undisturbed reference solve did not converge ({ref.message}); "
+                               "error norms are not available")
+    t = time.perf_counter()
+    state = iterate(solver, solver.init(z0, x), record)
+    elapsed = time.perf_counter() - t - sink_time  # the solver alone: the sink's I/O is excluded
+    errors = None if z_star is None else [float(np.linalg.norm(s.z - z_star)) for s in history]
+    result = SolveResult(
+        status=str(state.status),
+        message=state.message,
+        iterations=state.k,
+        z=state.z,
+        residual_norm=state.residual_norm,
+        residual_history=[s.residual_norm for s in history],
+        error_history=errors,
+        step_norms=[s.step_norm for s in history],
+        active_set_changes=[s.active_set_changes for s in history],
+        solution=game.solution_by_agent(state.z[: game.n]),
+        multipliers=game.multipliers_by_agent(state.z[game.n :]),
+        z_star=z_star,
+        reference_status=str(ref.status),
+        certificate=certificate(game, state.z, x),
+        time_s=elapsed,
+        compile_time_s=compile_time,
+        x=np.asarray(x, dtype=float),
+        game=game,
+        run_dir=run.path if run is not None else None,
+    )
+    if run is not None:
+        run.log("info" if result.success else "warning", f"status {result.status}: {result.message}")
+        run.write_summary(result.summary())
+    return result

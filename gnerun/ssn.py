@@ -178,18 +178,23 @@ class SemismoothNewton:
         t = 1.0
         if opts.line_search:
             t = self._armijo(state, dz)
-        z = state.z + t * dz
-        parts = game.kkt_parts(z, state.x)
+        return self.advance(state, state.z + t * dz, rcond=float(rcond))
+
+    def advance(self, state: SSNState, z: np.ndarray, *, rcond: float = math.nan) -> SSNState:
+        """The iterate after ``state``: z evaluated once (Phi, the parts for the next step), checked for
+        NaN and divergence. Every method's step ends here."""
+        parts = self.game.kkt_parts(z, state.x)
         phi, active = self.residual(parts, z)
-        changes = int(np.count_nonzero(active != state.active))
         new = SSNState(z=z, x=state.x, k=state.k + 1, phi=phi, residual_norm=_norm(phi), parts=parts,
-                       active=active, step_norm=t * _norm(dz), active_set_changes=changes,
-                       status=Status.RUNNING, message="", rng=state.rng, rcond=float(rcond))
+                       active=active, step_norm=_norm(z - state.z),
+                       active_set_changes=int(np.count_nonzero(active != state.active)), status=Status.RUNNING,
+                       message="", rng=state.rng, rcond=rcond)
         new = self._check_finite(new)
-        if new.status == Status.RUNNING and float(np.max(np.abs(z), initial=0.0)) > opts.divergence_limit:
+        limit = self.options.divergence_limit
+        if new.status == Status.RUNNING and float(np.max(np.abs(z), initial=0.0)) > limit:
             new = replace(new, status=Status.DIVERGED,
                           message=f"diverged at iteration {new.k}: ||z||_inf = {np.max(np.abs(z)):.2e} exceeds "
-                                  f"divergence_limit {opts.divergence_limit:.0e}")
+                                  f"divergence_limit {limit:.0e}")
         return new
 
     def terminate(self, state: SSNState) -> tuple[bool, Status]:
