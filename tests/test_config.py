@@ -1,0 +1,204 @@
+"""Config loading: strict schema, positions of every error, overrides, the resolved config."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from gnerun.config import load_config, parse_override
+from gnerun.errors import ConfigError, InputError
+from gnerun.yaml_source import MAX_CONFIG_BYTES
+
+from .conftest import CONFIGS
+
+SHIPPED = sorted(CONFIGS.glob("*.yaml"))
+
+STATIC = """\
+name: t
+game:
+  kind: static
+  parameters: {c: 2.0}
+  agents:
+    - name: p1
+      variables: {x1: {lower: 0, upper: 10}}
+      cost: "x1**2 - c*x1*x2"
+    - name: p2
+      variables:
+        x2: {lower: 0}
+      cost: 'x2**2 + x1*x2'
+      constraints:
+        - x1 + x2 <= 4
+solver:
+  tol: 1.0e-10
+"""
+
+
+def _problems(text: str) -> list[str]:
+    with pytest.raises(ConfigError) as err:
+        load_config("cfg.yaml", text=text)
+    return err.value.problems
+
+
+@pytest.mark.parametrize("path", SHIPPED, ids=lambda p: p.name)
+def test_shipped_configs_load_and_round_trip(path: Path) -> None:
+    cfg = load_config(path)
+    again = load_config(path.name, text=cfg.resolved_yaml())
+    assert again == cfg
+    assert again.config_hash() == cfg.config_hash()
+
+
+def test_defaults_are_filled_in() -> None:
+    cfg = load_config("cfg.yaml", text=STATIC)
+    assert cfg.version == 1
+    assert cfg.solver.kind == "ssn" and cfg.solver.complementarity == "min" and cfg.solver.max_iter == 50
+    assert cfg.disturbance.kind == "none" and cfg.disturbance.plant.kind == "none"
+    assert cfg.game.equilibrium == "generalized" and cfg.game.shared_constraints == []
+    resolved = cfg.resolved_yaml()
+    for key in ("complementarity: min", "tie_tol:", "min_rcond:", "line_search: false", "warm_start: previous"):
+        assert key in resolved
+
+
+@pytest.mark.parametrize("needle, line, column, path", [
+    ("name: t\n", 1, 1, "colour"),  # top level
+    ("  tol: 1.0e-10\n", 16, 3, "solver.tolerance"),
+    ("      cost: \"x1**2", 8, 7, "game.agents.0.costs"),
+    ("{lower: 0, upper: 10}", 7, 34, "game.agents.0.variables.x1.uper"),
+])
+def test_unknown_keys_are_located(needle: str, line: int, column: int, path: str) -> None:
+    key = path.rsplit(".", 1)[-1]
+    if key == "colour":
+        text = "colour: red\n" + STATIC
+    elif key == "tolerance":
+        text = STATIC.replace("  tol: 1.0e-10\n", "  tolerance: 1.0e-10\n")
+    elif key == "costs":
+        text = STATIC.replace('      cost: "x1**2 - c*x1*x2"', '      costs: "x1**2 - c*x1*x2"')
+    else:
+        text = STATIC.replace("{lower: 0, upper: 10}", "{lower: 0, uper: 10}")
+    problems = _problems(text)
+    matching = [p for p in problems if f"{path}: unknown key" in p]
+    assert matching, problems
+    assert matching[0].startswith(f"cfg.yaml:{line}:{column}: "), matching[0]
+
+
+def test_unknown_key_lists_the_allowed_ones() -> None:
+    [problem] = _problems(STATIC.replace("  tol: 1.0e-10\n", "  tolerance: 1.0e-10\n"))
+    assert "allowed here:" in problem and "tol" in problem and "max_iter" in problem
+
+
+def test_yaml_syntax_error_position() -> None:
+    [problem] = _problems("name: x\ngame: [1, 2\nsolver: {}\n")
+    assert problem.startswith("cfg.yaml:3:7: YAML syntax error") or problem.startswith("cfg.yaml:3:")
+    assert "YAML syntax error" in problem
+
+
+def test_duplicate_keys_are_errors() -> None:
+    problems = _problems(STATIC.replace("solver:\n  tol: 1.0e-10\n", "solver:\n  tol: 1.0e-10\n  tol: 2\n"))
+    assert problems == ["cfg.yaml:17:3: solver.tol: duplicate key"]
+
+
+@pytest.mark.parametrize("content, fragment", [
+    ("", "empty"),
+    ("- 1\n- 2\n", "must be a mapping"),
+    ("name: [\n", "YAML syntax error"),
+])
+def test_malformed_documents(content: str, fragment: str) -> None:
+    assert fragment in _problems(content)[0]
+
+
+def test_unreadable_files(tmp_path: Path) -> None:
+    big = tmp_path / "big.yaml"
+    big.write_text("name: x\n# " + "a" * MAX_CONFIG_BYTES + "\n")
+    binary = tmp_path / "bin.yaml"
+    binary.write_bytes(b"name: \xff\xfe\x00x\n")
+    for path, fragment in [(big, "the limit is"), (binary, "not UTF-8"), (tmp_path / "missing.yaml", "no such file"),
+                           (tmp_path, "is a directory")]:
+        with pytest.raises(ConfigError, match=fragment):
+            load_config(path)
+
+
+def test_type_errors_and_missing_fields_are_located() -> None:
+    problems = _problems(STATIC.replace("  tol: 1.0e-10", "  tol: -1"))
+    assert problems[0].startswith("cfg.yaml:16:8: solver.tol: ")
+    dyn = (CONFIGS / "paper_study2.yaml").read_text().replace("horizon: 10", "horizon: ten")
+    problems = _problems(dyn)
+    assert any(":9:12: game.horizon:" in p for p in problems), problems
+    problems = _problems(STATIC.replace('      cost: \'x2**2 + x1*x2\'\n', ""))
+    assert problems[0].startswith("cfg.yaml:9:7: game.agents.1.cost: required field is missing"), problems
+
+
+@pytest.mark.parametrize("replace, expected", [
+    # plain, double-quoted, single-quoted scalars: the column of the offending character in the file
+    (("- x1 + x2 <= 4", "- x1 + y2 <= 4"), "cfg.yaml:14:16: game.agents.1.constraints.0: unknown name 'y2'"),
+    (('cost: "x1**2 - c*x1*x2"', 'cost: "x1**2 - d*x1*x2"'), "cfg.yaml:8:22: game.agents.0.cost: unknown name 'd'"),
+    (("cost: 'x2**2 + x1*x2'", "cost: 'x2**2 + x1*x2)'"), "cfg.yaml:12:27: game.agents.1.cost: unbalanced ')'"),
+])
+def test_expression_errors_point_into_the_line(replace, expected: str) -> None:
+    problems = _problems(STATIC.replace(*replace))
+    assert problems[0].startswith(expected), problems
+    assert "of expression" in problems[0]
+
+
+def test_dynamic_game_checks() -> None:
+    base = (CONFIGS / "paper_study2.yaml").read_text()
+    cases = [
+        (base.replace("x0: [1, 3, 5]", "x0: [1, 3]"), "game.x0: has 2 entries for 3 states"),
+        (base.replace("[0, 0, 0.2]]\n    B:", "[0, 0, 0.2], [1, 1, 1]]\n    B:"), "game.dynamics.A: must be 3 x 3"),
+        (base.replace('      stage_cost: "(x3 - 1)**2"', '      stage_cost: "(x3 - 1)**2"\n      terminal_cost: "u3"'),
+         "game.agents.2.terminal_cost: unknown name 'u3'"),
+        (base.replace("inputs: [u2]", "inputs: [x1]"), "input 'x1' is already declared as state"),
+        (base.replace("inputs: [u2]", "inputs: [sin]"), "is the name of a function"),
+        (base.replace("name: agent2", "name: agent1"), "agent 'agent1' is declared twice"),
+    ]
+    for text, fragment in cases:
+        problems = _problems(text)
+        assert any(fragment in p for p in problems), (fragment, problems)
+    expr_dyn = base.replace("""    A: [[0.5, 0, 0], [0, 0.3, 0], [0, 0, 0.2]]
+    B: [[1, 0, 0], [0, 1, 0], [0, 0, 1]]""", """    x1: "0.5*x1 + u1"
+    x2: "0.3*x2 + u2"
+    x4: "x3 + u3\"""")
+    problems = _problems(expr_dyn)
+    assert any("no equation for state 'x3'" in p for p in problems)
+    assert any("'x4' is not a declared state" in p for p in problems)
+
+
+def test_overrides() -> None:
+    path = CONFIGS / "paper_study2.yaml"
+    cfg = load_config(path, {"solver.tol": 1e-12, "run.K": [1, 7]})
+    assert cfg.solver.tol == 1e-12 and cfg.run.K == [1, 7]
+    cfg = load_config(path, ["run.K=[2,3]", "game.agents.0.stage_cost=u1**2", "disturbance.kind=jacobian_noise",
+                             "disturbance.plant.kind=gaussian"])
+    assert cfg.run.K == [2, 3] and cfg.game.agents[0].stage_cost == "u1**2"
+    assert cfg.disturbance.kind == "jacobian_noise" and cfg.disturbance.plant.kind == "gaussian"
+    with pytest.raises(InputError, match="no such list element"):
+        load_config(path, ["game.agents.9.stage_cost=u1"])
+    with pytest.raises(InputError, match="not valid YAML"):
+        load_config(path, ["run.K=[1,"])
+    with pytest.raises(ConfigError) as err:
+        load_config(path, ["solver.tol=-3"])
+    assert str(err.value).startswith("--set solver.tol=-3: solver.tol:")
+    with pytest.raises(ConfigError) as err:
+        load_config(path, ["solver.colour=red"])
+    assert str(err.value).startswith("--set solver.colour=red: solver.colour: unknown key")
+
+
+@pytest.mark.parametrize("text, expected", [
+    ("a.b=1", ("a.b", 1)),
+    ("a.b=", ("a.b", "")),
+    ("a.b=x=y", ("a.b", "x=y")),
+    ("run.K=[1, 7]", ("run.K", [1, 7])),
+    ("game.agents.0.cost=x1**2 + 1", ("game.agents.0.cost", "x1**2 + 1")),
+])
+def test_parse_override(text: str, expected) -> None:
+    assert parse_override(text) == expected
+
+
+@pytest.mark.parametrize("text", ["=1", "a..b=1", "a.b", ".a=1"])
+def test_parse_override_rejects(text: str) -> None:
+    with pytest.raises(InputError):
+        parse_override(text)
+
+
+def test_other_config_versions_are_refused() -> None:
+    problems = _problems("version: 2\n" + STATIC)
+    assert problems[0].startswith("cfg.yaml:1:10: version:")
