@@ -2,8 +2,10 @@
 
 At every sampling time t the solver takes at most K steps from the warm start, every agent's first
 input u(t) is applied, and the plant moves to x(t+1) = f(x(t), u(t)) + w(t). Alongside, z*(t), the
-exact solution at x(t), is computed (to tolerance, outside the K budget, warm-started from z*(t-1))
-to measure the tracking error e(t) = z^K(t) - z*(t) of Theorem "bounded error".
+exact solution at x(t), is computed (to tolerance, outside the K budget) to measure the tracking
+error e(t) = z^K(t) - z*(t) of Theorem "bounded error": the solution the solver reaches from the same
+warm start without a budget (then from z*(t-1), then cold), i.e. the isolated solution the iterates
+track, which is the one equilibrium when it is unique.
 
 The budget K is a maximum: once ||Phi|| <= tol the remaining steps are skipped, because a solution
 is a fixed point of the Newton step.
@@ -152,10 +154,14 @@ def closed_loop(cfg: Config, game: CompiledGame, K: int, run: RunDirectory | Non
     topic = f"/K{K}/mpc"
     for t in range(steps):
         xs[t] = x
-        ref = reference_solution(game, cfg, z_star_prev, x)
-        if not ref.converged:  # a cold start may find what a warm start from z*(t-1) did not
-            cold = reference_solution(game, cfg, game.z_start(), x)
-            ref = cold if cold.converged else ref
+        # z*(t): the solution the solver reaches from the same warm start with an unlimited budget (so that e(t)
+        # measures the effect of the budget K, on the branch the loop follows when equilibria are not unique);
+        # then from z*(t-1), then cold
+        ref = reference_solution(game, cfg, z_warm, x)
+        for start in (z_star_prev, game.z_start()):
+            if ref.converged:
+                break
+            ref = reference_solution(game, cfg, start, x)
         z_star = ref.z if ref.converged else None
         ref_status.append(str(ref.status))
         if z_star is not None:

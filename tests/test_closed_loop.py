@@ -228,3 +228,25 @@ def test_bad_plant_disturbance_is_a_config_error() -> None:
         load_config(STUDY2, {"disturbance.plant": {"kind": "gaussian", "scale": [0.1, 0.1]}})
     with pytest.raises(ConfigError, match="disturbance.plant.kind"):
         load_config(STUDY2, {"disturbance.plant.kind": "brownian"})
+
+
+def test_vehicle_game_runs_K1_to_5_without_a_solver_failure() -> None:
+    sim = simulate(load_config(CONFIGS / "vehicles.yaml", {"run.K": [1, 2, 3, 4, 5]}))
+    game = sim.game
+    shared = slice(game.n + game.shared_slice.start, game.n + game.shared_slice.stop)
+    max_e = {}
+    for K, r in sim.items():
+        assert set(r.status) <= {"converged", "incomplete"}, (K, r.status)
+        assert set(r.reference_status) == {"converged"}  # every exact solution z*(t) found
+        distance = np.hypot(r.x[:, 0] - r.x[:, 3], r.x[:, 1] - r.x[:, 4])
+        if K >= 3:
+            assert distance.min() >= 1.0 - 1e-6  # ||p1 - p2|| >= d holds along the closed loop
+        assert distance.min() > 0.5  # no collision for any K
+        assert r.e_norm[-1] <= 1e-5  # K = 1 is still settling (2e-6) at t = 49
+        max_e[K] = float(np.max(r.e_norm))
+        # the collision constraint binds while the vehicles cross
+        assert np.max(r.z_star[:, shared]) > 0.5
+        # both vehicles get past the intersection towards their goals
+        assert r.x[-1, 0] > 6 and r.x[-1, 4] > 6
+    assert max_e[1] > 1.0  # small K: a visible tracking error
+    assert max_e[1] > max_e[2] > max_e[3] >= max_e[5] * 0.99
