@@ -176,6 +176,78 @@ def simulate(config: ConfigArg, out: OutOpt = None, set_: SetOpt = None, quiet: 
     typer.echo(f"run directory: {sim.run_dir}")
 
 
+RunArgs = Annotated[list[Path], typer.Argument(help="Run directories or their run.mcap files.", show_default=False)]
+
+
+def _existing_logs(runs: list[Path]) -> list[Path]:
+    from .errors import InputError
+    from .mcap_log import run_log_path
+
+    for run in runs:
+        if not run_log_path(run).is_file():
+            raise InputError(f"{run}: no run log here (expected a run directory or its run.mcap)")
+    return runs
+
+
+@app.command()
+def figures(
+    runs: RunArgs,
+    out: Annotated[Path, typer.Option("--out", help="Folder for the figures.")] = Path("figures"),
+    format_: Annotated[str, typer.Option("--format", help="Comma-separated: png, pdf, svg.")] = "png,pdf",
+    quiet: QuietOpt = False,
+) -> None:
+    """Paper-style figures (Studies 1-3) from run logs."""
+    with _reported():
+        from .errors import InputError
+        from .figures import write_figures
+
+        formats = [f.strip().lower() for f in format_.split(",") if f.strip()]
+        bad = [f for f in formats if f not in ("png", "pdf", "svg")]
+        if bad or not formats:
+            raise InputError(f"--format {format_}: choose from png, pdf, svg")
+        written = write_figures(_existing_logs(runs), out, formats)
+        if not written:
+            raise InputError("the runs hold nothing to draw (no /solve/iterate and no /K<k>/mpc topics)")
+    if not quiet:
+        for path in written:
+            typer.echo(str(path))
+
+
+@app.command()
+def inspect(run: Annotated[Path, typer.Argument(help="A run directory or its run.mcap.", show_default=False)]) -> None:
+    """Topics, message counts, time range, status and config of a run, finished or not."""
+    with _reported():
+        import datetime as dt
+        import json
+
+        from .mcap_log import read_run
+
+        record = read_run(_existing_logs([run])[0])
+        summary_file = record.path.parent / "summary.json"
+        status = "unknown"
+        if summary_file.is_file():
+            status = json.loads(summary_file.read_text()).get("status", "unknown")
+        elif not record.complete:
+            status = "incomplete: the run did not finish (no summary.json)"
+        times = [t for ts in record.log_times.values() for t in ts]
+    typer.echo(f"{record.path}: {record.note}")
+    meta = record.metadata
+    typer.echo(f"config: {meta.get('config_name', '?')} (hash {meta.get('config_hash', '?')[:12]}, gnerun "
+               f"{meta.get('version', '?')}, seed {meta.get('seed', '?')}, {meta.get('git_describe', '?')})")
+    typer.echo(f"status: {status}")
+    if times:
+        first, last = (dt.datetime.fromtimestamp(t / 1e9, dt.UTC) for t in (min(times), max(times)))
+        typer.echo(f"time range: {first.isoformat(timespec='seconds')} .. {last.isoformat(timespec='seconds')} "
+                   f"({(max(times) - min(times)) / 1e9:.3f} s)")
+    typer.echo(f"{'topic':<24} {'messages':>8}")
+    for topic, msgs in sorted(record.messages.items()):
+        typer.echo(f"{topic:<24} {len(msgs):>8}")
+    if record.config_yaml:
+        typer.echo("config.yaml:")
+        for line in record.config_yaml.rstrip().splitlines():
+            typer.echo(f"  {line}")
+
+
 def _ms(seconds: float) -> str:
     return f"{seconds * 1e3:.3f} ms"
 

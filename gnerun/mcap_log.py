@@ -11,7 +11,9 @@ from __future__ import annotations
 
 import json
 import math
+import struct
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Any
 
@@ -102,13 +104,87 @@ class RunLog:
         self.close()
 
 
+@dataclass
+class RunRecord:
+    """Everything a run log holds, read back (see :func:`read_run`)."""
+
+    path: Path
+    messages: dict[str, list[dict]]  # topic -> decoded messages, in log-time order
+    log_times: dict[str, list[int]]
+    config_yaml: str | None
+    metadata: dict[str, str]
+    complete: bool  # the log was finished (summary and index present)
+    note: str  # how it was read
+
+    @property
+    def message_count(self) -> int:
+        return sum(len(v) for v in self.messages.values())
+
+
+def run_log_path(path: str | Path) -> Path:
+    """RUN is a run directory or its .mcap file."""
+    p = Path(path)
+    return p / "run.mcap" if p.is_dir() else p
+
+
+def read_run(path: str | Path) -> RunRecord:
+    """Read a run log. A finished log is read through its index; a log whose writer was killed (no summary,
+    a truncated last chunk) is read record by record, keeping every complete chunk."""
+    from mcap.exceptions import McapError
+    from mcap.reader import make_reader
+    from mcap.records import Attachment, Channel, Message, Metadata
+    from mcap.stream_reader import StreamReader
+
+    file = run_log_path(path)
+    triples: list[tuple[str, int, dict]] = []
+    config_yaml: str | None = None
+    metadata: dict[str, str] = {}
+    with open(file, "rb") as f:
+        try:
+            reader = make_reader(f)
+            summary = reader.get_summary()
+            if summary is None:
+                raise McapError("no summary")
+            for _schema, channel, message in reader.iter_messages(log_time_order=True):
+                triples.append((channel.topic, message.log_time, json.loads(message.data)))
+            for a in reader.iter_attachments():
+                if a.name == "config.yaml":
+                    config_yaml = a.data.decode()
+            for md in reader.iter_metadata():
+                if md.name == "gnerun.run":
+                    metadata = dict(md.metadata)
+            complete, note = True, "finished log, read through its index"
+        except (McapError, ValueError, OSError, EOFError, struct.error) as exc:
+            f.seek(0)
+            triples, channels = [], {}
+            note = "unfinished log (no index): read record by record"
+            try:
+                for record in StreamReader(f, skip_magic=False).records:
+                    if isinstance(record, Channel):
+                        channels[record.id] = record.topic
+                    elif isinstance(record, Message) and record.channel_id in channels:
+                        triples.append((channels[record.channel_id], record.log_time, json.loads(record.data)))
+                    elif isinstance(record, Attachment) and record.name == "config.yaml":
+                        config_yaml = record.data.decode()
+                    elif isinstance(record, Metadata) and record.name == "gnerun.run":
+                        metadata = dict(record.metadata)
+            except Exception as tail:  # noqa: BLE001 - a truncated record ends what can be read
+                note += f"; it ends in an incomplete record ({type(tail).__name__})"
+            complete = False
+            if not isinstance(exc, McapError) or str(exc) != "no summary":
+                note += f" after {type(exc).__name__}"
+    triples.sort(key=lambda t: t[1])
+    messages: dict[str, list[dict]] = {}
+    times: dict[str, list[int]] = {}
+    for topic, t, msg in triples:
+        messages.setdefault(topic, []).append(msg)
+        times.setdefault(topic, []).append(t)
+    return RunRecord(file, messages, times, config_yaml, metadata, complete, note)
+
+
 def read_messages(path: str | Path) -> list[tuple[str, dict, int]]:
     """All messages of a run log as (topic, decoded JSON, log_time), in log-time order."""
-    from mcap.reader import make_reader
-
-    out = []
-    with open(path, "rb") as f:
-        reader = make_reader(f)
-        for _schema, channel, message in reader.iter_messages(log_time_order=True):
-            out.append((channel.topic, json.loads(message.data), message.log_time))
-    return out
+    record = read_run(path)
+    out = [(topic, msg, t) for topic in record.messages
+           for msg, t in zip(record.messages[topic], record.log_times[topic], strict=True)]
+    return sorted(out, key=lambda x: x[2])
