@@ -248,6 +248,28 @@ def inspect(run: Annotated[Path, typer.Argument(help="A run directory or its run
             typer.echo(f"  {line}")
 
 
+@app.command()
+def recover(
+    run: Annotated[Path, typer.Argument(help="A run directory or its run.mcap.", show_default=False)],
+    out: Annotated[Path | None, typer.Option("--out", help="The repaired copy (default: run.recovered.mcap beside "
+                                                          "the log).", show_default=False)] = None,
+    quiet: QuietOpt = False,
+) -> None:
+    """Write a finished, indexed copy of a run log whose writer was killed."""
+    with _reported():
+        from .errors import InputError
+        from .mcap_log import recover as recover_log
+        from .mcap_log import run_log_path
+
+        source = run_log_path(_existing_logs([run])[0])
+        target = out if out is not None else source.with_name("run.recovered.mcap")
+        if target.resolve() == source.resolve():
+            raise InputError(f"{target}: the copy must not overwrite the log it repairs")
+        record = recover_log(source, target)
+    if not quiet:
+        typer.echo(f"{target}: {record.message_count} messages recovered ({record.note})")
+
+
 def _ms(seconds: float) -> str:
     return f"{seconds * 1e3:.3f} ms"
 

@@ -182,6 +182,20 @@ def read_run(path: str | Path) -> RunRecord:
     return RunRecord(file, messages, times, config_yaml, metadata, complete, note)
 
 
+def recover(path: str | Path, target: str | Path) -> RunRecord:
+    """Write a finished, indexed copy of a run log (e.g. of a killed run) with every message that can be read."""
+    record = read_run(path)
+    with RunLog(target, config_yaml=record.config_yaml or "", metadata=record.metadata) as log:
+        order = sorted((t, topic, i) for topic, times in record.log_times.items() for i, t in enumerate(times))
+        for t, topic, i in order:
+            model = TOPICS.get(topic) or next((m for suffix, m in TOPICS.items() if topic.endswith(suffix)), None)
+            if model is None:
+                continue
+            message: Message = model.model_validate(record.messages[topic][i])
+            log.write(topic, message, log_time=t)
+    return record
+
+
 def read_messages(path: str | Path) -> list[tuple[str, dict, int]]:
     """All messages of a run log as (topic, decoded JSON, log_time), in log-time order."""
     record = read_run(path)

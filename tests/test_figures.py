@@ -114,3 +114,15 @@ def test_bad_runs_are_input_errors(args, needle) -> None:
 def test_bad_format(runs) -> None:
     proc = run_cli("figures", str(runs["clean"]), "--format", "gif")
     assert proc.returncode == 2 and "choose from png, pdf, svg" in proc.stderr
+
+
+def test_recover_writes_an_indexed_copy(runs, tmp_path: Path) -> None:
+    killed = _truncated(runs["study2"], tmp_path, 0.6)
+    cut = read_run(killed)
+    target = tmp_path / "repaired.mcap"
+    proc = run_cli("recover", str(killed), "--out", str(target))
+    assert proc.returncode == 0, proc.stderr
+    repaired = read_run(target)
+    assert repaired.complete  # readable through its index again
+    assert repaired.messages == cut.messages and repaired.log_times == cut.log_times
+    assert repaired.config_yaml == cut.config_yaml and repaired.metadata == cut.metadata
