@@ -50,6 +50,7 @@ def kkt_residuals(game: CompiledGame, z: np.ndarray, x: np.ndarray | None = None
 def best_response(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | None = None,
                   starts: list[np.ndarray] | None = None) -> tuple[float | None, np.ndarray | None, str]:
     """Agent ``agent``'s best response to a_-i: (value, its decision, a note)."""
+    a = np.asarray(a, dtype=float)
     sl = game.agent_slices[agent]
     rows = game.constraint_rows(agent)
     eq_rows = rows[game.equality_mask[rows]]

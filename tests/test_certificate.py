@@ -1,0 +1,286 @@
+"""gnerun.certificate: best responses, gaps and KKT residuals against closed forms.
+
+References: Facchinei & Kanzow (2010) Examples A.11 (variational GNE (3/4, 1/4), common multiplier 1/2)
+and A.12 (NE (16/3, 16/3)), Harker's game (GNE (5, 9), and the segment x1 + x2 = 15, 9 <= x1 <= 10),
+whose agents' problems are one-dimensional convex quadratics: the best response is the clipped
+stationary point, in closed form. The paper's Study 1 is checked end to end.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from gnerun.certificate import best_response, certificate, kkt_residuals
+from gnerun.config import load_config
+from gnerun.game import CompiledGame, compile_game
+from gnerun.solving import solve
+
+from .conftest import CONFIGS
+
+GAP_TOL = 1e-8
+BR_TOL = 1e-7  # SLSQP's decision accuracy on these one-dimensional problems
+
+
+def _game(name: str, overrides: dict | None = None) -> CompiledGame:
+    return compile_game(load_config(CONFIGS / f"{name}.yaml", overrides))
+
+
+def _z(game: CompiledGame, a, multipliers: dict[tuple[str, int | None], float] | None = None) -> np.ndarray:
+    """z = (a, lambda) with lambda given by (label, owner); unnamed multipliers are 0."""
+    lam = np.zeros(game.m)
+    keys = [(c.label, c.owner) for c in game.constraints]
+    for key, value in (multipliers or {}).items():
+        lam[keys.index(key)] = value
+    return np.r_[np.asarray(a, dtype=float), lam]
+
+
+# closed-form costs and best responses -------------------------------------------------------------
+
+
+def a12_cost(i: int, a: np.ndarray) -> float:
+    return float(a[i] * (a[0] + a[1] - 16))
+
+
+def a12_br(other: float) -> float:  # argmin_{-10 <= t <= 10} t (t + other - 16)
+    return float(np.clip((16 - other) / 2, -10, 10))
+
+
+def a11_cost(i: int, a: np.ndarray) -> float:
+    return float((a[0] - 1) ** 2) if i == 0 else float((a[1] - 0.5) ** 2)
+
+
+def a11_br(i: int, other: float) -> float:  # argmin (t - target)^2 s.t. t + other <= 1
+    return min(1.0 if i == 0 else 0.5, 1 - other)
+
+
+def harker_cost(i: int, a: np.ndarray) -> float:
+    x1, x2 = a
+    return float(x1**2 + 8 / 3 * x1 * x2 - 34 * x1) if i == 0 else float(x2**2 + 5 / 4 * x1 * x2 - 24.25 * x2)
+
+
+def harker_br(i: int, other: float) -> float:  # clipped stationary point on [0, min(10, 15 - other)]
+    stationary = (34 - 8 / 3 * other) / 2 if i == 0 else (24.25 - 5 / 4 * other) / 2
+    return float(min(max(stationary, 0.0), 10.0, 15.0 - other))
+
+
+def _with(a: np.ndarray, i: int, value: float) -> np.ndarray:
+    b = np.array(a, dtype=float)
+    b[i] = value
+    return b
+
+
+CASES = {  # name: (cost J_i(a), best response of agent i to the other's decision, known equilibrium)
+    "fk_a12": (a12_cost, lambda i, other: a12_br(other), (16 / 3, 16 / 3)),
+    "fk_a11": (a11_cost, a11_br, (0.75, 0.25)),  # the variational equilibrium
+    "harker": (harker_cost, harker_br, (5.0, 9.0)),
+}
+
+
+# --- 1. best responses and gaps ---------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("name", list(CASES))
+@pytest.mark.parametrize("agent", [0, 1])
+def test_best_response_has_the_closed_form(name: str, agent: int) -> None:
+    cost, br, star = CASES[name]
+    game = _game(name)
+    # the opponent at the equilibrium and at values that put the best response on each kind of bound
+    for other in (star[1 - agent], -10.0, -3.0, 0.0, 2.5, 9.0, 10.0):
+        a = np.zeros(2)
+        a[1 - agent] = other
+        if name == "harker" and not 0 <= other <= 10:
+            continue  # the opponent's own bounds; the best response is still defined, but keep to the box
+        value, decision, note = best_response(game, agent, a)
+        expected = br(agent, other)
+        assert note == "ok"
+        assert decision.shape == (1,)
+        assert decision[0] == pytest.approx(expected, abs=BR_TOL), (name, agent, other)
+        assert value == pytest.approx(cost(agent, _with(a, agent, expected)), abs=1e-9)
+
+
+@pytest.mark.parametrize("name", list(CASES))
+def test_gaps_vanish_at_the_known_equilibrium(name: str) -> None:
+    cost, br, star = CASES[name]
+    game = _game(name)
+    a = np.array(star)
+    for i in range(2):
+        value, decision, note = best_response(game, i, a)
+        np.testing.assert_array_equal(a, star)  # the candidate is not modified
+        assert note == "ok"
+        assert decision[0] == pytest.approx(star[i], abs=BR_TOL)
+        assert abs(cost(i, a) - value) <= GAP_TOL
+    cert = certificate(game, _z(game, a))
+    assert set(cert["best_response_gap"]) == set(game.agent_names)
+    assert all(abs(g) <= GAP_TOL for g in cert["best_response_gap"].values())
+    assert all(note == "ok" for note in cert["best_response_note"].values())
+
+
+def game_limit(name: str) -> float:
+    """The right-hand side of the shared constraint x1 + x2 <= . (none in A.12)."""
+    return {"fk_a12": np.inf, "fk_a11": 1.0, "harker": 15.0}[name]
+
+
+# (0.9, 0.6) in A.11 and (9, 9) in Harker violate the shared constraint: each agent's best response
+# is then feasible and may cost more than the candidate, so a gap can be negative (A.11 there: both).
+PERTURBED = {
+    "fk_a12": [(0.0, 16 / 3), (9.0, -10.0), (-10.0, 10.0)],
+    "fk_a11": [(0.5, 0.25), (0.2, 0.1), (0.9, 0.6)],
+    "harker": [(3.0, 9.0), (9.0, 9.0), (0.0, 2.0)],
+}
+
+
+@pytest.mark.parametrize("name", list(CASES))
+def test_gaps_away_from_the_equilibrium_equal_the_closed_form(name: str) -> None:
+    cost, br, _ = CASES[name]
+    game = _game(name)
+    for point in PERTURBED[name]:
+        a = np.array(point)
+        gaps = certificate(game, _z(game, a))["best_response_gap"]
+        expected = [cost(i, a) - cost(i, _with(a, i, br(i, a[1 - i]))) for i in range(2)]
+        assert max(np.abs(expected)) > 0.1  # the points are not equilibria
+        if point[0] + point[1] <= game_limit(name):  # at a feasible candidate no gap is negative
+            assert min(expected) >= 0 and max(expected) > 0.1
+        for i, agent_name in enumerate(game.agent_names):
+            assert gaps[agent_name] == pytest.approx(expected[i], abs=1e-8), (name, point, agent_name)
+
+
+def test_harker_gaps_vanish_along_its_segment_of_equilibria() -> None:
+    # x1 + x2 = 15 with 9 <= x1 <= 10: both agents are blocked by the shared constraint
+    game = _game("harker")
+    for x1 in (9.0, 9.5, 10.0):
+        gaps = certificate(game, _z(game, [x1, 15 - x1]))["best_response_gap"]
+        assert all(abs(g) <= GAP_TOL for g in gaps.values()), (x1, gaps)
+
+
+def test_generalized_a11_segment_is_an_equilibrium_but_off_it_is_not() -> None:
+    game = _game("fk_a11", {"game.equilibrium": "generalized"})
+    gaps = certificate(game, _z(game, [0.6, 0.4]))["best_response_gap"]  # on x1 + x2 = 1, 1/2 <= x1 <= 1
+    assert all(abs(g) <= GAP_TOL for g in gaps.values())
+    gaps = certificate(game, _z(game, [0.3, 0.7]))["best_response_gap"]  # x1 < 1/2: agent 2 would lower x2
+    assert gaps["p1"] == pytest.approx(0.0, abs=GAP_TOL)
+    assert gaps["p2"] == pytest.approx(0.2**2, abs=1e-9)  # (0.7 - 0.5)^2 - 0
+
+
+def test_best_response_accepts_an_integer_candidate() -> None:
+    game = _game("fk_a12")
+    value, decision, _ = best_response(game, 0, np.array([0, 5]))  # best response to x2 = 5 is 11/2
+    assert decision[0] == pytest.approx(5.5, abs=BR_TOL)
+    assert value == pytest.approx(-30.25, abs=1e-9)
+
+
+# --- 2. KKT residuals -------------------------------------------------------------------------------
+
+
+def test_kkt_residual_vanishes_at_known_primal_dual_solutions() -> None:
+    cases = [
+        (_game("fk_a12"), [16 / 3, 16 / 3], {}),  # interior NE, all multipliers 0
+        (_game("fk_a11"), [0.75, 0.25], {("x1 + x2 <= 1", None): 0.5}),  # variational: common multiplier 1/2
+        # generalized A.11 at (0.6, 0.4): lambda_1 = -2(x1 - 1) = 0.8, lambda_2 = -2(x2 - 1/2) = 0.2
+        (_game("fk_a11", {"game.equilibrium": "generalized"}), [0.6, 0.4],
+         {("x1 + x2 <= 1", 0): 0.8, ("x1 + x2 <= 1", 1): 0.2}),
+        (_game("harker"), [5.0, 9.0], {}),  # shared constraint inactive
+        # Harker on its segment at (9.5, 5.5): lambda_1 = -(2 x1 + 8/3 x2 - 34) = 1/3,
+        # lambda_2 = -(2 x2 + 5/4 x1 - 24.25) = 1.375
+        (_game("harker"), [9.5, 5.5], {("x1 + x2 <= 15", 0): 1 / 3, ("x1 + x2 <= 15", 1): 1.375}),
+    ]
+    for game, a, mult in cases:
+        r = kkt_residuals(game, _z(game, a, mult))
+        assert set(r) == {"kkt_residual", "stationarity", "primal_infeasibility", "dual_infeasibility",
+                          "complementarity"}
+        assert all(v <= 1e-12 for v in r.values()), (game.agent_names, a, r)
+        assert all(v >= 0 for v in r.values())
+
+
+def test_kkt_residual_with_an_active_bound_multiplier() -> None:
+    # semicopositive NE (3, 1): agent 2 sits at its lower bound x2 >= 1 with multiplier dJ2/dx2 = x1 = 3
+    game = compile_game(load_config(CONFIGS / "semicopositive_ne.yaml"))
+    z = _z(game, [3.0, 1.0], {("x2 >= 1", 1): 3.0})
+    assert kkt_residuals(game, z)["kkt_residual"] <= 1e-14
+    # with the wrong multiplier, stationarity is off by exactly the error
+    r = kkt_residuals(game, _z(game, [3.0, 1.0], {("x2 >= 1", 1): 2.5}))
+    assert r["stationarity"] == pytest.approx(0.5) and r["kkt_residual"] == pytest.approx(0.5)
+    assert r["primal_infeasibility"] == 0 and r["dual_infeasibility"] == 0 and r["complementarity"] == 0
+
+
+def test_kkt_residual_components_on_crafted_points() -> None:
+    # A.11, variational: L = (2(x1 - 1) + mu, 2(x2 - 1/2) + mu), c = x1 + x2 - 1
+    game = _game("fk_a11")
+    r = kkt_residuals(game, np.array([0.8, 0.3, -0.1]))
+    assert r["stationarity"] == pytest.approx(0.5)  # |2(0.8 - 1) - 0.1| = |2(0.3 - 0.5) - 0.1|
+    assert r["primal_infeasibility"] == pytest.approx(0.1)
+    assert r["dual_infeasibility"] == pytest.approx(0.1)
+    assert r["complementarity"] == pytest.approx(0.01)
+    assert r["kkt_residual"] == pytest.approx(0.5)  # max(|L|, |min(-c, mu)|) = max(0.5, 0.1)
+    # A.11, generalized, feasible with slack and stationary: only complementarity (and min(-c, lambda)) is off
+    gen = _game("fk_a11", {"game.equilibrium": "generalized"})
+    r = kkt_residuals(gen, _z(gen, [0.5, 0.4], {("x1 + x2 <= 1", 0): 1.0, ("x1 + x2 <= 1", 1): 0.2}))
+    assert r["stationarity"] == pytest.approx(0.0, abs=1e-15)
+    assert r["primal_infeasibility"] == 0 and r["dual_infeasibility"] == 0
+    assert r["complementarity"] == pytest.approx(0.1)  # max(|1.0 * -0.1|, |0.2 * -0.1|)
+    assert r["kkt_residual"] == pytest.approx(0.1)  # max(|min(0.1, 1.0)|, |min(0.1, 0.2)|)
+    # A.12 at (12, 1): c = (-22, 2, -11, -9), lambda = (0, 0.5, 0.3, -0.2)
+    a12 = _game("fk_a12")
+    z = _z(a12, [12.0, 1.0], {("x1 <= 10", 0): 0.5, ("x2 >= -10", 1): 0.3, ("x2 <= 10", 1): -0.2})
+    r = kkt_residuals(a12, z)
+    # L1 = 2 x1 + x2 - 16 - lambda_1lo + lambda_1up = 9.5, L2 = x1 + 2 x2 - 16 - 0.3 - 0.2 = -2.5
+    np.testing.assert_allclose(a12.kkt_parts(z).L, [9.5, -2.5])
+    assert r["stationarity"] == pytest.approx(9.5)
+    assert r["primal_infeasibility"] == pytest.approx(2.0)
+    assert r["dual_infeasibility"] == pytest.approx(0.2)
+    assert r["complementarity"] == pytest.approx(3.3)  # |0.3 * -11|
+    assert r["kkt_residual"] == pytest.approx(9.5)
+
+
+def test_kkt_residual_of_equality_constraints() -> None:
+    game = compile_game(load_config("e.yaml", text="""
+game:
+  kind: static
+  agents:
+    - name: p
+      variables: {x: {lower: -1}}
+      cost: "x**2"
+      constraints: ["x == 0.5"]
+"""))
+    # solution x = 1/2, lower bound inactive, equality multiplier -1 (free sign): 2x + mu = 0
+    assert kkt_residuals(game, np.array([0.5, 0.0, -1.0]))["kkt_residual"] == 0.0
+    r = kkt_residuals(game, np.array([0.7, -0.2, -1.0]))
+    assert r["stationarity"] == pytest.approx(0.6)  # 2(0.7) - (-0.2) + (-1)
+    assert r["primal_infeasibility"] == pytest.approx(0.2)  # |h| = |0.7 - 0.5|
+    assert r["dual_infeasibility"] == pytest.approx(0.2)  # the bound's multiplier only: mu of == is free
+    assert r["complementarity"] == pytest.approx(0.34)  # |-0.2 * (-1 - 0.7)|, equality excluded
+    value, decision, note = best_response(game, 0, np.array([0.7]))
+    assert note == "ok" and decision[0] == pytest.approx(0.5, abs=1e-9) and value == pytest.approx(0.25)
+
+
+def test_kkt_residual_is_positive_away_from_the_solution() -> None:
+    rng = np.random.default_rng(5)
+    for name in ("fk_a12", "fk_a11", "harker"):
+        game = _game(name)
+        for _ in range(5):
+            z = np.r_[rng.uniform(-5, 5, game.n), rng.uniform(-1, 1, game.m)]
+            r = kkt_residuals(game, z)
+            assert r["kkt_residual"] > 1e-3
+            assert r["kkt_residual"] >= r["stationarity"] - 1e-15
+
+
+# --- 3. the paper's Study 1 -------------------------------------------------------------------------
+
+
+def test_certificate_of_the_solved_paper_game() -> None:
+    res = solve(load_config(CONFIGS / "paper_study1.yaml"))
+    assert res.status == "converged"
+    cert = certificate(res.game, res.z, res.x)
+    assert cert["kkt_residual"] <= 1e-10
+    assert set(cert["best_response_gap"]) == {"agent1", "agent2", "agent3"}
+    assert all(abs(g) <= GAP_TOL for g in cert["best_response_gap"].values()), cert["best_response_gap"]
+    assert all(note == "ok" for note in cert["best_response_note"].values())
+    assert res.certificate["kkt_residual"] == pytest.approx(cert["kkt_residual"], abs=1e-14)
+    # moving agent 2 off its equilibrium plan (feasibly: u2 <= 1/2 still holds) gives it a positive gap,
+    # and leaves the KKT residual positive
+    game = res.game
+    z = res.z.copy()
+    z[game.agent_slices[1]] -= 0.3
+    off = certificate(game, z, res.x)
+    assert off["best_response_gap"]["agent2"] > 1e-3
+    assert off["kkt_residual"] > 1e-3
