@@ -9,6 +9,7 @@ the commands, so that ``gnerun --help`` stays fast.
 from __future__ import annotations
 
 import contextlib
+import re
 import sys
 import traceback
 from collections.abc import Iterator
@@ -18,7 +19,7 @@ from typing import Annotated, NoReturn
 import typer
 
 from . import __version__
-from .errors import InputError
+from .errors import InputError, Unavailable
 
 app = typer.Typer(
     add_completion=False,
@@ -66,6 +67,9 @@ def _fail(exc: BaseException) -> NoReturn:
     if isinstance(exc, InputError):
         typer.echo(f"error: {exc}", err=True)
         raise typer.Exit(2)
+    if isinstance(exc, Unavailable):
+        typer.echo(f"error: {exc}", err=True)
+        raise typer.Exit(1)
     typer.echo(f"error: {type(exc).__name__}: {exc} (run with --debug for the traceback)", err=True)
     raise typer.Exit(1)
 
@@ -246,6 +250,57 @@ def inspect(run: Annotated[Path, typer.Argument(help="A run directory or its run
         typer.echo("config.yaml:")
         for line in record.config_yaml.rstrip().splitlines():
             typer.echo(f"  {line}")
+
+
+@app.command()
+def replay(
+    runs: RunArgs,
+    save: Annotated[Path | None, typer.Option("--save", help="Write the recording to FILE.rrd.",
+                                              show_default=False)] = None,
+    spawn: Annotated[bool, typer.Option("--spawn", help="Open the native viewer (needs a display).")] = False,
+    serve: Annotated[bool, typer.Option("--serve", help="Serve the web viewer on 127.0.0.1, print its URL.")] = False,
+    screenshot: Annotated[Path | None, typer.Option(
+        "--screenshot", help="Write one PNG per paper figure to DIR, taken by a headless viewer (needs a Vulkan "
+        "driver, e.g. Debian's mesa-vulkan-drivers).", show_default=False)] = None,
+    size: Annotated[str, typer.Option("--size", help="Screenshot size in points (--screenshot).")] = "1600x900",
+    web_port: Annotated[int, typer.Option("--web-port", help="Port of the web viewer (--serve).")] = 9090,
+    grpc_port: Annotated[int, typer.Option("--grpc-port", help="Port of its data server (--serve).")] = 9876,
+    quiet: QuietOpt = False,
+) -> None:
+    """Open runs in Rerun: one timeline per kind of run, one view per paper figure (built from the logs only)."""
+    with _reported():
+        import os
+        import tempfile
+
+        from . import replay as rp
+        from .errors import InputError
+
+        runs = _existing_logs(runs)
+        if not re.fullmatch(r"\d{2,5}x\d{2,5}", size):
+            raise InputError(f"--size must look like 1600x900, not {size!r}")
+        if not (save or spawn or serve or screenshot):
+            if not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
+                raise InputError("no display for the viewer: use --save FILE.rrd, --serve or --screenshot DIR")
+            spawn = True
+        if save is not None:
+            rp.save(runs, save)
+            if not quiet:
+                typer.echo(f"saved {save}")
+        if screenshot is not None:
+            if not rp.vulkan_available():
+                raise Unavailable(rp.VULKAN_HINT)
+            for path in rp.screenshots(runs, screenshot, size=size):
+                if not quiet:
+                    typer.echo(f"wrote {path}")
+        if spawn:
+            rp.spawn(runs)
+        if serve:
+            rrd = save if save is not None else Path(tempfile.mkdtemp(prefix="gnerun-replay-")) / "replay.rrd"
+            if save is None:
+                rp.save(runs, rrd)
+            typer.echo(f"web viewer: {rp.web_url(web_port, grpc_port)} (Ctrl-C stops it)", err=False)
+            sys.stdout.flush()
+            rp.serve(rrd, web_port, grpc_port)
 
 
 @app.command()

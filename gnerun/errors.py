@@ -24,3 +24,10 @@ class ConfigError(InputError):
         more = len(self.problems) - 1
         suffix = f" (and {more} more problem{'s' if more > 1 else ''}: run `gnerun validate` for all)" if more else ""
         super().__init__(first + suffix)
+
+
+class Unavailable(Exception):
+    """Something this machine lacks for the request (a graphics driver, a display, a viewer that starts).
+
+    Reported as ``error: <message>`` with exit code 1: the input is fine, the environment is not.
+    """

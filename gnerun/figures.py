@@ -27,21 +27,21 @@ def _log_values(values: list[float | None]) -> list[float]:
     return [v if v is not None and v > 0 and math.isfinite(v) else math.nan for v in values]
 
 
-def _name(run: RunRecord) -> str:
+def run_name(run: RunRecord) -> str:
     if run.config_yaml:
         cfg = yaml.safe_load(run.config_yaml) or {}
         return str(cfg.get("name", run.path.parent.name))
     return run.path.parent.name
 
 
-def _solver_kind(run: RunRecord) -> str:
+def solver_kind(run: RunRecord) -> str:
     if not run.config_yaml:
         return ""
     cfg = yaml.safe_load(run.config_yaml) or {}
     return str((cfg.get("solver") or {}).get("kind", ""))
 
 
-def _disturbance(run: RunRecord) -> str:
+def disturbance(run: RunRecord) -> str:
     if not run.config_yaml:
         return ""
     d = (yaml.safe_load(run.config_yaml) or {}).get("disturbance") or {}
@@ -78,10 +78,10 @@ def study1_figure(runs: list[RunRecord]):
     for ax, run, label in zip(axes[0], runs, "abcdefgh", strict=False):
         its = run.messages.get("/solve/iterate", [])
         ax.semilogy([m["k"] for m in its], _log_values([m["error_norm"] for m in its]), "o-", ms=3,
-                    label=_disturbance(run))
+                    label=disturbance(run))
         ax.set_xlabel("iteration k")
         ax.xaxis.set_major_locator(MaxNLocator(integer=True))
-        ax.set_title(f"({label}) {_name(run)}", fontsize=9)
+        ax.set_title(f"({label}) {run_name(run)}", fontsize=9)
         ax.legend(loc="upper right")
     axes[0][0].set_ylabel(r"$\|z^k - z^*\|$")
     fig.tight_layout()
@@ -147,11 +147,11 @@ def make_figures(paths: list[str | Path]) -> dict[str, object]:
     figures: dict[str, object] = {}
     solves = [r for r in runs if "/solve/iterate" in r.messages]
     if solves:
-        figures["study1" if len(solves) > 1 else f"{_name(solves[0])}-study1"] = study1_figure(solves)
+        figures["study1" if len(solves) > 1 else f"{run_name(solves[0])}-study1"] = study1_figure(solves)
     for run in runs:
         if closed_loops(run):
-            kind = "study3" if _solver_kind(run) == "distributed" else "study2"
-            figures[f"{_name(run)}-{kind}"] = (study3_figure if kind == "study3" else study2_figure)(run)
+            kind = "study3" if solver_kind(run) == "distributed" else "study2"
+            figures[f"{run_name(run)}-{kind}"] = (study3_figure if kind == "study3" else study2_figure)(run)
     return figures
 
 

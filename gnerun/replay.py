@@ -1,0 +1,489 @@
+"""`gnerun replay`: Rerun recordings built from run logs alone.
+
+Every run becomes a subtree named after its config: solves on the timeline ``iteration``
+(``<run>/solve/error_norm`` ...), closed loops on the timeline ``t`` (``<run>/K<k>/x/<state>``,
+``<run>/K<k>/u/<input>``, ``<run>/K<k>/e_norm``, ``<run>/K<k>/e_agent/<agent>``), the ``/log`` text on the
+timeline ``log_time``, and the resolved config as a text document. Rerun's time-series view has no
+log axis, so every error and residual also has a ``log10_`` series. The blueprint has one tab per
+figure of the paper that the runs contain: Fig. 1 (||z^k - z*|| against k), Fig. 2 (x(t); ||e(t)|| per
+K), Fig. 3 (||e_i(t)|| per agent, per K), and tabs for the log and the configs.
+
+rerun-sdk is imported here only, so that ``gnerun --help`` stays fast.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import yaml
+
+from .errors import InputError, Unavailable
+from .figures import closed_loops, disturbance, run_name, solver_kind
+from .mcap_log import RunRecord, read_run
+
+APPLICATION_ID = "gnerun"
+
+# matplotlib's tab10, so that the Rerun views and `gnerun figures` colour alike
+PALETTE = [(31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40), (148, 103, 189), (140, 86, 75),
+           (227, 119, 194), (127, 127, 127), (188, 189, 34), (23, 190, 207)]
+
+
+def _log10(v: float | None) -> float | None:
+    return math.log10(v) if v is not None and v > 0 and math.isfinite(v) else None
+
+
+def _entity_name(text: str) -> str:
+    return re.sub(r"[^A-Za-z0-9_\-]", "_", text) or "run"
+
+
+@dataclass
+class Series:
+    """The entities of one figure view, with the range of the data they hold (for fixed axes)."""
+
+    entities: list[str] = field(default_factory=list)
+    t: list[int] = field(default_factory=list)  # [first, last] time
+    y: list[float] = field(default_factory=list)  # [lowest, highest] value
+
+    def span(self, time: int) -> None:
+        self.t = [min(self.t[0], time), max(self.t[1], time)] if self.t else [time, time]
+
+    def add(self, time: int, value: float) -> None:
+        self.span(time)
+        self.y = [min(self.y[0], value), max(self.y[1], value)] if self.y else [value, value]
+
+
+@dataclass
+class Contents:
+    """What the blueprint's figure views show: ``fig1``, ``fig2_x``, ``fig2_e``, ``fig3:<run>: K = <k>``."""
+
+    views: dict[str, Series] = field(default_factory=dict)
+    logs: list[str] = field(default_factory=list)
+    configs: list[str] = field(default_factory=list)
+    ends: dict[str, int] = field(default_factory=dict)  # timeline -> last time logged on it
+
+    def view(self, key: str) -> Series:
+        return self.views.setdefault(key, Series())
+
+    def reach(self, timeline: str, value: int) -> None:
+        self.ends[timeline] = max(self.ends.get(timeline, value), value)
+
+
+def _names(run: RunRecord) -> tuple[str, list[str], list[str], str]:
+    cfg = yaml.safe_load(run.config_yaml or "") or {}
+    game = cfg.get("game") or {}
+    states = list(game.get("states") or [])
+    inputs = [u for agent in game.get("agents") or [] for u in (agent.get("inputs") or {})]
+    return run_name(run), states, inputs, solver_kind(run)
+
+
+def log_run(rec, run: RunRecord, prefix: str, contents: Contents, several: bool = False) -> None:
+    """Log one run's messages into the recording ``rec`` under ``prefix`` (``several``: legends name the run)."""
+    import rerun as rr
+
+    name, states, inputs, kind = _names(run)
+
+    def scalar(entity: str, timeline: str, time: int, value: float | None, view: str | None = None) -> None:
+        if value is None or not math.isfinite(value):
+            return
+        rec.set_time(timeline, sequence=time)
+        contents.reach(timeline, time)
+        rec.log(entity, rr.Scalars(value))
+        if view is not None:
+            contents.view(view).add(time, value)
+
+    if run.config_yaml:
+        rec.log(f"{prefix}/config", rr.TextDocument(run.config_yaml, media_type="text/plain"), static=True)
+        contents.configs.append(f"{prefix}/config")
+    for msg, t in zip(run.messages.get("/log", []), run.log_times.get("/log", []), strict=True):
+        rec.set_time("log_time", timestamp=t * 1e-9)
+        level = {"warning": "WARN", "error": "ERROR", "debug": "DEBUG"}.get(msg["level"], "INFO")
+        rec.log(f"{prefix}/log", rr.TextLog(msg["message"], level=level))
+    if "/log" in run.messages:
+        contents.logs.append(f"{prefix}/log")
+    rec.reset_time()
+
+    def show(view: str, entity: str, label: str) -> None:
+        """Put ``entity`` into a figure view, with its legend label and a colour of its own there."""
+        series = contents.view(view)
+        if entity in series.entities:
+            return
+        color = PALETTE[len(series.entities) % len(PALETTE)]
+        series.entities.append(entity)
+        rec.log(entity, rr.SeriesLines(names=label, colors=color, widths=2.0), static=True)
+
+    iterates = run.messages.get("/solve/iterate", [])
+    for m in iterates:
+        for key in ("error_norm", "residual_norm", "step_norm"):
+            scalar(f"{prefix}/solve/{key}", "iteration", m["k"], m.get(key))
+            if key != "step_norm":
+                scalar(f"{prefix}/solve/log10_{key}", "iteration", m["k"], _log10(m.get(key)),
+                       "fig1" if key == "error_norm" else None)
+    if iterates:
+        show("fig1", f"{prefix}/solve/log10_error_norm", f"{name} ({disturbance(run)})")
+    rec.reset_time()
+
+    loops = closed_loops(run)
+    for K, topics in loops.items():
+        base = f"{prefix}/K{K}"
+        x_view = "fig2_x" if K == max(loops) and kind != "distributed" else None
+        e_view = "fig2_e" if kind != "distributed" else None
+        agent_view = f"fig3:{name}: K = {K}" if kind == "distributed" else None
+        for m in topics.get("state", []):
+            for j, v in enumerate(m["x"]):
+                entity = f"{base}/x/{states[j] if j < len(states) else f'x{j + 1}'}"
+                if x_view:
+                    show(x_view, entity, f"{entity.rsplit('/', 1)[1]} (K = {K})")
+                scalar(entity, "t", m["t"], v, x_view)
+            for j, v in enumerate(m["u"] or []):
+                scalar(f"{base}/u/{inputs[j] if j < len(inputs) else f'u{j + 1}'}", "t", m["t"], v)
+        for m in topics.get("error", []):
+            for view in (e_view, agent_view, x_view):
+                if view:  # the whole loop's time span, also where e(t) = 0 has no log10
+                    contents.view(view).span(m["t"])
+            scalar(f"{base}/e_norm", "t", m["t"], m["e_norm"])
+            if e_view:
+                show(e_view, f"{base}/log10_e_norm", f"{name}: K = {K}" if several else f"K = {K}")
+            scalar(f"{base}/log10_e_norm", "t", m["t"], _log10(m["e_norm"]), e_view)
+            for agent, v in m["e_norm_agent"].items():
+                scalar(f"{base}/e_agent/{agent}", "t", m["t"], v)
+                if agent_view:
+                    show(agent_view, f"{base}/log10_e_agent/{agent}", agent)
+                scalar(f"{base}/log10_e_agent/{agent}", "t", m["t"], _log10(v), agent_view)
+    rec.reset_time()
+
+
+@dataclass
+class FigureView:
+    """One paper figure as a blueprint container, with the timeline its x axis runs on."""
+
+    slug: str  # file name of its screenshot
+    title: str
+    timeline: str
+    container: object  # a rerun.blueprint container
+
+
+def _series_view(name: str, series: Series):
+    """A time-series view whose axes are fixed to its data (with a margin), so that every viewer and every
+    screenshot shows all of it."""
+    import rerun as rr
+    import rerun.blueprint as rrb
+
+    kwargs = {}
+    if series.t and series.y:
+        lo, hi = series.y
+        pad = 0.05 * (hi - lo) if hi > lo else 0.5
+        kwargs["axis_y"] = rrb.ScalarAxis(range=(lo - pad, hi + pad))
+        t0, t1 = series.t
+        kwargs["axis_x"] = rrb.archetypes.TimeAxis(view_range=rr.TimeRange(
+            start=rr.TimeRangeBoundary.absolute(seq=t0), end=rr.TimeRangeBoundary.absolute(seq=max(t1, t0 + 1))))
+    # errors fall and states settle: the upper right corner is where the curves are not
+    return rrb.TimeSeriesView(name=name, contents=series.entities, plot_legend=rrb.components.Corner2D.RightTop,
+                              **kwargs)
+
+
+def figure_views(contents: Contents) -> list[FigureView]:
+    """The paper figures that the runs contain, in the paper's order."""
+    import rerun.blueprint as rrb
+
+    views = contents.views
+    out = []
+    if views.get("fig1") and views["fig1"].entities:
+        out.append(FigureView("fig1", "Fig. 1: solves", "iteration", rrb.Horizontal(
+            _series_view("Fig. 1: log10 ||z^k - z*|| vs k", views["fig1"]), name="Fig. 1: solves")))
+    if views.get("fig2_e") and views["fig2_e"].entities:
+        out.append(FigureView("fig2", "Fig. 2: closed loop", "t", rrb.Horizontal(
+            _series_view("Fig. 2a: x(t)", views.get("fig2_x", Series())),
+            _series_view("Fig. 2b: log10 ||e(t)|| per K", views["fig2_e"]), name="Fig. 2: closed loop")))
+    fig3 = {key.removeprefix("fig3:"): s for key, s in views.items() if key.startswith("fig3:") and s.entities}
+    if fig3:
+        out.append(FigureView("fig3", "Fig. 3: per agent", "t", rrb.Grid(
+            *[_series_view(f"Fig. 3: log10 ||e_i(t)||, {title}", s) for title, s in fig3.items()],
+            name="Fig. 3: per agent")))
+    return out
+
+
+def blueprint(contents: Contents):
+    """One tab per paper figure the runs contain, then the log and the configs."""
+    import rerun.blueprint as rrb
+
+    figures = figure_views(contents)
+    tabs = [f.container for f in figures]
+    if contents.logs:
+        tabs.append(rrb.TextLogView(name="Log", contents=contents.logs))
+    if contents.configs:
+        tabs.append(rrb.Tabs(*[rrb.TextDocumentView(name=c.split("/")[0], origin=c) for c in contents.configs],
+                             name="Config"))
+    parts = [rrb.Tabs(*tabs)]
+    if figures:
+        parts.append(rrb.TimePanel(timeline=figures[0].timeline))
+    return rrb.Blueprint(*parts, collapse_panels=False)
+
+
+def record(paths: list[str | Path], rec) -> Contents:
+    """Log every run into the recording ``rec``; returns what the figure views should show."""
+    contents = Contents()
+    used: set[str] = set()
+    for path in paths:
+        run = read_run(path)
+        base = _entity_name(_names(run)[0])
+        prefix, i = base, 2
+        while prefix in used:
+            prefix, i = f"{base}_{i}", i + 1
+        used.add(prefix)
+        log_run(rec, run, prefix, contents, several=len(paths) > 1)
+    return contents
+
+
+def _stream():
+    import rerun as rr
+
+    return rr.RecordingStream(APPLICATION_ID)
+
+
+def save(paths: list[str | Path], target: str | Path) -> Path:
+    """Write a Rerun recording (.rrd) of the runs, with the figure blueprint."""
+    target = Path(target)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    rec = _stream()
+    rec.save(target)
+    rec.send_blueprint(blueprint(record(paths, rec)))
+    rec.flush()
+    rec.disconnect()
+    return target
+
+
+def spawn(paths: list[str | Path]) -> None:
+    """Open the runs in the native viewer (needs a display)."""
+    rec = _stream()
+    rec.spawn()
+    rec.send_blueprint(blueprint(record(paths, rec)))
+    rec.flush()
+
+
+def rerun_executable() -> list[str]:
+    """The `rerun` command line that rerun-sdk installs (next to this interpreter when possible)."""
+    import shutil
+    import sys
+
+    script = Path(sys.executable).parent / "rerun"
+    if script.exists():
+        return [str(script)]
+    found = shutil.which("rerun")
+    return [found] if found else [sys.executable, "-m", "rerun"]
+
+
+def serve_command(rrd: Path, web_port: int, grpc_port: int) -> list[str]:
+    """The web viewer and its gRPC server for a saved recording, bound to 127.0.0.1 only."""
+    return [*rerun_executable(), "--serve-web", "--bind", "127.0.0.1", "--web-viewer-port", str(web_port),
+            "--port", str(grpc_port), str(rrd)]
+
+
+def _start(command: list[str], **kwargs):
+    """A viewer process in a process group of its own: the `rerun` script runs the real binary as its child,
+    and stopping the group stops both (and the terminal's Ctrl-C reaches us, not them)."""
+    import subprocess
+
+    return subprocess.Popen(command, stdin=subprocess.DEVNULL, start_new_session=True, **kwargs)
+
+
+def _stop(proc, grace: float = 10.0) -> None:
+    import os
+    import signal
+    import subprocess
+
+    for sig in (signal.SIGTERM, signal.SIGKILL):
+        try:
+            os.killpg(proc.pid, sig)
+        except ProcessLookupError:
+            pass
+        try:
+            proc.wait(timeout=grace)
+            break
+        except subprocess.TimeoutExpired:
+            continue
+    # the group may outlive its leader
+    try:
+        os.killpg(proc.pid, signal.SIGKILL)
+    except ProcessLookupError:
+        pass
+
+
+def serve(rrd: Path, web_port: int, grpc_port: int) -> int:
+    """Run the web viewer until it stops, or until we are interrupted or terminated (then stop it too)."""
+    import os
+    import signal
+
+    proc = _start(serve_command(rrd, web_port, grpc_port), env=dict(os.environ, RERUN_APP_ONLY="true"))
+
+    def stop(signum, frame):  # SIGTERM: take the viewer down with us
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, stop)
+    try:
+        return proc.wait()
+    except KeyboardInterrupt:
+        return 0
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+        _stop(proc)
+
+
+def web_url(web_port: int, grpc_port: int) -> str:
+    return f"http://127.0.0.1:{web_port}/?url=rerun%2Bhttp://127.0.0.1:{grpc_port}/proxy"
+
+
+# headless screenshots ------------------------------------------------------------------------------
+
+VULKAN_HINT = ("headless screenshots need a Vulkan driver and none was found; on Debian or Ubuntu install "
+               "one with `apt-get install mesa-vulkan-drivers` (a software rasteriser is enough)")
+
+TOAST_SECONDS = 4.0
+_ICD_DIRS = ("/usr/share/vulkan/icd.d", "/etc/vulkan/icd.d", "/usr/local/share/vulkan/icd.d")
+
+
+def vulkan_available() -> bool:
+    """Whether a Vulkan driver (an ICD manifest) is installed, e.g. Mesa's lavapipe."""
+    import os
+
+    for var in ("VK_DRIVER_FILES", "VK_ICD_FILENAMES"):
+        if any(Path(f).is_file() for f in os.environ.get(var, "").split(os.pathsep) if f):
+            return True
+    return any(Path(d).is_dir() and any(Path(d).glob("*.json")) for d in _ICD_DIRS)
+
+
+def _free_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+class _HeadlessViewer:
+    """A headless Rerun viewer on 127.0.0.1, started and stopped by us (its log kept for error messages)."""
+
+    def __init__(self, size: str, timeout: float) -> None:
+        import os
+        import subprocess
+        import tempfile
+        import time
+
+        from rerun.experimental import ViewerClient
+
+        self.port = _free_port()
+        self.url = f"rerun+http://127.0.0.1:{self.port}/proxy"
+        self._tmp = tempfile.TemporaryDirectory(prefix="gnerun-viewer-")
+        self._log_path = Path(self._tmp.name) / "viewer.log"
+        env = dict(os.environ, RERUN_APP_ONLY="true")  # a tool's viewer: no analytics opt-in prompt
+        if not os.environ.get("XDG_RUNTIME_DIR"):
+            env["XDG_RUNTIME_DIR"] = self._tmp.name
+        with open(self._log_path, "wb") as log:
+            self.proc = _start([*rerun_executable(), "--headless", "--bind", "127.0.0.1", "--port", str(self.port),
+                                "--hide-welcome-screen", "--window-size", size], stdout=log, stderr=subprocess.STDOUT,
+                               env=env)
+        self.started = time.monotonic()
+        deadline = self.started + timeout
+        while True:
+            if self.proc.poll() is not None:
+                self.close()
+                raise Unavailable(self._failure())
+            try:
+                self.client = ViewerClient.connect(self.url)
+                self.client.get_state()
+                return
+            except Exception:  # noqa: BLE001 - not listening yet
+                if time.monotonic() > deadline:
+                    self.close()
+                    raise Unavailable(f"the headless viewer did not start within {timeout:g} s") from None
+                time.sleep(0.2)
+
+    def _failure(self) -> str:
+        text = self._log_path.read_text(errors="replace") if self._log_path.exists() else ""
+        if "adapter" in text.lower() or "vulkan" in text.lower():
+            return VULKAN_HINT.replace("none was found", "none works")
+        lines = [ln for ln in text.splitlines() if ln.strip()]
+        return "the headless viewer stopped: " + (lines[-1] if lines else "no output")
+
+    def close(self) -> None:
+        _stop(self.proc)
+        self._tmp.cleanup()
+
+
+def _wait_for(client, expected_views: set[str], timeline: str, ends: dict[str, int], timeout: float) -> None:
+    """Until the viewer shows exactly the figure's views, with every timeline's data arrived."""
+    import time
+
+    deadline = time.monotonic() + timeout
+    while True:
+        state = client.get_state()
+        names = {v.name for v in state.views if v.visible}
+        arrived = {tl.name: tl.end for rec in state.recordings for tl in rec.timelines}
+        if (names == expected_views and not state.loading
+                and all(arrived.get(name) == end for name, end in ends.items())):
+            return
+        if time.monotonic() > deadline:
+            raise Unavailable(f"the viewer did not show {sorted(expected_views)} on timeline {timeline!r} "
+                               f"within {timeout:g} s (it shows {sorted(names)})")
+        time.sleep(0.2)
+
+
+def _settled_screenshot(client, attempts: int = 8) -> bytes:
+    """A screenshot once the viewer has stopped changing (two identical frames in a row)."""
+    import time
+
+    previous = client.take_screenshot()
+    for _ in range(attempts):
+        time.sleep(0.2)
+        png = client.take_screenshot()
+        if png == previous:
+            return png
+        previous = png
+    return previous
+
+
+def _view_names(container) -> set[str]:
+    import rerun.blueprint as rrb
+
+    if isinstance(container, rrb.View):
+        return {str(container.name)}
+    return set().union(*(_view_names(c) for c in container.contents)) if container.contents else set()
+
+
+def screenshots(paths: list[str | Path], out_dir: str | Path, size: str = "1600x900",
+                timeout: float = 60.0) -> list[Path]:
+    """One PNG per paper figure the runs contain, taken by a headless viewer (needs a Vulkan driver)."""
+    import time
+
+    import rerun.blueprint as rrb
+
+    if not re.fullmatch(r"\d{2,5}x\d{2,5}", size):
+        raise InputError(f"--size must look like 1600x900, not {size!r}")
+    if not vulkan_available():
+        raise Unavailable(VULKAN_HINT)
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    viewer = _HeadlessViewer(size, timeout)
+    written = []
+    try:
+        rec = _stream()
+        rec.connect_grpc(viewer.url)
+        contents = record(paths, rec)
+        rec.flush()
+        for fig in figure_views(contents):
+            rec.send_blueprint(rrb.Blueprint(fig.container, rrb.TimePanel(timeline=fig.timeline, state="collapsed"),
+                                             collapse_panels=True), make_active=True)
+            rec.flush()
+            _wait_for(viewer.client, _view_names(fig.container), fig.timeline, contents.ends, timeout)
+            # the viewer's start-up notifications cover the views for their first seconds
+            time.sleep(max(0.0, viewer.started + TOAST_SECONDS - time.monotonic()))
+            png = _settled_screenshot(viewer.client)
+            target = out_dir / f"{fig.slug}.png"
+            target.write_bytes(png)
+            written.append(target)
+        rec.disconnect()
+    finally:
+        viewer.close()
+    return written

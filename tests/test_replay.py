@@ -1,0 +1,243 @@
+"""Rerun recordings built from run logs, read back with rerun's own reader."""
+
+from __future__ import annotations
+
+import math
+import os
+import signal
+import socket
+import subprocess
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from rerun.chunk import RrdReader
+
+from gnerun.closed_loop import simulate
+from gnerun.config import load_config
+from gnerun.mcap_log import read_run
+from gnerun.replay import PALETTE, save, serve_command, vulkan_available
+from gnerun.solving import solve
+
+from .conftest import CONFIGS, gnerun_command, run_cli
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory) -> dict[str, Path]:
+    root = tmp_path_factory.mktemp("runs")
+    out = {"solve": root / "s1", "loop": root / "s2", "dist": root / "s3"}
+    solve(load_config(CONFIGS / "paper_study1_disturbed.yaml"), out=out["solve"])
+    simulate(load_config(CONFIGS / "paper_study2.yaml", {"run.steps": 8, "run.K": [1, 3]}), out=out["loop"])
+    simulate(load_config(CONFIGS / "paper_study3.yaml", {"run.steps": 6}), out=out["dist"])
+    return out
+
+
+def _series(rrd: Path) -> dict[str, dict[str, list]]:
+    """entity path -> {timeline or 'value': column} for every scalar entity of the recording."""
+    out: dict[str, dict[str, list]] = {}
+    for chunk in RrdReader(rrd).stream().to_chunks():
+        batch = chunk.to_record_batch()
+        names = batch.schema.names
+        if "Scalars:scalars" not in names:
+            continue
+        entry = out.setdefault(chunk.entity_path, {})
+        for timeline in ("iteration", "t"):
+            if timeline in names:
+                entry.setdefault(timeline, []).extend(batch.column(timeline).to_pylist())
+        entry.setdefault("value", []).extend(v[0] for v in batch.column("Scalars:scalars").to_pylist())
+    return out
+
+
+def test_recording_holds_the_logged_values(runs, tmp_path: Path) -> None:
+    rrd = save([runs["solve"], runs["loop"], runs["dist"]], tmp_path / "all.rrd")
+    reader = RrdReader(rrd)
+    assert [r.kind for r in reader.recordings()] == ["recording"]
+    assert len(reader.blueprints()) == 1  # the figure layout travels with the recording
+    series = _series(rrd)
+    # Fig. 1: ||z^k - z*|| and its log10 on the iteration timeline
+    iterates = read_run(runs["solve"]).messages["/solve/iterate"]
+    s = series["/paper-study1-disturbed/solve/error_norm"]
+    assert s["iteration"] == [m["k"] for m in iterates]
+    assert s["value"] == [m["error_norm"] for m in iterates]
+    lg = series["/paper-study1-disturbed/solve/log10_error_norm"]
+    np.testing.assert_allclose(lg["value"], [math.log10(m["error_norm"]) for m in iterates if m["error_norm"] > 0])
+    # Fig. 2: x(t) per state and e(t) per K on the t timeline
+    loop = read_run(runs["loop"])
+    for K in (1, 3):
+        states = loop.messages[f"/K{K}/mpc/state"]
+        for j, name in enumerate(("x1", "x2", "x3")):
+            x = series[f"/paper-study2/K{K}/x/{name}"]
+            assert x["t"] == [m["t"] for m in states] and x["value"] == [m["x"][j] for m in states]
+        u = series[f"/paper-study2/K{K}/u/u2"]
+        assert u["value"] == [m["u"][1] for m in states if m["u"] is not None]
+        errors = loop.messages[f"/K{K}/mpc/error"]
+        assert series[f"/paper-study2/K{K}/e_norm"]["value"] == [m["e_norm"] for m in errors]
+    # Fig. 3: per-agent errors of the distributed run
+    dist = read_run(runs["dist"])
+    for K in (2, 5):
+        errors = dist.messages[f"/K{K}/mpc/error"]
+        for agent in ("agent1", "agent2", "agent3"):
+            got = series[f"/paper-study3/K{K}/e_agent/{agent}"]
+            assert got["value"] == [m["e_norm_agent"][agent] for m in errors]
+
+
+def test_log_and_config_are_in_the_recording(runs, tmp_path: Path) -> None:
+    rrd = save([runs["loop"]], tmp_path / "loop.rrd")
+    texts, logs = {}, []
+    for chunk in RrdReader(rrd).stream().to_chunks():
+        batch = chunk.to_record_batch()
+        if "TextDocument:text" in batch.schema.names:
+            texts[chunk.entity_path] = batch.column("TextDocument:text").to_pylist()[0][0]
+        if "TextLog:text" in batch.schema.names:
+            logs += [v[0] for v in batch.column("TextLog:text").to_pylist()]
+    assert texts["/paper-study2/config"] == (runs["loop"] / "config.yaml").read_text()
+    assert logs == [m["message"] for m in read_run(runs["loop"]).messages["/log"]]
+
+
+def test_replay_of_a_killed_run(runs, tmp_path: Path) -> None:
+    data = (runs["loop"] / "run.mcap").read_bytes()
+    killed = tmp_path / "killed.mcap"
+    killed.write_bytes(data[: len(data) // 2])
+    proc = run_cli("replay", str(killed), "--save", str(tmp_path / "killed.rrd"))
+    assert proc.returncode == 0, proc.stderr
+    series = _series(tmp_path / "killed.rrd")
+    recovered = read_run(killed).messages["/K1/mpc/error"]
+    assert 0 < len(recovered) and series["/paper-study2/K1/e_norm"]["value"] == [m["e_norm"] for m in recovered]
+
+
+def test_replay_needs_an_output_without_a_display(runs) -> None:
+    import os
+
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
+    proc = subprocess.run([*gnerun_command(), "replay", str(runs["loop"])], capture_output=True, text=True, env=env,
+                          stdin=subprocess.DEVNULL, timeout=60)
+    assert proc.returncode == 2 and "--save" in proc.stderr and "Traceback" not in proc.stderr
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_serve_binds_to_localhost_only(runs, tmp_path: Path) -> None:
+    web, grpc = _free_port(), _free_port()
+    assert serve_command(tmp_path / "x.rrd", web, grpc)[-7:-1] == ["--bind", "127.0.0.1", "--web-viewer-port",
+                                                                     str(web), "--port", str(grpc)]
+    proc = subprocess.Popen([*gnerun_command(), "replay", str(runs["loop"]), "--serve", "--web-port", str(web),
+                             "--grpc-port", str(grpc)], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
+                            stdin=subprocess.DEVNULL, text=True, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 60
+        up = False
+        while time.monotonic() < deadline and not up:
+            try:
+                with socket.create_connection(("127.0.0.1", web), timeout=1):
+                    up = True
+            except OSError:
+                time.sleep(0.5)
+        assert up, "the web viewer did not start"
+        # bound to the loopback interface only: no other address of this machine answers
+        others = {info[4][0] for info in socket.getaddrinfo(socket.gethostname(), None, socket.AF_INET)}
+        for address in others - {"127.0.0.1"}:
+            if address.startswith("127."):
+                continue
+            with pytest.raises(OSError), socket.create_connection((address, web), timeout=1):
+                pass
+        proc.terminate()  # gnerun stops its viewer when terminated
+        out, _ = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    assert f"http://127.0.0.1:{web}/" in out
+    time.sleep(0.5)
+    with pytest.raises(OSError), socket.create_connection(("127.0.0.1", web), timeout=1):
+        pass  # the viewer went down with gnerun
+
+
+def _blueprint_text(rrd: Path) -> str:
+    """Every string stored in the recording's blueprint (view names, container names, timelines, queries)."""
+    reader = RrdReader(rrd)
+    (bp,) = reader.blueprints()
+    texts = []
+    for chunk in reader.stream(store=bp).to_chunks():
+        batch = chunk.to_record_batch()
+        for name in batch.schema.names:
+            if ":" in name:  # components (view and container names, contents queries, timelines, ranges)
+                texts.append(f"{chunk.entity_path} {name} {batch.column(name).to_pylist()}")
+    return "\n".join(texts)
+
+
+def test_blueprint_has_one_view_per_paper_figure(runs, tmp_path: Path) -> None:
+    rrd = save([runs["solve"], runs["loop"], runs["dist"]], tmp_path / "all.rrd")
+    text = _blueprint_text(rrd)
+    for name in ("Fig. 1: log10 ||z^k - z*|| vs k", "Fig. 2a: x(t)", "Fig. 2b: log10 ||e(t)|| per K",
+                 "Fig. 3: log10 ||e_i(t)||, paper-study3: K = 2", "Fig. 3: log10 ||e_i(t)||, paper-study3: K = 5"):
+        assert name in text
+    assert "TimePanelBlueprint:timeline [['iteration']]" in text  # the first figure's timeline
+    only_loop = _blueprint_text(save([runs["loop"]], tmp_path / "loop.rrd"))
+    assert "Fig. 2a: x(t)" in only_loop and "Fig. 1" not in only_loop and "Fig. 3" not in only_loop
+    assert "TimePanelBlueprint:timeline [['t']]" in only_loop
+    assert "paper-study2/K3/x/x1" in only_loop and "paper-study2/K1/log10_e_norm" in only_loop
+
+
+def test_figure_views_fix_their_axes_to_the_data(runs) -> None:
+    """The views' ranges hold every logged value: a viewer opening the recording shows all of it."""
+    from gnerun.replay import record
+
+    class Sink:  # a recording stream that keeps nothing
+        def __getattr__(self, name):
+            return lambda *a, **k: None
+
+    contents = record([runs["loop"]], Sink())
+    loop = read_run(runs["loop"])
+    e = [math.log10(m["e_norm"]) for K in (1, 3) for m in loop.messages[f"/K{K}/mpc/error"] if m["e_norm"]]
+    fig2_e = contents.views["fig2_e"]
+    assert fig2_e.y == [min(e), max(e)]
+    assert fig2_e.t == [0, loop.messages["/K1/mpc/error"][-1]["t"]]
+    x = [v for m in loop.messages["/K3/mpc/state"] for v in m["x"]]  # Fig. 2a: the largest K
+    assert contents.views["fig2_x"].y == [min(x), max(x)]
+    assert contents.views["fig2_x"].entities == [f"paper-study2/K3/x/{s}" for s in ("x1", "x2", "x3")]
+
+
+# headless screenshots -----------------------------------------------------------------------------
+
+HAS_VULKAN = vulkan_available()
+
+
+@pytest.mark.skipif(not HAS_VULKAN, reason="no Vulkan driver on this machine (Debian: apt-get install "
+                                            "mesa-vulkan-drivers); CI installs it")
+def test_screenshots_show_the_figures(runs, tmp_path: Path) -> None:
+    from PIL import Image
+
+    out = tmp_path / "shots"
+    proc = run_cli("replay", str(runs["solve"]), str(runs["loop"]), str(runs["dist"]), "--screenshot", str(out),
+                   "--size", "1200x700", timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert sorted(p.name for p in out.iterdir()) == ["fig1.png", "fig2.png", "fig3.png"]
+    # the curves are there, in their palette colours: Fig. 1 has one solve (the first colour), Fig. 2 three
+    # states and two K, Fig. 3 three agents (the first three colours); the top bar is left out (its warnings
+    # are orange)
+    for name, colours in (("fig1.png", 1), ("fig2.png", 3), ("fig3.png", 3)):
+        image = np.asarray(Image.open(out / name).convert("RGB")).astype(int)
+        assert image.shape[1] >= 1200 and image.shape[0] >= 700  # logical points, times the pixel ratio
+        body = image[image.shape[0] // 15:]
+        for colour in PALETTE[:colours]:
+            assert np.all(np.abs(body - np.array(colour)) <= 12, axis=-1).sum() > 300, (name, colour)
+
+
+def test_screenshots_without_vulkan_say_what_to_install(runs, tmp_path: Path, monkeypatch) -> None:
+    from typer.testing import CliRunner
+
+    import gnerun.replay as rp
+    from gnerun.cli import app
+
+    monkeypatch.setattr(rp, "_ICD_DIRS", ())
+    monkeypatch.delenv("VK_DRIVER_FILES", raising=False)
+    monkeypatch.delenv("VK_ICD_FILENAMES", raising=False)
+    result = CliRunner().invoke(app, ["replay", str(runs["loop"]), "--screenshot", str(tmp_path / "s")])
+    assert result.exit_code == 1
+    assert "mesa-vulkan-drivers" in result.output and "Traceback" not in result.output
+    assert not (tmp_path / "s").exists()
