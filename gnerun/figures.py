@@ -93,7 +93,7 @@ def study2_figure(run: RunRecord):
     import matplotlib.pyplot as plt
 
     loops = closed_loops(run)
-    fig, (ax_x, ax_e) = plt.subplots(1, 2, figsize=(7.0, 2.8))
+    fig, (ax_x, ax_e) = plt.subplots(1, 2, figsize=(7.0, 2.8), sharex=True)  # e(t) = 0 leaves no point
     K_max = max(loops)
     states = loops[K_max].get("state", [])
     names = []
