@@ -104,6 +104,18 @@ class CompiledGame:
     _agent_constraints: list[np.ndarray]  # per agent: row indices of c that constrain its own problem
     _sparsity: tuple[ca.Sparsity, ca.Sparsity]
     _dynamics: Evaluator | None = field(default=None, repr=False)
+    affine: bool = False  # L affine in z and c affine in a, with constant derivatives (LQ games)
+    _affine_cache: dict = field(default_factory=dict, repr=False)
+
+    def __post_init__(self) -> None:
+        if self.affine:
+            # the constant derivatives, once; read-only, shared by every KKTParts
+            _, _, dL, dc = self._kkt(np.zeros(self.n), np.zeros(self.m), self.x0)
+            # [L; c] = W z + w0(x) in one product
+            W = np.vstack([dL, np.hstack([dc, np.zeros((self.m, self.m))])])
+            for arr in (dL, dc, W):
+                arr.flags.writeable = False
+            self._affine_cache.update(dL=dL, dc=dc, W=W, x=None)
 
     # sizes --------------------------------------------------------------------------------
     @property
@@ -155,6 +167,8 @@ class CompiledGame:
     def _x(self, x: np.ndarray | None) -> np.ndarray:
         if x is None:
             return self.x0
+        if type(x) is np.ndarray and x.ndim == 1 and x.size == self.nx and x.dtype == np.float64:
+            return x
         x = np.asarray(x, dtype=float).reshape(-1)
         if x.size != self.nx:
             raise ValueError(f"state x has {x.size} entries, the game has {self.nx} states")
@@ -164,8 +178,22 @@ class CompiledGame:
     def kkt_parts(self, z: np.ndarray, x: np.ndarray | None = None) -> KKTParts:
         """L(z; x), c(a; x), dL/dz and dc/da at z = (a, lambda)."""
         n = self.n
+        if self.affine:
+            cache = self._affine_cache
+            v = cache["W"] @ z
+            v += self._offsets(self._x(x))
+            return KKTParts(v[:n], v[n:], cache["dL"], cache["dc"])
         L, c, dL, dc = self._kkt(z[:n], z[n:], self._x(x))
         return KKTParts(L.reshape(-1), c.reshape(-1), dL, dc)
+
+    def _offsets(self, x: np.ndarray) -> np.ndarray:
+        """[L(0; x); c(0; x)] of an affine game, evaluated once per state x."""
+        cache = self._affine_cache
+        key = x.tobytes()
+        if key != cache["x"]:
+            L0, c0, _, _ = self._kkt(np.zeros(self.n), np.zeros(self.m), x)
+            cache.update(x=key, w0=np.concatenate([L0.reshape(-1), c0.reshape(-1)]))
+        return cache["w0"]
 
     def costs(self, a: np.ndarray, x: np.ndarray | None = None) -> np.ndarray:
         """(J_1(a), ..., J_N(a)) at the state x."""
@@ -477,6 +505,7 @@ def _assemble(*, kind: str, a: ca.SX, x: ca.SX, costs: list[ca.SX], own_rows: li
         _agent_constraints=agent_rows,
         _sparsity=sparsity,
         _dynamics=Evaluator(dynamics) if dynamics is not None else None,
+        affine=not ca.depends_on(ca.vec(dL), ca.vertcat(a, lam, x)) and not ca.depends_on(ca.vec(dc), ca.vertcat(a, x)),
     )
 
 

@@ -51,7 +51,7 @@ class Status(StrEnum):
 FAILURES = frozenset({Status.SINGULAR_JACOBIAN, Status.DIVERGED, Status.NAN, Status.SUBPROBLEM_FAILED})
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class SSNState:
     """The iterate z^k and everything one step needs, evaluated once at z^k."""
 
@@ -84,6 +84,15 @@ class SemismoothNewton:
         self._eq = game.equality_mask
         self._ineq = ~self._eq
         self._fb = solver.complementarity == "fischer_burmeister"
+        d = self.disturbance
+        # The min map's multiplier rows say lambda_j^+ = 0: solve only for a and the g-branch multipliers
+        # (same step, smaller system). Noise on all of JPhi or on the right-hand side needs the full system.
+        self.reduced = not self._fb and not (d.kind in ("jacobian_noise", "residual") and d.scale > 0)
+        self._eq_rows = np.flatnonzero(self._eq)
+        # LQ games: the reduced matrix depends on the active set only; its factorisation is kept
+        self._factors: dict[bytes, tuple[np.ndarray, np.ndarray, int, float]] = {}
+        self._solutions: dict = {}  # and, for the current state x, the step's end point per active set
+        self._solutions_x: np.ndarray | None = None
 
     # ------------------------------------------------------------------------------------
     def residual(self, parts: KKTParts, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -92,16 +101,19 @@ class SemismoothNewton:
         lam = z[n:]
         a = -parts.c
         tol = self.options.tie_tol
+        phi = np.empty(n + a.size)
+        phi[:n] = parts.L
         if self._fb:
             r = np.hypot(a, lam)
-            comp = a + lam - r
+            phi[n:] = a + lam - r
             active = a < lam
         else:
-            comp = np.minimum(a, lam)
+            np.minimum(a, lam, out=phi[n:])
             active = a < lam - tol
-        comp = np.where(self._eq, parts.c, comp)
-        active &= self._ineq
-        return np.concatenate([parts.L, comp]), active
+        if self._eq_rows.size:
+            phi[n + self._eq_rows] = parts.c[self._eq_rows]
+            active &= self._ineq
+        return phi, active
 
     def jacobian(self, parts: KKTParts, z: np.ndarray, active: np.ndarray) -> np.ndarray:
         """An element JPhi(z) of the limiting Jacobian of Phi (tie rule in the module docstring)."""
@@ -150,7 +162,9 @@ class SemismoothNewton:
         """Exactly one (perturbed) semismooth Newton iteration; a failed state is returned unchanged."""
         if state.status in FAILURES:
             return state
-        game, opts = self.game, self.options
+        if self.reduced:
+            return self._reduced_step(state)
+        opts = self.options
         J = self.jacobian(state.parts, state.z, state.active)
         rhs = -state.phi
         d = self.disturbance
@@ -159,26 +173,82 @@ class SemismoothNewton:
         elif d.kind == "residual" and d.scale > 0:
             w = _noise(state.rng, rhs.shape, d.distribution)
             rhs = rhs + d.scale * w / max(_norm(w), 1e-300)
-        lu, piv, info = lapack.dgetrf(J)
-        rcond = 0.0
-        if info == 0:
-            anorm = float(np.abs(J).sum(axis=0).max()) if J.size else 0.0
-            rcond, _ = lapack.dgecon(lu, anorm, norm="1")
+        lu, piv, info, rcond = _factor(J)
         if info != 0 or not rcond >= opts.min_rcond:
-            msg = (f"JPhi(z^{state.k}) is singular or ill-conditioned (reciprocal condition number "
-                   f"{rcond:.1e} < min_rcond {opts.min_rcond:.0e}); the step was not taken")
-            if game.shares_constraints_generalized:
-                msg += ("; this plain GNE has constraints shared by several agents, each with its own "
-                        "multiplier: such games have a continuum of equilibria with a singular JPhi there "
-                        "(consider equilibrium: variational)")
-            elif not opts.line_search:
-                msg += "; the pure method may have left the region of convergence (try solver.line_search: true)"
-            return replace(state, status=Status.SINGULAR_JACOBIAN, message=msg, rcond=float(rcond))
+            return self._singular(state, rcond)
         dz, info = lapack.dgetrs(lu, piv, rhs)
         t = 1.0
         if opts.line_search:
             t = self._armijo(state, dz)
         return self.advance(state, state.z + t * dz, rcond=float(rcond))
+
+    def _singular(self, state: SSNState, rcond: float) -> SSNState:
+        opts = self.options
+        msg = (f"JPhi(z^{state.k}) is singular or ill-conditioned (reciprocal condition number "
+               f"{rcond:.1e} < min_rcond {opts.min_rcond:.0e}); the step was not taken")
+        if self.game.shares_constraints_generalized:
+            msg += ("; this plain GNE has constraints shared by several agents, each with its own "
+                    "multiplier: such games have a continuum of equilibria with a singular JPhi there "
+                    "(consider equilibrium: variational)")
+        elif not opts.line_search:
+            msg += "; the pure method may have left the region of convergence (try solver.line_search: true)"
+        return replace(state, status=Status.SINGULAR_JACOBIAN, message=msg, rcond=float(rcond))
+
+    def _reduced_step(self, state: SSNState) -> SSNState:
+        """The min-map Newton step through the reduced system. With A the g-branch rows (and equalities),
+        the multiplier rows give lambda_I^+ = 0 and the rest is
+
+            [ dL/da     dL/dlambda_A ] [ da          ]   [ -L(z) + dL/dlambda lambda ]
+            [ dc_A/da   0            ] [ lambda_A^+  ] = [ -c_A(a)                   ]
+
+        (a row -dc_j/da da = c_j of JPhi, negated). Its reciprocal condition number is the one checked.
+        """
+        game, opts = self.game, self.options
+        n = game.n
+        parts, z = state.parts, state.z
+        A = np.flatnonzero(state.active | self._eq) if self._eq_rows.size else np.flatnonzero(state.active)
+        factors = None
+        if game.affine:
+            key = A.tobytes()
+            factors = self._factors.get(key)
+        if factors is None:
+            k = A.size
+            M = np.zeros((n + k, n + k))
+            M[:n, :n] = parts.dL_dz[:, :n]
+            M[:n, n:] = parts.dL_dz[:, n + A]
+            M[n:, :n] = parts.dc_da[A]
+            factors = _factor(M)
+            if game.affine:
+                if len(self._factors) >= 256:
+                    self._factors.clear()
+                self._factors[key] = factors
+        lu, piv, info, rcond = factors
+        if info != 0 or not rcond >= opts.min_rcond:
+            return self._singular(state, rcond)
+        if game.affine:
+            # L and c affine: the step lands on M^-1 [-L(0); -c_A(0)] from any z with this active set
+            w0 = game._offsets(state.x)
+            if self._solutions_x is not w0:  # a new state x (the game keeps one offset array per x)
+                self._solutions.clear()
+                self._solutions_x = w0
+            sol = self._solutions.get(key)
+            if sol is None:
+                sol, _ = lapack.dgetrs(lu, piv, np.concatenate([-w0[:n], -w0[n + A]]))
+                self._solutions[key] = sol
+            z_new = np.zeros_like(z)
+            z_new[:n] = sol[:n]
+        else:
+            lam = z[n:]
+            rhs = np.concatenate([parts.dL_dz[:, n:] @ lam - parts.L, -parts.c[A]])
+            sol, _ = lapack.dgetrs(lu, piv, rhs)
+            z_new = np.zeros_like(z)
+            z_new[:n] = z[:n] + sol[:n]
+        z_new[n + A] = sol[n:]
+        if opts.line_search:
+            t = self._armijo(state, z_new - z)
+            if t != 1.0:
+                z_new = z + t * (z_new - z)
+        return self.advance(state, z_new, rcond=float(rcond))
 
     def advance(self, state: SSNState, z: np.ndarray, *, rcond: float = math.nan) -> SSNState:
         """The iterate after ``state``: z evaluated once (Phi, the parts for the next step), checked for
@@ -191,7 +261,7 @@ class SemismoothNewton:
                        message="", rng=state.rng, rcond=rcond)
         new = self._check_finite(new)
         limit = self.options.divergence_limit
-        if new.status == Status.RUNNING and float(np.max(np.abs(z), initial=0.0)) > limit:
+        if new.status == Status.RUNNING and float(z @ z) > limit * limit and float(np.abs(z).max()) > limit:
             new = replace(new, status=Status.DIVERGED,
                           message=f"diverged at iteration {new.k}: ||z||_inf = {np.max(np.abs(z)):.2e} exceeds "
                                   f"divergence_limit {limit:.0e}")
@@ -237,6 +307,8 @@ class SemismoothNewton:
         return t / beta
 
     def _check_finite(self, state: SSNState) -> SSNState:
+        if math.isfinite(state.residual_norm):  # a NaN or an infinity anywhere shows in the norm
+            return state
         bad = ~np.isfinite(state.phi)
         if not bad.any():
             return state
@@ -259,6 +331,17 @@ def describe_row(game: CompiledGame, row: int) -> str:
     info = game.constraints[row - n]
     owner = "shared" if info.owner is None else game.agent_names[info.owner]
     return f"the constraint of {owner}: {info.label}"
+
+
+def _factor(M: np.ndarray) -> tuple[np.ndarray, np.ndarray, int, float]:
+    """LU factors of M, LAPACK's info, and the reciprocal 1-norm condition number (0 when singular)."""
+    lu, piv, info = lapack.dgetrf(M)
+    rcond = 0.0
+    if info == 0 and M.size:
+        rcond, _ = lapack.dgecon(lu, float(np.abs(M).sum(axis=0).max()), norm="1")
+    elif info == 0:
+        rcond = 1.0
+    return lu, piv, info, float(rcond)
 
 
 def _norm(v: np.ndarray) -> float:
