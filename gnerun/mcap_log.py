@@ -50,6 +50,7 @@ class RunLog:
         self._writer = Writer(self._file, compression=CompressionType.ZSTD)
         self._writer.start(profile=PROFILE, library="gnerun")
         self._channels: dict[str, int] = {}
+        self._checked: dict[tuple[str, type], int] = {}
         self._sequence = 0
         self._closed = False
         now = time.time_ns()
@@ -71,13 +72,16 @@ class RunLog:
     def write(self, topic: str, message: Message, *, log_time: int | None = None) -> None:
         """Append ``message`` on ``topic`` (its model's schema is registered on first use)."""
         model = type(message)
-        expected = TOPICS.get(topic) or next((m for t, m in TOPICS.items() if topic.endswith(t)), None)
-        if expected is not None and expected is not model:
-            raise TypeError(f"topic {topic} carries {expected.__name__}, not {model.__name__}")
+        channel = self._checked.get((topic, model))
+        if channel is None:
+            expected = TOPICS.get(topic) or next((m for t, m in TOPICS.items() if topic.endswith(t)), None)
+            if expected is not None and expected is not model:
+                raise TypeError(f"topic {topic} carries {expected.__name__}, not {model.__name__}")
+            channel = self._checked[(topic, model)] = self._channel(topic, model)
         t = time.time_ns() if log_time is None else log_time
-        data = json.dumps(json_ready(message.model_dump()), separators=(",", ":"), allow_nan=False).encode()
-        self._writer.add_message(channel_id=self._channel(topic, model), log_time=t, publish_time=t, data=data,
-                                 sequence=self._sequence)
+        # compact JSON, NaN and infinities as null (the models say so), serialised by pydantic's core
+        data = message.__pydantic_serializer__.to_json(message)
+        self._writer.add_message(channel_id=channel, log_time=t, publish_time=t, data=data, sequence=self._sequence)
         self._sequence += 1
 
     def log(self, level: str, text: str) -> None:

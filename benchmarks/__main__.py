@@ -1,0 +1,305 @@
+"""`python -m benchmarks`: gnerun's speed against baselines run in the same process.
+
+Prints a markdown table and writes JSON to benchmarks/results/. Every number is a median over repeats;
+every ratio is baseline time / gnerun time, both measured here, in this run.
+
+Measured:
+- paper game (configs/paper_study1.yaml), T = 10: one SSN iteration (a cold solve from z = 0, time per
+  iteration); the straightforward dense SSN (Jacobian rebuilt from a CasADi evaluation, np.linalg.solve);
+  scipy.optimize.root on the Fischer-Burmeister system (whole solves compared); the same at T = 100;
+- one closed-loop step of the paper's Study 2 with K = 7 (warm start, K steps at most, plant update), with
+  logging off and with MCAP logging on (the messages `gnerun simulate` writes, flushed every step);
+- the scalable family of benchmarks/family.py over N agents and horizons T: time per iteration;
+- `gnerun --help` (a fresh process) and the config load + compile time of the paper game.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # small dense systems: threads only add overhead
+
+import numpy as np  # noqa: E402
+from scipy import optimize  # noqa: E402
+
+from gnerun import __version__  # noqa: E402
+from gnerun.config import load_config  # noqa: E402
+from gnerun.game import CompiledGame, compile_game  # noqa: E402
+from gnerun.mcap_log import RunLog  # noqa: E402
+from gnerun.messages import MpcError, MpcIterate, MpcState  # noqa: E402
+from gnerun.solving import make_solver  # noqa: E402
+from gnerun.ssn import FAILURES, Status  # noqa: E402
+
+from .family import family_config  # noqa: E402
+
+ROOT = Path(__file__).resolve().parent.parent
+RESULTS = Path(__file__).resolve().parent / "results"
+
+
+def _median_time(fn, repeats: int, inner: int | None = None) -> float:
+    """Median over ``repeats`` samples of the time of one call; each sample runs long enough (>= 20 ms) for
+    the clock and the machine's noise."""
+    t0 = time.perf_counter()
+    fn()  # warm up
+    once = time.perf_counter() - t0
+    if inner is None:
+        inner = max(1, int(0.02 / max(once, 1e-7)))
+    samples = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        for _ in range(inner):
+            fn()
+        samples.append((time.perf_counter() - t0) / inner)
+    return statistics.median(samples)
+
+
+# gnerun ------------------------------------------------------------------------------------------
+
+
+def gnerun_solve(cfg, game: CompiledGame):
+    """A cold solve from the config's start; returns (iterations, final state)."""
+    solver = make_solver(cfg, game)
+
+    def run():
+        state = solver.init()
+        while not solver.terminate(state)[0]:
+            state = solver.step(state)
+        return state
+
+    return solver, run
+
+
+def per_iteration(cfg, game: CompiledGame, repeats: int) -> tuple[float, float, int, float]:
+    """(time per iteration, time per solve, iterations, final ||Phi||) of gnerun's SSN."""
+    _, run = gnerun_solve(cfg, game)
+    state = run()
+    t = _median_time(run, repeats)
+    return t / max(state.k, 1), t, state.k, state.residual_norm
+
+
+# baselines ---------------------------------------------------------------------------------------
+
+
+def dense_ssn(game: CompiledGame, tol: float, max_iter: int = 50, tie_tol: float = 1e-12):
+    """The straightforward dense SSN: evaluate L, c and their derivatives (one CasADi call), rebuild JPhi,
+    np.linalg.solve. Same min map and tie rule as gnerun."""
+    n, m = game.n, game.m
+    x = game.x0
+
+    def run():
+        z = game.z_start()
+        for k in range(max_iter + 1):
+            L, c, dL, dc = game._kkt(z[:n], z[n:], x)
+            L, c = L.reshape(-1), c.reshape(-1)
+            lam = z[n:]
+            phi = np.concatenate([L, np.minimum(-c, lam)])
+            if np.linalg.norm(phi) <= tol or k == max_iter:
+                return z, k, float(np.linalg.norm(phi))
+            active = -c < lam - tie_tol
+            J = np.zeros((n + m, n + m))
+            J[:n] = dL
+            J[n:][active, :n] = -dc[active]
+            idx = np.flatnonzero(~active)
+            J[n + idx, n + idx] = 1.0
+            z = z + np.linalg.solve(J, -phi)
+        return z, max_iter, float("nan")
+
+    return run
+
+
+def scipy_root_fb(game: CompiledGame, tol: float):
+    """scipy.optimize.root (hybr, exact Jacobian) on the Fischer-Burmeister reformulation of the KKT system."""
+    n, m = game.n, game.m
+    x = game.x0
+
+    def fun(z):
+        L, c, dL, dc = game._kkt(z[:n], z[n:], x)
+        L, c = L.reshape(-1), c.reshape(-1)
+        a, lam = -c, z[n:]
+        r = np.sqrt(a * a + lam * lam)
+        phi = np.concatenate([L, a + lam - r])
+        with np.errstate(invalid="ignore", divide="ignore"):
+            r_safe = np.where(r > 0, r, 1.0)
+            da = np.where(r > 0, 1 - a / r_safe, 1 - 1 / np.sqrt(2))
+            db = np.where(r > 0, 1 - lam / r_safe, 1 - 1 / np.sqrt(2))
+        J = np.zeros((n + m, n + m))
+        J[:n] = dL
+        J[n:, :n] = -da[:, None] * dc
+        J[n + np.arange(m), n + np.arange(m)] = db
+        return phi, J
+
+    def run():
+        sol = optimize.root(fun, game.z_start(), jac=True, method="hybr", tol=tol * 1e-3)
+        return sol.x, sol.nfev, float(np.linalg.norm(fun(sol.x)[0]))
+
+    return run
+
+
+# closed loop -------------------------------------------------------------------------------------
+
+
+def closed_loop_step(cfg, game: CompiledGame, K: int, steps: int, log: RunLog | None) -> float:
+    """Median time of one closed-loop step: K SSN steps at most from the warm start, first inputs applied,
+    plant moved, warm start kept; with ``log``, the messages of `gnerun simulate` written and flushed."""
+    solver = make_solver(cfg, game)
+    times = []
+    for _ in range(3):
+        x = np.array(game.x0, dtype=float)
+        z_warm = game.z_start()
+        for t in range(steps):
+            t0 = time.perf_counter()
+            state = solver.init(z_warm, x)
+            trace = [(0, state.residual_norm)]
+            for _ in range(K):
+                if solver.terminate(state)[1] in FAILURES | {Status.CONVERGED}:
+                    break
+                state = solver.step(state)
+                trace.append((state.k, state.residual_norm))
+            z = state.z
+            u = game.first_inputs(z[: game.n])
+            if log is not None:
+                for k, r in trace:
+                    log.write("/K7/mpc/iterate", MpcIterate(t=t, k=k, residual_norm=r, error_norm=None))
+                log.write("/K7/mpc/state", MpcState(t=t, x=x.tolist(), u=u.tolist()))
+                log.write("/K7/mpc/error", MpcError(t=t, e_norm=None, e_norm_agent={}))
+                log.flush()
+            x = game.step_dynamics(x, u)
+            z_warm = z
+            times.append(time.perf_counter() - t0)
+    return statistics.median(times)
+
+
+# the run -----------------------------------------------------------------------------------------
+
+
+def cli_help_time(repeats: int = 5) -> float:
+    exe = Path(sys.executable).parent / "gnerun"
+    cmd = [str(exe)] if exe.exists() else [sys.executable, "-m", "gnerun.cli"]
+    samples = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        subprocess.run([*cmd, "--help"], capture_output=True, check=True)
+        samples.append(time.perf_counter() - t0)
+    return statistics.median(samples)
+
+
+def us(v: float) -> str:
+    return f"{v * 1e6:,.1f} µs" if v < 1e-3 else f"{v * 1e3:,.2f} ms" if v < 1 else f"{v:,.2f} s"
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m benchmarks", description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="fewer repeats and a smaller family grid")
+    args = parser.parse_args(argv)
+    reps = 5 if args.quick else 21
+    rows: list[dict] = []
+
+    def row(name: str, gnerun_s: float | None, baseline: str = "", baseline_s: float | None = None,
+            target: str = "", met: bool | None = None, note: str = "") -> None:
+        ratio = baseline_s / gnerun_s if baseline_s and gnerun_s else None
+        rows.append({"benchmark": name, "gnerun_s": gnerun_s, "baseline": baseline, "baseline_s": baseline_s,
+                     "ratio": ratio, "target": target, "met": met, "note": note})
+        print(f"  {name}: {us(gnerun_s) if gnerun_s else '-'}"
+              + (f" vs {baseline} {us(baseline_s)} (x{ratio:.1f})" if ratio else ""), file=sys.stderr, flush=True)
+
+    # 4. CLI start and compile
+    t_help = cli_help_time()
+    row("`gnerun --help` (fresh process)", t_help, target="<= 0.3 s", met=t_help <= 0.3)
+    paper = ROOT / "configs" / "paper_study1.yaml"
+    t0 = time.perf_counter()
+    cfg = load_config(paper)
+    t_load = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    game = compile_game(cfg)
+    t_compile = time.perf_counter() - t0
+    row("paper game: config load", t_load, note="reported")
+    row("paper game: compile (parse, condense, differentiate)", t_compile, note="reported")
+
+    # 1. and 3. the paper game at T = 10 and T = 100
+    for T, target_dense in ((10, 5.0), (100, 20.0)):
+        cfg_T = load_config(paper, {"game.horizon": T})
+        game_T = game if T == 10 else compile_game(cfg_T)
+        it, solve_t, k, res = per_iteration(cfg_T, game_T, reps)
+        dense = dense_ssn(game_T, cfg_T.solver.tol)
+        zd, kd, resd = dense()
+        t_dense = _median_time(dense, reps)
+        size = f"{game_T.size} unknowns"
+        target = "<= 20 µs" if T == 10 else ""
+        row(f"paper game T = {T} ({size}): one SSN iteration", it, target=target,
+            met=(it <= 20e-6) if T == 10 else None, note=f"{k} iterations, ||Phi|| = {res:.1e}")
+        row(f"paper game T = {T}: per iteration vs dense SSN", it, "dense SSN", t_dense / max(kd, 1),
+            target=f"ratio >= {target_dense:g}", met=(t_dense / max(kd, 1)) / it >= target_dense,
+            note=f"dense: {kd} iterations, ||Phi|| = {resd:.1e}")
+        root = scipy_root_fb(game_T, cfg_T.solver.tol)
+        zr, nfev, resr = root()
+        t_root = _median_time(root, max(3, reps // 4))
+        row(f"paper game T = {T}: whole solve vs scipy.optimize.root (FB)", solve_t, "scipy root", t_root,
+            target="ratio >= 50", met=t_root / solve_t >= 50,
+            note=f"root: {nfev} evaluations, ||Phi_FB|| = {resr:.1e}; same solution to "
+                 f"{np.abs(zr[:game_T.n] - zd[:game_T.n]).max():.0e}")
+
+    # 1. closed loop
+    cfg2 = load_config(ROOT / "configs" / "paper_study2.yaml")
+    game2 = compile_game(cfg2)
+    t_off = closed_loop_step(cfg2, game2, 7, cfg2.run.steps, None)
+    row("Study 2 closed-loop step, K = 7, logging off", t_off, target="<= 0.2 ms", met=t_off <= 0.2e-3)
+    with tempfile.TemporaryDirectory() as tmp, RunLog(Path(tmp) / "run.mcap", config_yaml="{}", metadata={}) as log:
+        t_on = closed_loop_step(cfg2, game2, 7, cfg2.run.steps, log)
+    row("Study 2 closed-loop step, K = 7, MCAP logging on", t_on, target="<= 0.3 ms", met=t_on <= 0.3e-3)
+
+    # 2. the family
+    grid = {3: (10, 25, 50, 100, 200), 5: (10, 25, 50, 100), 10: (10, 25, 50)}
+    if args.quick:
+        grid = {3: (10, 50, 100)}
+    family: dict[str, dict] = {}
+    for N, Ts in grid.items():
+        for T in Ts:
+            t0 = time.perf_counter()
+            cfg_f = family_config(N, T)
+            game_f = compile_game(cfg_f)
+            t_c = time.perf_counter() - t0
+            it, _, k, res = per_iteration(cfg_f, game_f, max(3, reps // 3))
+            family[f"N{N}-T{T}"] = {"N": N, "T": T, "unknowns": game_f.size, "iteration_s": it,
+                                    "iterations": k, "residual": res, "compile_s": t_c}
+            row(f"family N = {N}, T = {T} ({game_f.size} unknowns): one iteration", it,
+                note=f"{k} iterations, compile {t_c:.2f} s")
+    for N, Ts in grid.items():
+        if 50 in Ts and 200 in Ts:
+            r = family[f"N{N}-T200"]["iteration_s"] / family[f"N{N}-T50"]["iteration_s"]
+            row(f"family N = {N}: t(T = 200) / t(T = 50)", None, target="<= 5", met=r <= 5, note=f"{r:.1f}")
+            rows[-1]["ratio"] = r
+
+    machine = {"python": platform.python_version(), "platform": platform.platform(), "processor":
+               platform.processor() or platform.machine(), "cpus": os.cpu_count(),
+               "numpy": np.__version__, "openblas_threads": os.environ.get("OPENBLAS_NUM_THREADS")}
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    stamp = time.strftime("%Y%m%dT%H%M%SZ", time.gmtime())
+    out = RESULTS / f"bench-{stamp}.json"
+    out.write_text(json.dumps({"gnerun": __version__, "machine": machine, "rows": rows, "family": family},
+                              indent=2))
+
+    print(f"gnerun {__version__}, {machine['processor']}, {machine['cpus']} CPUs, Python {machine['python']}, "
+          f"numpy {machine['numpy']}, OPENBLAS_NUM_THREADS={machine['openblas_threads']}\n")
+    print("| benchmark | gnerun | baseline | ratio | target | met |")
+    print("|---|---|---|---|---|---|")
+    for r in rows:
+        g = us(r["gnerun_s"]) if r["gnerun_s"] else r["note"]
+        b = f"{r['baseline']} {us(r['baseline_s'])}" if r["baseline_s"] else ""
+        ratio = f"{r['ratio']:.1f}" if r["ratio"] else ""
+        met = "" if r["met"] is None else ("yes" if r["met"] else "**no**")
+        print(f"| {r['benchmark']} | {g} | {b} | {ratio} | {r['target']} | {met} |")
+    print(f"\nJSON: {out.relative_to(ROOT)}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,87 @@
+"""The min-map step through the reduced system equals the step through the whole JPhi, and the LQ fast path
+evaluates the same L and c as the compiled CasADi functions."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from gnerun.config import load_config
+from gnerun.game import compile_game
+from gnerun.solving import make_solver
+from gnerun.ssn import Status
+
+from .conftest import CONFIGS
+
+CASES = ["paper_study1", "harker", "fk_a11", "fk_a12", "nonlinear_gne", "variational_gne", "vehicles"]
+
+
+def _full_step(solver, state) -> np.ndarray:
+    """z + dz with JPhi(z) dz = -Phi(z), the whole system (the reference)."""
+    J = solver.jacobian(state.parts, state.z, state.active)
+    return state.z + np.linalg.solve(J, -state.phi)
+
+
+@pytest.mark.parametrize("name", CASES)
+def test_reduced_step_equals_the_full_newton_step(name: str) -> None:
+    cfg = load_config(CONFIGS / f"{name}.yaml", {"solver.kind": "ssn", "solver.line_search": False,
+                                                  "solver.complementarity": "min"})
+    game = compile_game(cfg)
+    solver = make_solver(cfg, game)
+    assert solver.reduced
+    rng = np.random.default_rng(3)
+    # along the method's own iterates, and from random points (multipliers of both signs, all branches)
+    states = [solver.init()]
+    for _ in range(4):
+        nxt = solver.step(states[-1])
+        if nxt.status != Status.RUNNING or nxt.residual_norm < 1e-9:
+            break
+        states.append(nxt)
+    for _ in range(5):
+        z = game.z_start() + rng.normal(scale=0.5, size=game.size)
+        states.append(solver.init(z))
+    checked = 0
+    for state in states:
+        J = solver.jacobian(state.parts, state.z, state.active)
+        if np.linalg.cond(J) > 1e8:
+            continue
+        expected = _full_step(solver, state)
+        got = solver.step(state)
+        assert got.status in (Status.RUNNING, Status.CONVERGED), got.message
+        np.testing.assert_allclose(got.z, expected, rtol=1e-8, atol=1e-8 * (1 + np.abs(expected).max()))
+        checked += 1
+    assert checked >= 3
+
+
+def test_lq_games_are_recognised_and_evaluated_exactly() -> None:
+    rng = np.random.default_rng(0)
+    for name, affine in [("paper_study1", True), ("harker", True), ("fk_a11", True), ("vehicles", False),
+                         ("nonlinear_gne", False)]:
+        game = compile_game(load_config(CONFIGS / f"{name}.yaml"))
+        assert game.affine is affine, name
+        for _ in range(5):
+            z = rng.normal(size=game.size) * 3
+            x = game.x0 + rng.normal(size=game.nx)
+            parts = game.kkt_parts(z, x)
+            L, c, dL, dc = game._kkt(z[: game.n], z[game.n:], x)  # the compiled CasADi functions
+            np.testing.assert_allclose(parts.L, L.reshape(-1), rtol=1e-12, atol=1e-12)
+            np.testing.assert_allclose(parts.c, c.reshape(-1), rtol=1e-12, atol=1e-12)
+            np.testing.assert_array_equal(parts.dL_dz, dL)
+            np.testing.assert_array_equal(parts.dc_da, dc)
+
+
+def test_lq_step_cache_follows_the_state() -> None:
+    """The cached end point of an LQ step belongs to one plant state: a new x gives a new step."""
+    cfg = load_config(CONFIGS / "paper_study2.yaml")
+    game = compile_game(cfg)
+    solver = make_solver(cfg, game)
+    for x in (np.array([1.0, 3.0, 5.0]), np.array([0.2, -1.0, 2.0]), np.array([1.0, 3.0, 5.0])):
+        state = solver.init(game.z_start(), x)
+        while not solver.terminate(state)[0]:
+            state = solver.step(state)
+        assert state.status == Status.RUNNING and state.residual_norm <= cfg.solver.tol
+        fresh = make_solver(cfg, game)  # no cache
+        ref = fresh.init(game.z_start(), x)
+        while not fresh.terminate(ref)[0]:
+            ref = fresh.step(ref)
+        np.testing.assert_allclose(state.z, ref.z, atol=1e-12)
