@@ -9,7 +9,6 @@ the commands, so that ``gnerun --help`` stays fast.
 from __future__ import annotations
 
 import contextlib
-import re
 import sys
 import traceback
 from collections.abc import Iterator
@@ -276,8 +275,7 @@ def replay(
         from .errors import InputError
 
         runs = _existing_logs(runs)
-        if not re.fullmatch(r"\d{2,5}x\d{2,5}", size):
-            raise InputError(f"--size must look like 1600x900, not {size!r}")
+        rp.check_size(size)
         if not (save or spawn or serve or screenshot):
             if not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
                 raise InputError("no display for the viewer: use --save FILE.rrd, --serve or --screenshot DIR")
@@ -287,8 +285,6 @@ def replay(
             if not quiet:
                 typer.echo(f"saved {save}")
         if screenshot is not None:
-            if not rp.vulkan_available():
-                raise Unavailable(rp.VULKAN_HINT)
             for path in rp.screenshots(runs, screenshot, size=size):
                 if not quiet:
                     typer.echo(f"wrote {path}")
@@ -298,7 +294,7 @@ def replay(
             rrd = save if save is not None else Path(tempfile.mkdtemp(prefix="gnerun-replay-")) / "replay.rrd"
             if save is None:
                 rp.save(runs, rrd)
-            typer.echo(f"web viewer: {rp.web_url(web_port, grpc_port)} (Ctrl-C stops it)", err=False)
+            typer.echo(f"web viewer: {rp.web_url(web_port, grpc_port)} (Ctrl-C stops it)")
             sys.stdout.flush()
             rp.serve(rrd, web_port, grpc_port)
 

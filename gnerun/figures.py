@@ -16,8 +16,6 @@ import math
 import re
 from pathlib import Path
 
-import yaml
-
 from .mcap_log import RunRecord, read_run
 
 _K_TOPIC = re.compile(r"^/K(\d+)/mpc/(state|error|iterate)$")
@@ -28,23 +26,17 @@ def _log_values(values: list[float | None]) -> list[float]:
 
 
 def run_name(run: RunRecord) -> str:
-    if run.config_yaml:
-        cfg = yaml.safe_load(run.config_yaml) or {}
-        return str(cfg.get("name", run.path.parent.name))
-    return run.path.parent.name
+    return str(run.config.get("name", run.path.parent.name))
 
 
 def solver_kind(run: RunRecord) -> str:
-    if not run.config_yaml:
-        return ""
-    cfg = yaml.safe_load(run.config_yaml) or {}
-    return str((cfg.get("solver") or {}).get("kind", ""))
+    return str((run.config.get("solver") or {}).get("kind", ""))
 
 
 def disturbance(run: RunRecord) -> str:
     if not run.config_yaml:
         return ""
-    d = (yaml.safe_load(run.config_yaml) or {}).get("disturbance") or {}
+    d = run.config.get("disturbance") or {}
     kind = d.get("kind", "none")
     return "undisturbed" if kind == "none" else f"{kind.replace('_', ' ')}, scale {d.get('scale', 0):g}"
 
@@ -96,9 +88,7 @@ def study2_figure(run: RunRecord):
     fig, (ax_x, ax_e) = plt.subplots(1, 2, figsize=(7.0, 2.8), sharex=True)  # e(t) = 0 leaves no point
     K_max = max(loops)
     states = loops[K_max].get("state", [])
-    names = []
-    if run.config_yaml:
-        names = ((yaml.safe_load(run.config_yaml) or {}).get("game") or {}).get("states") or []
+    names = (run.config.get("game") or {}).get("states") or []
     nx = len(states[0]["x"]) if states else 0
     for j in range(nx):
         ax_x.plot([m["t"] for m in states], [m["x"][j] if m["x"][j] is not None else math.nan for m in states],

@@ -181,12 +181,12 @@ class CompiledGame:
         if self.affine:
             cache = self._affine_cache
             v = cache["W"] @ z
-            v += self._offsets(self._x(x))
+            v += self.offsets(self._x(x))
             return KKTParts(v[:n], v[n:], cache["dL"], cache["dc"])
         L, c, dL, dc = self._kkt(z[:n], z[n:], self._x(x))
         return KKTParts(L.reshape(-1), c.reshape(-1), dL, dc)
 
-    def _offsets(self, x: np.ndarray) -> np.ndarray:
+    def offsets(self, x: np.ndarray) -> np.ndarray:
         """[L(0; x); c(0; x)] of an affine game, evaluated once per state x."""
         cache = self._affine_cache
         key = x.tobytes()

@@ -9,6 +9,7 @@ message written before its last flush.
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 import struct
@@ -123,6 +124,13 @@ class RunRecord:
     @property
     def message_count(self) -> int:
         return sum(len(v) for v in self.messages.values())
+
+    @functools.cached_property
+    def config(self) -> dict:
+        """The resolved config as a mapping ({} when the log has none)."""
+        import yaml
+
+        return (yaml.safe_load(self.config_yaml) or {}) if self.config_yaml else {}
 
 
 def run_log_path(path: str | Path) -> Path:

@@ -18,8 +18,6 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import yaml
-
 from .errors import InputError, Unavailable
 from .figures import closed_loops, disturbance, run_name, solver_kind
 from .mcap_log import RunRecord, read_run
@@ -72,8 +70,7 @@ class Contents:
 
 
 def _names(run: RunRecord) -> tuple[str, list[str], list[str], str]:
-    cfg = yaml.safe_load(run.config_yaml or "") or {}
-    game = cfg.get("game") or {}
+    game = run.config.get("game") or {}
     states = list(game.get("states") or [])
     inputs = [u for agent in game.get("agents") or [] for u in (agent.get("inputs") or {})]
     return run_name(run), states, inputs, solver_kind(run)
@@ -452,6 +449,11 @@ def _view_names(container) -> set[str]:
     return set().union(*(_view_names(c) for c in container.contents)) if container.contents else set()
 
 
+def check_size(size: str) -> None:
+    if not re.fullmatch(r"\d{2,5}x\d{2,5}", size):
+        raise InputError(f"--size must look like 1600x900, not {size!r}")
+
+
 def screenshots(paths: list[str | Path], out_dir: str | Path, size: str = "1600x900",
                 timeout: float = 60.0) -> list[Path]:
     """One PNG per paper figure the runs contain, taken by a headless viewer (needs a Vulkan driver)."""
@@ -459,8 +461,7 @@ def screenshots(paths: list[str | Path], out_dir: str | Path, size: str = "1600x
 
     import rerun.blueprint as rrb
 
-    if not re.fullmatch(r"\d{2,5}x\d{2,5}", size):
-        raise InputError(f"--size must look like 1600x900, not {size!r}")
+    check_size(size)
     if not vulkan_available():
         raise Unavailable(VULKAN_HINT)
     out_dir = Path(out_dir)

@@ -227,7 +227,7 @@ class SemismoothNewton:
             return self._singular(state, rcond)
         if game.affine:
             # L and c affine: the step lands on M^-1 [-L(0); -c_A(0)] from any z with this active set
-            w0 = game._offsets(state.x)
+            w0 = game.offsets(state.x)
             if self._solutions_x is not w0:  # a new state x (the game keeps one offset array per x)
                 self._solutions.clear()
                 self._solutions_x = w0
@@ -245,9 +245,10 @@ class SemismoothNewton:
             z_new[:n] = z[:n] + sol[:n]
         z_new[n + A] = sol[n:]
         if opts.line_search:
-            t = self._armijo(state, z_new - z)
+            dz = z_new - z
+            t = self._armijo(state, dz)
             if t != 1.0:
-                z_new = z + t * (z_new - z)
+                z_new = z + t * dz
         return self.advance(state, z_new, rcond=float(rcond))
 
     def advance(self, state: SSNState, z: np.ndarray, *, rcond: float = math.nan) -> SSNState:
