@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
+from typing import NamedTuple
 
 import casadi as ca
 import numpy as np
@@ -37,14 +38,15 @@ class Evaluator:
     """A CasADi Function evaluated into preallocated numpy buffers (no per-call DM conversions).
 
     Calling it copies the arguments into the input buffers, evaluates, and returns fresh numpy arrays
-    shaped like the Function's (dense) outputs.
+    shaped like the Function's (dense) outputs; with ``dense=False``, the outputs' nonzeros as they are
+    stored (column by column).
     """
 
-    def __init__(self, f: ca.Function):
+    def __init__(self, f: ca.Function, dense: bool = True):
         self.function = f
         self._args = [np.zeros(f.nnz_in(i)) for i in range(f.n_in())]
         self._res = [np.zeros(f.nnz_out(i)) for i in range(f.n_out())]
-        self._shapes = [f.size_out(i) for i in range(f.n_out())]
+        self._shapes = [f.size_out(i) if dense else (f.nnz_out(i),) for i in range(f.n_out())]
         self._buffer, self._eval = f.buffer()
         for i, arr in enumerate(self._args):
             self._buffer.set_arg(i, memoryview(arr))
@@ -69,8 +71,7 @@ class ConstraintInfo:
     stage: int | None = None
 
 
-@dataclass(frozen=True)
-class KKTParts:
+class KKTParts(NamedTuple):
     """L, c and their exact derivatives at one point (dense numpy arrays)."""
 
     L: np.ndarray  # (n,)
@@ -105,7 +106,9 @@ class CompiledGame:
     _sparsity: tuple[ca.Sparsity, ca.Sparsity]
     _dynamics: Evaluator | None = field(default=None, repr=False)
     affine: bool = False  # L affine in z and c affine in a, with constant derivatives (LQ games)
+    _offset_map: tuple[np.ndarray, np.ndarray] | None = field(default=None, repr=False)  # [L; c](0; x) = Wx x + w00
     _affine_cache: dict = field(default_factory=dict, repr=False)
+    derived: dict = field(default_factory=dict, repr=False)  # what is built from this game once (sparse system)
 
     def __post_init__(self) -> None:
         if self.affine:
@@ -191,8 +194,15 @@ class CompiledGame:
         cache = self._affine_cache
         key = x.tobytes()
         if key != cache["x"]:
-            L0, c0, _, _ = self._kkt(np.zeros(self.n), np.zeros(self.m), x)
-            cache.update(x=key, w0=np.concatenate([L0.reshape(-1), c0.reshape(-1)]))
+            if self._offset_map is not None:  # affine in x too: one product
+                Wx, w00 = self._offset_map
+                w0 = Wx @ x
+                w0 += w00
+            else:
+                L0, c0, _, _ = self._kkt(np.zeros(self.n), np.zeros(self.m), x)
+                w0 = np.concatenate([L0.reshape(-1), c0.reshape(-1)])
+            w0.flags.writeable = False
+            cache.update(x=key, w0=w0)
         return cache["w0"]
 
     def costs(self, a: np.ndarray, x: np.ndarray | None = None) -> np.ndarray:
@@ -370,16 +380,21 @@ class _Expressions:
     own_rows: dict[int, list[_Row]]  # their constraint rows, stage by stage
     shared_common: list[_Row]  # variational shared constraints (one common multiplier each)
     dynamics: ca.Function | None
+    defects: list[ca.SX] = field(default_factory=list)  # with given states: f(xi(tau), u(tau)) - xi(tau+1)
 
 
 def _expressions(g: StaticGame | DynamicGame, lay: _Layout, a: ca.SX, x: ca.SX, agents: list[int],
-                 *, shared_as_own: bool = False) -> _Expressions:
+                 *, shared_as_own: bool = False, states: ca.SX | None = None) -> _Expressions:
     """Costs and constraints of ``agents`` only, as CasADi expressions in (a, x).
 
     Other agents' costs and constraints are not even parsed: what is built from here can reach only
     the chosen agents' own data, the common dynamics and parameters. Shared constraints go to each
     chosen agent's own rows when the equilibrium is generalized (or ``shared_as_own``), otherwise to
     the common block.
+
+    Dynamic games are condensed (the states are functions of x and a), unless ``states`` gives the
+    states xi(1), ..., xi(T+1) as variables (stage-major): then the dynamics become the defects
+    f(xi(tau), u(tau)) - xi(tau+1), with xi(0) = x (the sparse formulation).
     """
     fns = casadi_functions()
     params = dict(g.parameters)
@@ -427,9 +442,15 @@ def _expressions(g: StaticGame | DynamicGame, lay: _Layout, a: ca.SX, x: ca.SX, 
     terminal_cost = {i: parse_expression(g.agents[i].terminal_cost) for i in agents}
     total = {i: ca.SX(0) for i in agents}
     xi = x
+    defects: list[ca.SX] = []
     for tau in range(lay.horizon + 1):
         u = ca.vertcat(*[a[slices[i].start + tau * len(names[i]) + j] for i, j, _ in inputs])
-        xi = f(xi, u)  # the state that the inputs of stage tau produce
+        if states is None:
+            xi = f(xi, u)  # the state that the inputs of stage tau produce
+        else:
+            nxt = states[tau * lay.nx:(tau + 1) * lay.nx]
+            defects.append(f(xi, u) - nxt)
+            xi = nxt
         env = dict(params)
         env.update({s: xi[k] for k, s in enumerate(g.states)})
         env.update({name: u[k] for k, (_, _, name) in enumerate(inputs)})
@@ -440,7 +461,7 @@ def _expressions(g: StaticGame | DynamicGame, lay: _Layout, a: ca.SX, x: ca.SX, 
     env_T.update({s: xi[k] for k, s in enumerate(g.states)})
     for i in agents:
         costs[i] = ca.SX(total[i] + evaluate(terminal_cost[i], env_T, fns))
-    return _Expressions(costs, own, common, dynamics)
+    return _Expressions(costs, own, common, dynamics, defects)
 
 
 def _assemble(*, kind: str, a: ca.SX, x: ca.SX, costs: list[ca.SX], own_rows: list[list[_Row]],
@@ -483,6 +504,17 @@ def _assemble(*, kind: str, a: ca.SX, x: ca.SX, costs: list[ca.SX], own_rows: li
     # agent i's own problem: its own rows, plus the common shared rows (they constrain everyone)
     agent_rows = [np.r_[np.arange(ms.start, ms.stop), np.arange(shared_slice.start, shared_slice.stop)].astype(int)
                   for ms in multiplier_slices]
+    affine = not ca.depends_on(ca.vec(dL), ca.vertcat(a, lam, x)) and not ca.depends_on(ca.vec(dc), ca.vertcat(a, x))
+    offset_map = None
+    if affine:
+        # [L; c] at z = 0 as a function of the state: for LQ dynamic games it is affine in x as well
+        v = ca.vertcat(L, c)
+        dv_dx = ca.jacobian(v, x)
+        if not ca.depends_on(ca.vec(dv_dx), ca.vertcat(a, lam, x)):
+            zero = ca.Function("offset_map", [a, lam, x], [ca.densify(dv_dx), ca.densify(v)])
+            Wx, w00 = zero(np.zeros(n), np.zeros(m), np.zeros(x.numel()))
+            offset_map = (np.array(Wx, dtype=float).reshape(v.numel(), x.numel()),
+                          np.array(w00, dtype=float).reshape(-1))
     return CompiledGame(
         kind=kind,
         agent_names=agent_names,
@@ -505,7 +537,8 @@ def _assemble(*, kind: str, a: ca.SX, x: ca.SX, costs: list[ca.SX], own_rows: li
         _agent_constraints=agent_rows,
         _sparsity=sparsity,
         _dynamics=Evaluator(dynamics) if dynamics is not None else None,
-        affine=not ca.depends_on(ca.vec(dL), ca.vertcat(a, lam, x)) and not ca.depends_on(ca.vec(dc), ca.vertcat(a, x)),
+        affine=affine,
+        _offset_map=offset_map,
     )
 
 

@@ -89,10 +89,15 @@ class SemismoothNewton:
         # (same step, smaller system). Noise on all of JPhi or on the right-hand side needs the full system.
         self.reduced = not self._fb and not (d.kind in ("jacobian_noise", "residual") and d.scale > 0)
         self._eq_rows = np.flatnonzero(self._eq)
-        # LQ games: the reduced matrix depends on the active set only; its factorisation is kept
-        self._factors: dict[bytes, tuple[np.ndarray, np.ndarray, int, float]] = {}
-        self._solutions: dict = {}  # and, for the current state x, the step's end point per active set
-        self._solutions_x: np.ndarray | None = None
+        # LQ games: the reduced matrix depends on the active set only, and the step lands on the same
+        # point from any z with that active set: z^+ = G_A w0(x). G_A (or the reason it does not exist)
+        # is kept per active set, so a step is one product.
+        self._lq = self.reduced and game.affine
+        self._tie_tol = solver.tie_tol
+        self._maps: dict[bytes, tuple[np.ndarray | None, float]] = {}
+        if game.affine:
+            cache = game._affine_cache
+            self._W, self._dL, self._dc = cache["W"], cache["dL"], cache["dc"]
 
     # ------------------------------------------------------------------------------------
     def residual(self, parts: KKTParts, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -114,6 +119,21 @@ class SemismoothNewton:
             phi[n + self._eq_rows] = parts.c[self._eq_rows]
             active &= self._ineq
         return phi, active
+
+    def _evaluate(self, z: np.ndarray, x: np.ndarray) -> tuple[KKTParts, np.ndarray, np.ndarray]:
+        """The parts, Phi and the g-branch rows at z; for LQ games with the min map, in a few products."""
+        if not (self._lq and self._eq_rows.size == 0):
+            parts = self.game.kkt_parts(z, x)
+            return parts, *self.residual(parts, z)
+        n = self.game.n
+        v = self._W @ z
+        v += self.game.offsets(x)
+        phi = v.copy()
+        a = np.negative(v[n:], out=phi[n:])  # -c, in place in Phi's buffer
+        lam = z[n:]
+        active = a < lam - self._tie_tol
+        np.minimum(a, lam, out=a)
+        return KKTParts(v[:n], v[n:], self._dL, self._dc), phi, active
 
     def jacobian(self, parts: KKTParts, z: np.ndarray, active: np.ndarray) -> np.ndarray:
         """An element JPhi(z) of the limiting Jacobian of Phi (tie rule in the module docstring)."""
@@ -152,8 +172,7 @@ class SemismoothNewton:
         xv = game.x0 if x is None else np.asarray(x, dtype=float).reshape(-1)
         if rng is None and self.disturbance.kind in ("jacobian_noise", "residual"):
             rng = np.random.default_rng(self.disturbance.seed)
-        parts = game.kkt_parts(z, xv)
-        phi, active = self.residual(parts, z)
+        parts, phi, active = self._evaluate(z, xv)
         state = SSNState(z=z, x=xv, k=0, phi=phi, residual_norm=_norm(phi), parts=parts, active=active,
                          step_norm=math.nan, active_set_changes=0, status=Status.RUNNING, message="", rng=rng)
         return self._check_finite(state)
@@ -206,44 +225,26 @@ class SemismoothNewton:
         game, opts = self.game, self.options
         n = game.n
         parts, z = state.parts, state.z
-        A = np.flatnonzero(state.active | self._eq) if self._eq_rows.size else np.flatnonzero(state.active)
-        factors = None
-        if game.affine:
-            key = A.tobytes()
-            factors = self._factors.get(key)
-        if factors is None:
-            k = A.size
-            M = np.zeros((n + k, n + k))
-            M[:n, :n] = parts.dL_dz[:, :n]
-            M[:n, n:] = parts.dL_dz[:, n + A]
-            M[n:, :n] = parts.dc_da[A]
-            factors = _factor(M)
-            if game.affine:
-                if len(self._factors) >= 256:
-                    self._factors.clear()
-                self._factors[key] = factors
-        lu, piv, info, rcond = factors
-        if info != 0 or not rcond >= opts.min_rcond:
-            return self._singular(state, rcond)
-        if game.affine:
-            # L and c affine: the step lands on M^-1 [-L(0); -c_A(0)] from any z with this active set
-            w0 = game.offsets(state.x)
-            if self._solutions_x is not w0:  # a new state x (the game keeps one offset array per x)
-                self._solutions.clear()
-                self._solutions_x = w0
-            sol = self._solutions.get(key)
-            if sol is None:
-                sol, _ = lapack.dgetrs(lu, piv, np.concatenate([-w0[:n], -w0[n + A]]))
-                self._solutions[key] = sol
-            z_new = np.zeros_like(z)
-            z_new[:n] = sol[:n]
+        if self._lq:
+            key = state.active.tobytes()
+            entry = self._maps.get(key)
+            if entry is None:
+                entry = self._lq_map(state.active)
+            G, rcond = entry
+            if G is None:
+                return self._singular(state, rcond)
+            z_new = G @ game.offsets(state.x)
         else:
+            A = np.flatnonzero(state.active | self._eq) if self._eq_rows.size else np.flatnonzero(state.active)
+            lu, piv, info, rcond = _factor(self._reduced_matrix(parts, A))
+            if info != 0 or not rcond >= opts.min_rcond:
+                return self._singular(state, rcond)
             lam = z[n:]
             rhs = np.concatenate([parts.dL_dz[:, n:] @ lam - parts.L, -parts.c[A]])
             sol, _ = lapack.dgetrs(lu, piv, rhs)
             z_new = np.zeros_like(z)
             z_new[:n] = z[:n] + sol[:n]
-        z_new[n + A] = sol[n:]
+            z_new[n + A] = sol[n:]
         if opts.line_search:
             dz = z_new - z
             t = self._armijo(state, dz)
@@ -251,18 +252,46 @@ class SemismoothNewton:
                 z_new = z + t * dz
         return self.advance(state, z_new, rcond=float(rcond))
 
+    def _reduced_matrix(self, parts: KKTParts, A: np.ndarray) -> np.ndarray:
+        n, k = self.game.n, A.size
+        M = np.zeros((n + k, n + k))
+        M[:n, :n] = parts.dL_dz[:, :n]
+        M[:n, n:] = parts.dL_dz[:, n + A]
+        M[n:, :n] = parts.dc_da[A]
+        return M
+
+    def _lq_map(self, active: np.ndarray) -> tuple[np.ndarray | None, float]:
+        """G_A with z^+ = G_A w0 for an LQ game and the active set ``active`` (g-branch rows and equalities):
+        the reduced system M [a; lambda_A] = -[L(0); c_A(0)] solved for every column of the selection."""
+        game = self.game
+        n = game.n
+        A = np.flatnonzero(active | self._eq)
+        lu, piv, info, rcond = _factor(self._reduced_matrix(KKTParts(None, None, self._dL, self._dc), A))
+        G = None
+        if info == 0 and rcond >= self.options.min_rcond:
+            select = np.zeros((n + A.size, game.size))
+            select[np.arange(n), np.arange(n)] = -1.0
+            select[n + np.arange(A.size), n + A] = -1.0
+            sol, _ = lapack.dgetrs(lu, piv, select)
+            G = np.zeros((game.size, game.size))
+            G[:n] = sol[:n]
+            G[n + A] = sol[n:]
+        if len(self._maps) >= 256:
+            self._maps.clear()
+        entry = (G, float(rcond))
+        self._maps[active.tobytes()] = entry
+        return entry
+
     def advance(self, state: SSNState, z: np.ndarray, *, rcond: float = math.nan) -> SSNState:
         """The iterate after ``state``: z evaluated once (Phi, the parts for the next step), checked for
         NaN and divergence. Every method's step ends here."""
-        parts = self.game.kkt_parts(z, state.x)
-        phi, active = self.residual(parts, z)
-        new = SSNState(z=z, x=state.x, k=state.k + 1, phi=phi, residual_norm=_norm(phi), parts=parts,
-                       active=active, step_norm=_norm(z - state.z),
-                       active_set_changes=int(np.count_nonzero(active != state.active)), status=Status.RUNNING,
-                       message="", rng=state.rng, rcond=rcond)
+        parts, phi, active = self._evaluate(z, state.x)
+        dz = z - state.z
+        new = SSNState(z, state.x, state.k + 1, phi, _norm(phi), parts, active, _norm(dz),
+                       np.count_nonzero(active != state.active), Status.RUNNING, "", state.rng, rcond)
         new = self._check_finite(new)
         limit = self.options.divergence_limit
-        if new.status == Status.RUNNING and float(z @ z) > limit * limit and float(np.abs(z).max()) > limit:
+        if new.status == Status.RUNNING and z @ z > limit * limit and np.abs(z).max() > limit:
             new = replace(new, status=Status.DIVERGED,
                           message=f"diverged at iteration {new.k}: ||z||_inf = {np.max(np.abs(z)):.2e} exceeds "
                                   f"divergence_limit {limit:.0e}")
@@ -300,7 +329,7 @@ class SemismoothNewton:
         t = 1.0
         while t >= t_min:
             z = state.z + t * dz
-            phi, _ = self.residual(self.game.kkt_parts(z, state.x), z)
+            _, phi, _ = self._evaluate(z, state.x)
             theta = 0.5 * float(phi @ phi)
             if math.isfinite(theta) and theta <= (1.0 - 2.0 * sigma * t) * theta0:
                 return t
@@ -346,7 +375,7 @@ def _factor(M: np.ndarray) -> tuple[np.ndarray, np.ndarray, int, float]:
 
 
 def _norm(v: np.ndarray) -> float:
-    return float(np.sqrt(v @ v)) if v.size else 0.0
+    return math.sqrt(v @ v)  # nan if v has a nan, inf if it overflows; 0 for an empty v
 
 
 def _noise(rng: np.random.Generator, shape: tuple[int, ...], distribution: str) -> np.ndarray:
