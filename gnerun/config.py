@@ -144,6 +144,9 @@ class SolverConfig(Strict):
     min_rcond: float = Field(1e-14, ge=0, description="JPhi with reciprocal condition below this is singular")
     line_search: bool = Field(False, description="Armijo backtracking on 1/2||Phi||^2 (off: the paper's pure method)")
     divergence_limit: float = Field(1e12, gt=0, description="||z||_inf beyond this is divergence")
+    formulation: Literal["auto", "condensed", "sparse"] = Field(
+        "auto", description="dynamic games, ssn: states eliminated (condensed, dense) or kept as unknowns (sparse, "
+                            "linear in the horizon); auto: sparse for long horizons. Same iterates either way")
     # kind: distributed (agent-distributed proximal response); ignored by ssn and jn
     scheme: Literal["jacobi", "gauss_seidel"] = "jacobi"
     tau: float = Field(1.0, ge=0, description="proximal weight: tau/2 ||a_i - abar_i||^2")
@@ -525,6 +528,19 @@ def check_semantics(cfg: Config, smap: SourceMap) -> list[str]:
     if cfg.disturbance.kind == "pseudogradient" and cfg.solver.kind == "ssn":
         report(("disturbance", "kind"), "'pseudogradient' perturbs the Josephy-Newton method; with solver.kind "
                "'ssn' use 'jacobian_noise' or 'residual'")
+    if cfg.solver.formulation == "sparse":
+        why = []
+        if static:
+            why.append("a static game has no states to keep")
+        if cfg.solver.kind != "ssn":
+            why.append(f"solver.kind is {cfg.solver.kind!r} (the sparse formulation is for 'ssn')")
+        if cfg.solver.complementarity != "min":
+            why.append("it takes min-map steps (solver.complementarity: min)")
+        if cfg.disturbance.kind in ("jacobian_noise", "residual") and cfg.disturbance.scale > 0:
+            why.append(f"disturbance {cfg.disturbance.kind!r} perturbs the whole condensed JPhi or its right-hand side")
+        if why:
+            report(("solver", "formulation"), "'sparse' is not available here: " + "; ".join(why)
+                   + " (use 'condensed' or 'auto')")
     if cfg.disturbance.kind in ("jacobian_noise", "residual") and cfg.solver.kind == "jn":
         report(("disturbance", "kind"), f"{cfg.disturbance.kind!r} perturbs semismooth Newton; with solver.kind "
                "'jn' use 'pseudogradient' (noise on F and H)")

@@ -32,7 +32,31 @@ def make_solver(cfg: Config, game: CompiledGame, *, disturbed: bool = True) -> S
         from .josephy_newton import JosephyNewton
 
         return JosephyNewton(game, cfg.solver, disturbance)
+    if formulation(cfg, game) == "sparse":
+        from .sparse import SparseSemismoothNewton, compile_sparse
+
+        system = game.derived.get("sparse")
+        if system is None:
+            system = game.derived["sparse"] = compile_sparse(cfg, game)
+        return SparseSemismoothNewton(game, cfg.solver, disturbance, system)
     return SemismoothNewton(game, cfg.solver, disturbance)
+
+
+# auto: the sparse formulation from this many unknowns of the condensed system on (measured crossover,
+# benchmarks/README: below it the dense factorisation of the condensed system is faster)
+SPARSE_FROM = 500
+
+
+def formulation(cfg: Config, game: CompiledGame) -> str:
+    """The formulation a solve uses: the config's choice, or for ``auto`` sparse where it applies and the
+    condensed system is large."""
+    chosen = cfg.solver.formulation
+    if chosen != "auto":
+        return chosen
+    d = cfg.disturbance
+    eligible = (game.kind == "dynamic" and cfg.solver.kind == "ssn" and cfg.solver.complementarity == "min"
+                and not (d.kind in ("jacobian_noise", "residual") and d.scale > 0))
+    return "sparse" if eligible and game.size >= SPARSE_FROM else "condensed"
 
 
 def iterate(solver: SemismoothNewton, state: SSNState,

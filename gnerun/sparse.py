@@ -1,0 +1,238 @@
+"""The sparse (non-condensed) formulation of a dynamic game's semismooth Newton step.
+
+The condensed KKT system of a dynamic game (gnerun.game) eliminates the states: its Jacobian is dense
+and a step costs O(T^2) to O(T^3) in the horizon T. Here the states xi(1..T+1) stay unknowns, with the
+dynamics as equality constraints f(xi(tau), u(tau)) - xi(tau+1) = 0 and one costate sequence p_i per
+agent (agent i's multipliers of the dynamics in its own problem). Agent i's Lagrangian is
+
+    L_i = J_i(xi, a) + lambda_i^T g_i(xi, a) [+ lambda_s^T g_s] + p_i^T d(xi, a; x),
+
+and the whole system F(w) = [(grad_{a_i} L_i)_i; (grad_xi L_i)_i; d; c] in w = (a, xi, p, lambda) has a
+block-banded Jacobian: every row and column belongs to one stage and touches only its neighbours. One
+LU factorisation of it (SuperLU) costs O(T).
+
+The iterate stays z = (a, lambda), and the step is the condensed method's step. Before every
+evaluation the states are rolled out from (x, a) and the costates solved backwards from
+grad_xi L_i = 0; at such a point the full Newton system, with xi and p eliminated, is the condensed
+one (the reduced Hessian of L_i is the condensed Hessian, and grad_{a_i} L_i is the condensed
+stationarity L(z)). So both formulations produce the same iterates up to rounding, and the same
+closed loop; only the cost of a step differs.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import casadi as ca
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse import linalg as spla
+
+from .config import Config, DisturbanceConfig, DynamicGame, SolverConfig
+from .game import CompiledGame, Evaluator, _expressions, _layout
+from .ssn import SemismoothNewton, SSNState
+
+
+class SparseParts(NamedTuple):
+    """L and c of the condensed system at z (so Phi is the same), and the full system at the projected point."""
+
+    L: np.ndarray
+    c: np.ndarray
+    dL_dz: None
+    dc_da: None
+    F: np.ndarray  # the full residual (its G_xi and d rows vanish up to rounding)
+    J: np.ndarray  # nonzeros of dF/dw in the pattern of SparseKKT.pattern
+    F0: np.ndarray  # F with the costates and multipliers set to zero (F is linear in them)
+
+
+class SparseKKT:
+    """The full-space KKT system of a dynamic game, evaluated at rolled-out states and solved costates.
+
+    Unknowns w = (a [n], xi [S], p_1..p_N [N S], lambda [m]) with S = nx (T + 1); rows
+    F = (G_a [n], G_xi [N S], d [S], c [m]). Build with :func:`compile_sparse`.
+    """
+
+    def __init__(self, game: CompiledGame, function: ca.Function, pattern: ca.Sparsity, affine: bool, S: int):
+        self.game = game
+        self.n, self.m, self.S = game.n, game.m, S
+        self.N = len(game.agent_names)
+        self.size = self.n + S + self.N * S + self.m
+        self._eval = Evaluator(function, dense=False)
+        colind, row = pattern.colind(), pattern.row()
+        self.pattern = sp.csc_matrix((np.zeros(len(row)), np.asarray(row), np.asarray(colind)),
+                                     shape=(self.size, self.size))
+        self.affine = affine  # dF/dw constant: LQ games
+        self._lam0 = self.size - self.m  # first multiplier column (and first c row)
+        self._not_multipliers = np.arange(self._lam0)
+
+    def evaluate(self, z: np.ndarray, x: np.ndarray) -> SparseParts:
+        n = self.n
+        F, J, F0 = self._eval(z[:n], z[n:], x)
+        return SparseParts(F[:n], F[self._lam0:], None, None, F, J, F0)
+
+    def matrix(self, J: np.ndarray) -> sp.csc_matrix:
+        """dF/dw as a sparse matrix, from the nonzeros of an evaluation."""
+        M = self.pattern.copy()
+        M.data = J
+        return M
+
+    def kept(self, A: np.ndarray) -> np.ndarray:
+        """Rows and columns of the reduced system for the g-branch rows A (and equalities): all but the
+        inactive multipliers (zero after the step) and their rows."""
+        return np.concatenate([self._not_multipliers, self._lam0 + A])
+
+    @staticmethod
+    def rhs(parts: SparseParts) -> np.ndarray:
+        """The right-hand side -F(a, xi, 0, 0): F is linear in (p, lambda), so with their current values
+        moved over, the unknowns of the step are their new values, (da, dxi, p^+, lambda_A^+)."""
+        return -parts.F0
+
+    def new_iterate(self, z: np.ndarray, sol: np.ndarray, A: np.ndarray) -> np.ndarray:
+        """z^+ = (a + da, lambda^+) from the solution of the reduced system."""
+        n = self.n
+        z_new = np.zeros_like(z)
+        z_new[:n] = z[:n] + sol[:n]
+        z_new[n + A] = sol[self._lam0:]
+        return z_new
+
+
+def compile_sparse(cfg: Config, game: CompiledGame) -> SparseKKT:
+    """The full-space system of the dynamic game of ``cfg`` (``game`` is its condensed compilation, whose
+    constraint order and multiplier blocks it shares)."""
+    g = cfg.game
+    if not isinstance(g, DynamicGame):
+        raise ValueError("the sparse formulation is for dynamic games")
+    lay = _layout(g)
+    N, n, nx, T = len(g.agents), lay.n, lay.nx, lay.horizon
+    S = nx * (T + 1)
+    a = ca.SX.sym("a", n)
+    x = ca.SX.sym("x", nx)
+    X = ca.SX.sym("xi", S)
+    ex = _expressions(g, lay, a, x, list(range(N)), states=X)
+    rows = [r for i in range(N) for r in ex.own_rows[i]] + ex.shared_common
+    if [r.info.label for r in rows] != [c.label for c in game.constraints]:
+        raise AssertionError("sparse and condensed constraint orders differ")
+    m = len(rows)
+    lam = ca.SX.sym("lam", m)
+    P = ca.SX.sym("p", N * S)
+    c = ca.vertcat(*[r.expr for r in rows]) if rows else ca.SX(0, 1)
+    d = ca.vertcat(*ex.defects)
+    shared = game.shared_slice
+    Ga, Gx, gx_only = [], [], []
+    for i in range(N):
+        ms = game.multiplier_slices[i]
+        Li = ex.costs[i]
+        if ms.stop > ms.start:
+            Li = Li + ca.dot(lam[ms], c[ms])
+        if shared.stop > shared.start:
+            Li = Li + ca.dot(lam[shared], c[shared])
+        gx_only.append(ca.gradient(Li, X))  # grad_xi of J_i + lambda^T c (no costates)
+        Pi = P[i * S:(i + 1) * S]
+        Li = Li + ca.dot(Pi, d)
+        Ga.append(ca.gradient(Li, a[lay.agent_slices[i]]))
+        Gx.append(ca.gradient(Li, X))
+    F = ca.vertcat(*Ga, *Gx, d, c)
+    w = ca.vertcat(a, X, P, lam)
+    J = ca.jacobian(F, w)
+    full = ca.Function("full", [a, X, P, lam, x], [F, J])
+
+    # projection: xi rolled out from (x, a); p_i from grad_xi L_i = 0, backwards:
+    # p_i(tau) = grad_{xi(tau+1)} (J_i + lambda^T c) + f_xi(xi(tau+1), u(tau+1))^T p_i(tau+1), p_i(T+1) = 0
+    inputs = [(i, j) for i, names in enumerate(lay.variable_names) for j in range(len(names))]
+
+    def u_at(tau: int) -> ca.SX:
+        return ca.vertcat(*[a[lay.agent_slices[i].start + tau * len(lay.variable_names[i]) + j] for i, j in inputs])
+
+    f = ex.dynamics
+    xs = [x]
+    for tau in range(T + 1):
+        xs.append(f(xs[-1], u_at(tau)))
+    X_roll = ca.vertcat(*xs[1:])
+    xsym, usym = ca.SX.sym("xs", nx), ca.SX.sym("us", len(inputs))
+    f_xi = ca.Function("f_xi", [xsym, usym], [ca.jacobian(f(xsym, usym), xsym)])
+    costates = []
+    for i in range(N):
+        gi = gx_only[i]
+        p_next = ca.SX.zeros(nx)
+        stages = [None] * (T + 1)
+        for tau in range(T, -1, -1):
+            p = gi[tau * nx:(tau + 1) * nx]
+            if tau < T:
+                p = p + ca.mtimes(f_xi(X[tau * nx:(tau + 1) * nx], u_at(tau + 1)).T, p_next)
+            stages[tau] = p
+            p_next = p
+        costates.append(ca.vertcat(*stages))
+    adjoint = ca.Function("adjoint", [a, X, lam, x], [ca.vertcat(*costates)])
+    P_proj = adjoint(a, X_roll, lam, x)
+    F_proj, J_proj = full(a, X_roll, P_proj, lam, x)
+    F0, _ = full(a, X_roll, ca.SX.zeros(N * S), ca.SX.zeros(m), x)
+    function = ca.Function("sparse_kkt", [a, lam, x], [F_proj, J_proj, F0], ["a", "lam", "x"], ["F", "J", "F0"])
+    affine = not ca.depends_on(J, ca.vertcat(a, X, P, lam, x))
+    return SparseKKT(game, function, function.sparsity_out(1), affine, S)
+
+
+def factor(M: sp.csc_matrix) -> tuple[spla.SuperLU | None, float]:
+    """SuperLU factors of M and an estimate of its reciprocal 1-norm condition number (0 when singular)."""
+    try:
+        lu = spla.splu(M, permc_spec="COLAMD")
+    except RuntimeError:  # "Factor is exactly singular"
+        return None, 0.0
+    if M.shape[0] == 0:
+        return lu, 1.0
+    inverse = spla.LinearOperator(M.shape, matvec=lu.solve, rmatvec=lambda b: lu.solve(b, trans="T"),
+                                  dtype=float)
+    with np.errstate(all="ignore"):
+        inv_norm = spla.onenormest(inverse, t=1)
+    norm = abs(M).sum(axis=0).max()
+    rcond = 1.0 / (norm * inv_norm) if np.isfinite(inv_norm) and inv_norm > 0 else 0.0
+    return lu, float(rcond)
+
+
+class SparseSemismoothNewton(SemismoothNewton):
+    """Semismooth Newton (min map, reduced step) through the sparse formulation: the same iterates as
+    :class:`~gnerun.ssn.SemismoothNewton` on the condensed system, at a cost linear in the horizon.
+
+    The reciprocal condition number checked is SuperLU's 1-norm estimate for the reduced full-space
+    matrix. For LQ games that matrix depends on the active set only, and its factorisation is kept.
+    """
+
+    def __init__(self, game: CompiledGame, solver: SolverConfig, disturbance: DisturbanceConfig | None,
+                 system: SparseKKT):
+        super().__init__(game, solver, disturbance)
+        if not self.reduced:
+            raise ValueError("the sparse formulation takes min-map steps without noise on JPhi or the residual")
+        self.system = system
+        self._lq = False  # the condensed fast path is not used
+        self._J = system.matrix(system.evaluate(game.z_start(), game.x0).J) if system.affine else None
+        self._lus: dict[bytes, tuple[spla.SuperLU | None, float]] = {}
+
+    def _evaluate(self, z: np.ndarray, x: np.ndarray) -> tuple[SparseParts, np.ndarray, np.ndarray]:
+        parts = self.system.evaluate(z, x)
+        return parts, *self.residual(parts, z)
+
+    def _reduced_step(self, state: SSNState) -> SSNState:
+        system, parts, z = self.system, state.parts, state.z
+        A = np.flatnonzero(state.active | self._eq) if self._eq_rows.size else np.flatnonzero(state.active)
+        keep = system.kept(A)
+        if self._J is not None:  # LQ: a constant matrix, one factorisation per active set
+            J = self._J
+            key = A.tobytes()
+            entry = self._lus.get(key)
+            if entry is None:
+                if len(self._lus) >= 64:
+                    self._lus.clear()
+                entry = self._lus[key] = factor(J[keep][:, keep].tocsc())
+        else:
+            J = system.matrix(parts.J)
+            entry = factor(J[keep][:, keep].tocsc())
+        lu, rcond = entry
+        if lu is None or not rcond >= self.options.min_rcond:
+            return self._singular(state, rcond)
+        sol = lu.solve(system.rhs(parts)[keep])
+        z_new = system.new_iterate(z, sol, A)
+        if self.options.line_search:
+            dz = z_new - z
+            t = self._armijo(state, dz)
+            if t != 1.0:
+                z_new = z + t * dz
+        return self.advance(state, z_new, rcond=rcond)
