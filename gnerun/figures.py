@@ -21,8 +21,20 @@ from .mcap_log import RunRecord, read_run
 _K_TOPIC = re.compile(r"^/K(\d+)/mpc/(state|error|iterate)$")
 
 
+# An error of exactly 0 (the iterate is z* to the last bit) has no logarithm: it is drawn at this value,
+# below any rounding-level error, and the axes say so.
+ZERO_AT = 1e-17
+
+
 def _log_values(values: list[float | None]) -> list[float]:
-    return [v if v is not None and v > 0 and math.isfinite(v) else math.nan for v in values]
+    return [ZERO_AT if v == 0 else v if v is not None and v > 0 and math.isfinite(v) else math.nan for v in values]
+
+
+def _note_zeros(ax, values: list[float | None]) -> None:
+    if any(v == 0 for v in values) and not getattr(ax, "_gnerun_zero_note", False):
+        ax.text(0.99, 0.02, f"exact 0 drawn at {ZERO_AT:.0e}", transform=ax.transAxes, ha="right", va="bottom",
+                fontsize=6, color="0.4")
+        ax._gnerun_zero_note = True
 
 
 def run_name(run: RunRecord) -> str:
@@ -69,8 +81,9 @@ def study1_figure(runs: list[RunRecord]):
     fig, axes = plt.subplots(1, len(runs), figsize=(3.4 * len(runs), 2.8), squeeze=False, sharey=True)
     for ax, run, label in zip(axes[0], runs, "abcdefgh", strict=False):
         its = run.messages.get("/solve/iterate", [])
-        ax.semilogy([m["k"] for m in its], _log_values([m["error_norm"] for m in its]), "o-", ms=3,
-                    label=disturbance(run))
+        values = [m["error_norm"] for m in its]
+        ax.semilogy([m["k"] for m in its], _log_values(values), "o-", ms=3, label=disturbance(run))
+        _note_zeros(ax, values)
         ax.set_xlabel("iteration k")
         ax.xaxis.set_major_locator(MaxNLocator(integer=True))
         ax.set_title(f"({label}) {run_name(run)}", fontsize=9)
@@ -99,8 +112,9 @@ def study2_figure(run: RunRecord):
     ax_x.legend(loc="best")
     for K, topics in loops.items():
         errors = topics.get("error", [])
-        ax_e.semilogy([m["t"] for m in errors], _log_values([m["e_norm"] for m in errors]), "o-", ms=2.5,
-                      label=f"K = {K}")
+        values = [m["e_norm"] for m in errors]
+        ax_e.semilogy([m["t"] for m in errors], _log_values(values), "o-", ms=2.5, label=f"K = {K}")
+        _note_zeros(ax_e, values)
     ax_e.set_xlabel("t")
     ax_e.set_ylabel(r"$\|e(t)\|$")
     ax_e.set_title("(b) tracking error", fontsize=9)
@@ -119,8 +133,9 @@ def study3_figure(run: RunRecord):
         errors = topics.get("error", [])
         agents = list(errors[0]["e_norm_agent"]) if errors else []
         for agent in agents:
-            ax.semilogy([m["t"] for m in errors], _log_values([m["e_norm_agent"][agent] for m in errors]), "o-",
-                        ms=2.5, label=agent)
+            values = [m["e_norm_agent"][agent] for m in errors]
+            ax.semilogy([m["t"] for m in errors], _log_values(values), "o-", ms=2.5, label=agent)
+            _note_zeros(ax, values)
         ax.set_xlabel("t")
         ax.set_title(f"({label}) K = {K}", fontsize=9)
         ax.legend(loc="best")

@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from .errors import InputError, Unavailable
-from .figures import closed_loops, disturbance, run_name, solver_kind
+from .figures import ZERO_AT, closed_loops, disturbance, run_name, solver_kind
 from .mcap_log import RunRecord, read_run
 
 APPLICATION_ID = "gnerun"
@@ -30,6 +30,9 @@ PALETTE = [(31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40), (148, 1
 
 
 def _log10(v: float | None) -> float | None:
+    """log10 of an error or residual; an exact 0 at log10 of figures.ZERO_AT, as in `gnerun figures`."""
+    if v == 0:
+        return math.log10(ZERO_AT)
     return math.log10(v) if v is not None and v > 0 and math.isfinite(v) else None
 
 

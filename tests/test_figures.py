@@ -29,7 +29,7 @@ def runs(tmp_path_factory) -> dict[str, Path]:
 
 
 def _as_logged(values) -> np.ndarray:
-    return np.array([v if v is not None and v > 0 else math.nan for v in values], dtype=float)
+    return np.array([1e-17 if v == 0 else v if v is not None and v > 0 else math.nan for v in values], dtype=float)
 
 
 def test_the_plotted_data_are_the_logged_data(runs) -> None:
