@@ -202,7 +202,7 @@ class SparseSemismoothNewton(SemismoothNewton):
         if not self.reduced:
             raise ValueError("the sparse formulation takes min-map steps without noise on JPhi or the residual")
         self.system = system
-        self._lq = False  # the condensed fast path is not used
+        self._lq = self._lq_inline = False  # the condensed fast path is not used
         self._J = system.matrix(system.evaluate(game.z_start(), game.x0).J) if system.affine else None
         self._lus: dict[bytes, tuple[spla.SuperLU | None, float]] = {}
 

@@ -62,8 +62,8 @@ class SSNState:
     residual_norm: float  # ||Phi(z^k)||_2
     parts: KKTParts  # L, c and derivatives at z^k
     active: np.ndarray  # rows whose g-branch is chosen at z^k (min map: -g_j < lambda_j - tie_tol)
-    step_norm: float  # ||z^k - z^{k-1}||_2 (nan at k = 0)
-    active_set_changes: int  # rows whose branch changed from z^{k-1} to z^k
+    z_prev: np.ndarray | None  # z^{k-1} (None at k = 0)
+    active_prev: np.ndarray | None  # the g-branch rows at z^{k-1}
     status: Status
     message: str
     rng: np.random.Generator | None
@@ -72,6 +72,19 @@ class SSNState:
     @property
     def converged(self) -> bool:
         return self.status == Status.CONVERGED
+
+    @property
+    def step_norm(self) -> float:
+        """||z^k - z^{k-1}||_2 (nan at k = 0); computed when asked, not in the solver loop."""
+        if self.z_prev is None:
+            return math.nan
+        d = self.z - self.z_prev
+        return math.sqrt(d @ d)
+
+    @property
+    def active_set_changes(self) -> int:
+        """Rows whose branch changed from z^{k-1} to z^k."""
+        return 0 if self.active_prev is None else int(np.count_nonzero(self.active != self.active_prev))
 
 
 class SemismoothNewton:
@@ -89,10 +102,13 @@ class SemismoothNewton:
         # (same step, smaller system). Noise on all of JPhi or on the right-hand side needs the full system.
         self.reduced = not self._fb and not (d.kind in ("jacobian_noise", "residual") and d.scale > 0)
         self._eq_rows = np.flatnonzero(self._eq)
+        self._z_start = game.z_start()
+        self._noisy = self.disturbance.kind in ("jacobian_noise", "residual")
         # LQ games: the reduced matrix depends on the active set only, and the step lands on the same
         # point from any z with that active set: z^+ = G_A w0(x). G_A (or the reason it does not exist)
         # is kept per active set, so a step is one product.
         self._lq = self.reduced and game.affine
+        self._lq_inline = self._lq and not self._eq_rows.size and not solver.line_search
         self._tie_tol = solver.tie_tol
         self._maps: dict[bytes, tuple[np.ndarray | None, float]] = {}
         if game.affine:
@@ -166,21 +182,27 @@ class SemismoothNewton:
              rng: np.random.Generator | None = None) -> SSNState:
         """State at z0 (default: the config's start values, multipliers zero) and plant state x."""
         game = self.game
-        z = game.z_start() if z0 is None else np.array(z0, dtype=float).reshape(-1)
+        if z0 is None:
+            z = self._z_start.copy()
+        elif type(z0) is np.ndarray and z0.dtype == np.float64 and z0.ndim == 1:
+            z = z0.copy()
+        else:
+            z = np.array(z0, dtype=float).reshape(-1)
         if z.size != game.size:
             raise ValueError(f"z0 has {z.size} entries; the KKT system has {game.size} unknowns")
-        xv = game.x0 if x is None else np.asarray(x, dtype=float).reshape(-1)
-        if rng is None and self.disturbance.kind in ("jacobian_noise", "residual"):
+        xv = game.x0 if x is None else game._x(x)
+        if rng is None and self._noisy:
             rng = np.random.default_rng(self.disturbance.seed)
         parts, phi, active = self._evaluate(z, xv)
-        state = SSNState(z=z, x=xv, k=0, phi=phi, residual_norm=_norm(phi), parts=parts, active=active,
-                         step_norm=math.nan, active_set_changes=0, status=Status.RUNNING, message="", rng=rng)
+        state = SSNState(z, xv, 0, phi, _norm(phi), parts, active, None, None, Status.RUNNING, "", rng)
         return self._check_finite(state)
 
     def step(self, state: SSNState) -> SSNState:
         """Exactly one (perturbed) semismooth Newton iteration; a failed state is returned unchanged."""
         if state.status in FAILURES:
             return state
+        if self._lq_inline:
+            return self._lq_step(state)
         if self.reduced:
             return self._reduced_step(state)
         opts = self.options
@@ -252,6 +274,34 @@ class SemismoothNewton:
                 z_new = z + t * dz
         return self.advance(state, z_new, rcond=float(rcond))
 
+    def _lq_step(self, state: SSNState) -> SSNState:
+        """:meth:`_reduced_step` then :meth:`advance` for an LQ game without equalities or line search, in one
+        function: the same operations (z^+ = G_A w0, then Phi(z^+) = [L; min(-c, lambda)] with
+        [L; c] = W z^+ + w0), without the calls between them."""
+        entry = self._maps.get(state.active.tobytes())
+        if entry is None:
+            entry = self._lq_map(state.active)
+        G, rcond = entry
+        if G is None:
+            return self._singular(state, rcond)
+        x = state.x
+        w0 = self.game.offsets(x)
+        z = G @ w0
+        n = self.game.n
+        v = self._W @ z
+        v += w0
+        phi = v.copy()
+        a = np.negative(v[n:], out=phi[n:])
+        lam = z[n:]
+        active = a < lam - self._tie_tol
+        np.minimum(a, lam, out=a)
+        new = SSNState(z, x, state.k + 1, phi, math.sqrt(phi @ phi), KKTParts(v[:n], v[n:], self._dL, self._dc),
+                       active, state.z, state.active, Status.RUNNING, "", state.rng, rcond)
+        limit = self.options.divergence_limit
+        if not math.isfinite(new.residual_norm) or z @ z > limit * limit:  # rare: the general checks decide
+            return self._checked(new)
+        return new
+
     def _reduced_matrix(self, parts: KKTParts, A: np.ndarray) -> np.ndarray:
         n, k = self.game.n, A.size
         M = np.zeros((n + k, n + k))
@@ -286,9 +336,13 @@ class SemismoothNewton:
         """The iterate after ``state``: z evaluated once (Phi, the parts for the next step), checked for
         NaN and divergence. Every method's step ends here."""
         parts, phi, active = self._evaluate(z, state.x)
-        dz = z - state.z
-        new = SSNState(z, state.x, state.k + 1, phi, _norm(phi), parts, active, _norm(dz),
-                       np.count_nonzero(active != state.active), Status.RUNNING, "", state.rng, rcond)
+        new = SSNState(z, state.x, state.k + 1, phi, _norm(phi), parts, active, state.z, state.active,
+                       Status.RUNNING, "", state.rng, rcond)
+        return self._checked(new)
+
+    def _checked(self, new: SSNState) -> SSNState:
+        """``new`` with the NaN and divergence checks applied."""
+        z = new.z
         new = self._check_finite(new)
         limit = self.options.divergence_limit
         if new.status == Status.RUNNING and z @ z > limit * limit and np.abs(z).max() > limit:
