@@ -22,6 +22,7 @@ agent, inputs are time-major: a_i = (u_i(0), u_i(1), ..., u_i(T)) with u_i(tau) 
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field, replace
 from typing import NamedTuple
@@ -80,6 +81,19 @@ class KKTParts(NamedTuple):
     dc_da: np.ndarray  # (m, n)
 
 
+@dataclass(frozen=True)
+class _Symbolic:
+    """The KKT system's symbolic parts, from which derivatives are built when first needed."""
+
+    a: ca.SX
+    lam: ca.SX
+    x: ca.SX
+    L: ca.SX  # stationarity, (grad_{a_i} L_i)_i
+    c: ca.SX  # constraint values
+    F: ca.SX  # pseudogradient
+    J: ca.SX  # the agents' costs
+
+
 @dataclass
 class CompiledGame:
     """A game ready for the Newton methods. Create with :func:`compile_game`."""
@@ -97,28 +111,83 @@ class CompiledGame:
     state_names: list[str]
     equilibrium: str
     n_shared: int  # shared constraints declared per stage
-    linear_rows: np.ndarray  # rows of c that are affine in a (polyhedral constraints)
-    _kkt: Evaluator
-    _costs: Evaluator
-    _pseudo: Evaluator
-    _cost_grads: Evaluator
+    _symbolic: _Symbolic = field(repr=False)
+    _costs: Evaluator = field(repr=False)
     _agent_constraints: list[np.ndarray]  # per agent: row indices of c that constrain its own problem
-    _sparsity: tuple[ca.Sparsity, ca.Sparsity]
     _dynamics: Evaluator | None = field(default=None, repr=False)
-    affine: bool = False  # L affine in z and c affine in a, with constant derivatives (LQ games)
-    _offset_map: tuple[np.ndarray, np.ndarray] | None = field(default=None, repr=False)  # [L; c](0; x) = Wx x + w00
-    _affine_cache: dict = field(default_factory=dict, repr=False)
     derived: dict = field(default_factory=dict, repr=False)  # what is built from this game once (sparse system)
 
-    def __post_init__(self) -> None:
-        if self.affine:
-            # the constant derivatives, once; read-only, shared by every KKTParts
-            _, _, dL, dc = self._kkt(np.zeros(self.n), np.zeros(self.m), self.x0)
-            # [L; c] = W z + w0(x) in one product
-            W = np.vstack([dL, np.hstack([dc, np.zeros((self.m, self.m))])])
-            for arr in (dL, dc, W):
-                arr.flags.writeable = False
-            self._affine_cache.update(dL=dL, dc=dc, W=W, x=None)
+    # The dense derivatives are built on first use: the sparse formulation of a long horizon never needs
+    # the condensed Jacobian, whose construction grows with T^2.
+    @functools.cached_property
+    def _derivatives(self) -> dict:
+        sym = self._symbolic
+        a, lam, x, L, c = sym.a, sym.lam, sym.x, sym.L, sym.c
+        dL = ca.jacobian(L, ca.vertcat(a, lam))
+        dc = ca.jacobian(c, a) if self.m else ca.SX(0, self.n)
+        affine = not ca.depends_on(ca.vec(dL), ca.vertcat(a, lam, x)) and not ca.depends_on(ca.vec(dc),
+                                                                                             ca.vertcat(a, x))
+        kkt = ca.Function("kkt", [a, lam, x], [ca.densify(v) for v in (L, c, dL, dc)], ["a", "lam", "x"],
+                          ["L", "c", "dL_dz", "dc_da"])
+        offset_map = None
+        if affine:
+            # [L; c] at z = 0 as a function of the state: for LQ dynamic games it is affine in x as well
+            v = ca.vertcat(L, c)
+            dv_dx = ca.jacobian(v, x)
+            if not ca.depends_on(ca.vec(dv_dx), ca.vertcat(a, lam, x)):
+                at_zero = ca.Function("offset_map", [a, lam, x], [ca.densify(dv_dx), ca.densify(v)])
+                Wx, w00 = at_zero(np.zeros(self.n), np.zeros(self.m), np.zeros(x.numel()))
+                offset_map = (np.array(Wx, dtype=float).reshape(v.numel(), x.numel()),
+                              np.array(w00, dtype=float).reshape(-1))
+        return {"kkt": Evaluator(kkt), "sparsity": (dL.sparsity(), dc.sparsity()), "affine": affine,
+                "offset_map": offset_map}
+
+    @property
+    def _kkt(self) -> Evaluator:
+        return self._derivatives["kkt"]
+
+    @property
+    def _sparsity(self) -> tuple[ca.Sparsity, ca.Sparsity]:
+        return self._derivatives["sparsity"]
+
+    @property
+    def _offset_map(self) -> tuple[np.ndarray, np.ndarray] | None:
+        return self._derivatives["offset_map"]
+
+    @property
+    def affine(self) -> bool:
+        """L affine in z and c affine in a, with constant derivatives (LQ games)."""
+        return self._derivatives["affine"]
+
+    @functools.cached_property
+    def _affine_cache(self) -> dict:
+        if not self.affine:
+            return {}
+        # the constant derivatives, once; read-only, shared by every KKTParts
+        _, _, dL, dc = self._kkt(np.zeros(self.n), np.zeros(self.m), self.x0)
+        # [L; c] = W z + w0(x) in one product
+        W = np.vstack([dL, np.hstack([dc, np.zeros((self.m, self.m))])])
+        for arr in (dL, dc, W):
+            arr.flags.writeable = False
+        return {"dL": dL, "dc": dc, "W": W, "x": None}
+
+    @functools.cached_property
+    def linear_rows(self) -> np.ndarray:
+        """Rows of c that are affine in a (polyhedral constraints)."""
+        return _affine_rows(self._symbolic.c, self._symbolic.a, self.m)
+
+    @functools.cached_property
+    def _pseudo(self) -> Evaluator:
+        sym = self._symbolic
+        H = ca.jacobian(sym.F, sym.a)
+        return Evaluator(ca.Function("pseudogradient", [sym.a, sym.x], [ca.densify(sym.F), ca.densify(H)],
+                                     ["a", "x"], ["F", "H"]))
+
+    @functools.cached_property
+    def _cost_grads(self) -> Evaluator:
+        sym = self._symbolic
+        return Evaluator(ca.Function("cost_gradients", [sym.a, sym.x], [ca.densify(ca.jacobian(sym.J, sym.a))],
+                                     ["a", "x"], ["dJ"]))
 
     # sizes --------------------------------------------------------------------------------
     @property
@@ -467,9 +536,8 @@ def _expressions(g: StaticGame | DynamicGame, lay: _Layout, a: ca.SX, x: ca.SX, 
 def _assemble(*, kind: str, a: ca.SX, x: ca.SX, costs: list[ca.SX], own_rows: list[list[_Row]],
               shared_common: list[_Row], agent_names: list[str], lay: _Layout, equilibrium: str, n_shared: int,
               state_names: list[str], dynamics: ca.Function | None) -> CompiledGame:
-    """The KKT system of the agents' problems [KKT_concatenated] and its exact derivatives."""
+    """The KKT system of the agents' problems [KKT_concatenated]; its exact derivatives are built on first use."""
     N = len(costs)
-    n = lay.n
     agent_slices = lay.agent_slices
     rows: list[_Row] = [r for block in own_rows for r in block] + shared_common
     m = len(rows)
@@ -488,33 +556,13 @@ def _assemble(*, kind: str, a: ca.SX, x: ca.SX, costs: list[ca.SX], own_rows: li
             Li = Li + ca.dot(lam[shared_slice], c[shared_slice])
         grads.append(ca.gradient(Li, a[agent_slices[i]]))
     L = ca.vertcat(*grads)
-    z = ca.vertcat(a, lam)
-    dL = ca.jacobian(L, z)
-    dc = ca.jacobian(c, a) if m else ca.SX(0, n)
-    sparsity = (dL.sparsity(), dc.sparsity())
-    kkt = ca.Function("kkt", [a, lam, x], [ca.densify(v) for v in (L, c, dL, dc)], ["a", "lam", "x"],
-                      ["L", "c", "dL_dz", "dc_da"])
     J = ca.vertcat(*costs)
     F = ca.vertcat(*[ca.gradient(costs[i], a[agent_slices[i]]) for i in range(N)])
-    H = ca.jacobian(F, a)
-    pseudo = ca.Function("pseudogradient", [a, x], [ca.densify(F), ca.densify(H)], ["a", "x"], ["F", "H"])
     costs_fn = ca.Function("costs", [a, x], [ca.densify(J)], ["a", "x"], ["J"])
-    cost_grads = ca.Function("cost_gradients", [a, x], [ca.densify(ca.jacobian(J, a))], ["a", "x"], ["dJ"])
 
     # agent i's own problem: its own rows, plus the common shared rows (they constrain everyone)
     agent_rows = [np.r_[np.arange(ms.start, ms.stop), np.arange(shared_slice.start, shared_slice.stop)].astype(int)
                   for ms in multiplier_slices]
-    affine = not ca.depends_on(ca.vec(dL), ca.vertcat(a, lam, x)) and not ca.depends_on(ca.vec(dc), ca.vertcat(a, x))
-    offset_map = None
-    if affine:
-        # [L; c] at z = 0 as a function of the state: for LQ dynamic games it is affine in x as well
-        v = ca.vertcat(L, c)
-        dv_dx = ca.jacobian(v, x)
-        if not ca.depends_on(ca.vec(dv_dx), ca.vertcat(a, lam, x)):
-            zero = ca.Function("offset_map", [a, lam, x], [ca.densify(dv_dx), ca.densify(v)])
-            Wx, w00 = zero(np.zeros(n), np.zeros(m), np.zeros(x.numel()))
-            offset_map = (np.array(Wx, dtype=float).reshape(v.numel(), x.numel()),
-                          np.array(w00, dtype=float).reshape(-1))
     return CompiledGame(
         kind=kind,
         agent_names=agent_names,
@@ -529,16 +577,10 @@ def _assemble(*, kind: str, a: ca.SX, x: ca.SX, costs: list[ca.SX], own_rows: li
         state_names=state_names,
         equilibrium=equilibrium,
         n_shared=n_shared,
-        linear_rows=_affine_rows(c, a, m),
-        _kkt=Evaluator(kkt),
+        _symbolic=_Symbolic(a, lam, x, L, c, F, J),
         _costs=Evaluator(costs_fn),
-        _pseudo=Evaluator(pseudo),
-        _cost_grads=Evaluator(cost_grads),
         _agent_constraints=agent_rows,
-        _sparsity=sparsity,
         _dynamics=Evaluator(dynamics) if dynamics is not None else None,
-        affine=affine,
-        _offset_map=offset_map,
     )
 
 

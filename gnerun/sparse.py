@@ -196,13 +196,14 @@ class SparseSemismoothNewton(SemismoothNewton):
     matrix. For LQ games that matrix depends on the active set only, and its factorisation is kept.
     """
 
+    condensed = False
+
     def __init__(self, game: CompiledGame, solver: SolverConfig, disturbance: DisturbanceConfig | None,
                  system: SparseKKT):
         super().__init__(game, solver, disturbance)
         if not self.reduced:
             raise ValueError("the sparse formulation takes min-map steps without noise on JPhi or the residual")
         self.system = system
-        self._lq = self._lq_inline = False  # the condensed fast path is not used
         self._J = system.matrix(system.evaluate(game.z_start(), game.x0).J) if system.affine else None
         self._lus: dict[bytes, tuple[spla.SuperLU | None, float]] = {}
 

@@ -90,6 +90,8 @@ class SSNState:
 class SemismoothNewton:
     """The semismooth Newton method for a compiled game (see the module docstring)."""
 
+    condensed = True  # steps through the condensed KKT system (see gnerun.sparse for the other formulation)
+
     def __init__(self, game: CompiledGame, solver: SolverConfig, disturbance: DisturbanceConfig | None = None):
         self.game = game
         self.options = solver
@@ -107,11 +109,11 @@ class SemismoothNewton:
         # LQ games: the reduced matrix depends on the active set only, and the step lands on the same
         # point from any z with that active set: z^+ = G_A w0(x). G_A (or the reason it does not exist)
         # is kept per active set, so a step is one product.
-        self._lq = self.reduced and game.affine
+        self._lq = self.condensed and self.reduced and game.affine
         self._lq_inline = self._lq and not self._eq_rows.size and not solver.line_search
         self._tie_tol = solver.tie_tol
         self._maps: dict[bytes, tuple[np.ndarray | None, float]] = {}
-        if game.affine:
+        if self._lq:
             cache = game._affine_cache
             self._W, self._dL, self._dc = cache["W"], cache["dL"], cache["dc"]
 
