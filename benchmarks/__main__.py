@@ -12,7 +12,9 @@ Measured:
   logging off and with MCAP logging on (the messages `gnerun simulate` writes, flushed every step);
 - the scalable family of benchmarks/family.py over N agents and horizons T: time per iteration with one
   solver (what is kept per active set reused) and with a fresh solver (every factorisation new);
-- `gnerun --help` (a fresh process) and the config load + compile time of the paper game.
+- `gnerun --help` (a fresh process) and the config load + compile time of the paper game;
+- if nashopt is installed (`pip install -e ".[bench]"`), nashopt's solvers on configs/variational_gne.yaml,
+  a game both can state (benchmarks/peers.py).
 """
 
 from __future__ import annotations
@@ -41,6 +43,7 @@ from gnerun.messages import MpcError, MpcIterate, MpcState  # noqa: E402
 from gnerun.solving import formulation, make_solver  # noqa: E402
 from gnerun.ssn import FAILURES, Status  # noqa: E402
 
+from . import peers  # noqa: E402
 from .family import family_config  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -207,6 +210,20 @@ def closed_loop_step(cfg, game: CompiledGame, K: int, steps: int, log: RunLog | 
 # the run -----------------------------------------------------------------------------------------
 
 
+def _stdout_to_stderr(fn):
+    """Call fn with file descriptor 1 pointing at stderr (HiGHS, under nashopt, prints a banner from C)."""
+    sys.stdout.flush()
+    saved = os.dup(1)
+    os.dup2(2, 1)
+    try:
+        return fn()
+    finally:
+        sys.stdout.flush()
+        os.dup2(saved, 1)
+        os.close(saved)
+
+
+
 def cli_help_time(repeats: int = 5) -> float:
     exe = Path(sys.executable).parent / "gnerun"
     cmd = [str(exe)] if exe.exists() else [sys.executable, "-m", "gnerun.cli"]
@@ -309,6 +326,20 @@ def main(argv: list[str] | None = None) -> int:
             row(f"family N = {N}, T = {T} ({game_f.size} unknowns, {form}): one iteration", it,
                 note=f"{k} iterations; {us(cold)} with a fresh solver (every factorisation new); "
                      f"compile {t_c:.2f} s")
+    # the automatic choice of formulation: both, around the crossover
+    crossover = [] if args.quick else [(3, 25), (3, 50), (5, 25), (5, 50), (10, 25)]
+    for N, T in crossover:
+        base = family_config(N, T)
+        game_f = compile_game(base)
+        times = {}
+        for form in ("condensed", "sparse"):
+            cfg_f = base.model_copy(update={"solver": base.solver.model_copy(update={"formulation": form})})
+            it, _, k, _ = per_iteration(cfg_f, game_f, max(3, reps // 3))
+            times[form] = (it, cold_per_iteration(cfg_f, game_f, max(3, reps // 3)))
+        auto = formulation(base, game_f)
+        (ci, cc), (si, sc) = times["condensed"], times["sparse"]
+        row(f"family N = {N}, T = {T} ({game_f.size} unknowns): condensed vs sparse per iteration", si,
+            "condensed", ci, note=f"fresh solvers: sparse {us(sc)}, condensed {us(cc)}; auto takes {auto}")
     for N, Ts in grid.items():
         if 50 in Ts and 200 in Ts:
             f200, f50 = family[f"N{N}-T200"], family[f"N{N}-T50"]
@@ -317,6 +348,14 @@ def main(argv: list[str] | None = None) -> int:
             row(f"family N = {N}: t(T = 200) / t(T = 50)", None, target="<= 5", met=max(r, rc) <= 5,
                 note=f"{r:.1f} (fresh solver: {rc:.1f})")
             rows[-1]["ratio"] = r
+
+    # 3. peers: nashopt (optional extra `bench`) on a game both can state, last (importing it loads JAX)
+    if peers.available():
+        for r in _stdout_to_stderr(lambda: peers.peer_rows(10, max(3, reps // 4))):
+            row(r["benchmark"], r["gnerun_s"], r["baseline"], r["baseline_s"],
+                note=f"max |u - u_gnerun| = {r['max_abs_diff']:.1e}; {r['note']}")
+    else:
+        row("nashopt on configs/variational_gne.yaml", None, note="nashopt not installed (`pip install -e '.[bench]'`)")
 
     machine = {"python": platform.python_version(), "platform": platform.platform(), "processor":
                platform.processor() or platform.machine(), "cpus": os.cpu_count(),

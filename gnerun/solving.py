@@ -44,7 +44,7 @@ def make_solver(cfg: Config, game: CompiledGame, *, disturbed: bool = True) -> S
 
 # auto: the sparse formulation from this many unknowns of the condensed system on (measured crossover,
 # benchmarks/README: below it the dense factorisation of the condensed system is faster)
-SPARSE_FROM = 500
+SPARSE_FROM = 800
 
 
 def formulation(cfg: Config, game: CompiledGame) -> str:

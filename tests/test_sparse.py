@@ -10,7 +10,7 @@ from benchmarks.family import family_config, family_yaml
 from gnerun import simulate, solve
 from gnerun.config import ConfigError, load_config
 from gnerun.game import compile_game
-from gnerun.solving import formulation, make_solver
+from gnerun.solving import SPARSE_FROM, formulation, make_solver
 from gnerun.sparse import SparseSemismoothNewton
 from gnerun.ssn import SemismoothNewton, Status
 
@@ -93,7 +93,7 @@ def test_sparse_and_condensed_give_the_same_closed_loop(name: str) -> None:
 def test_long_horizons_choose_the_sparse_formulation_and_solve() -> None:
     cfg = family_config(3, 120)
     game = compile_game(cfg)
-    assert cfg.solver.formulation == "auto" and game.size >= 500
+    assert cfg.solver.formulation == "auto" and game.size >= SPARSE_FROM
     assert formulation(cfg, game) == "sparse"
     assert formulation(family_config(3, 10), compile_game(family_config(3, 10))) == "condensed"
     res = solve(cfg)
