@@ -32,7 +32,9 @@ def _log_values(values: list[float | None]) -> list[float]:
 
 def _note_zeros(ax, values: list[float | None]) -> None:
     if any(v == 0 for v in values) and not getattr(ax, "_gnerun_zero_note", False):
-        ax.text(0.99, 0.02, f"exact 0 drawn at {ZERO_AT:.0e}", transform=ax.transAxes, ha="right", va="bottom",
+        # room below the zeros' line for the note
+        ax.set_ylim(bottom=ZERO_AT / 30)
+        ax.text(0.99, 0.01, f"exact 0 drawn at {ZERO_AT:.0e}", transform=ax.transAxes, ha="right", va="bottom",
                 fontsize=6, color="0.4")
         ax._gnerun_zero_note = True
 
