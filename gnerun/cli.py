@@ -165,8 +165,14 @@ def simulate(config: ConfigArg, out: OutOpt = None, set_: SetOpt = None, quiet: 
             typer.echo(f"gnerun simulate {config}: K = {cfg.run.K}, {cfg.run.steps} steps, {cfg.solver.kind} "
                        f"({cfg.solver.complementarity} map), warm start {cfg.run.warm_start}, solver disturbance "
                        f"{cfg.disturbance.kind}, plant {cfg.disturbance.plant.kind}")
-        with _progress(cfg, enabled=not quiet and sys.stdout.isatty()) as progress:
-            sim = run_simulate(cfg, out=out_dir, force=force, progress=progress)
+        try:
+            with _progress(cfg, enabled=not quiet and sys.stdout.isatty()) as progress:
+                sim = run_simulate(cfg, out=out_dir, force=force, progress=progress)
+        except KeyboardInterrupt:
+            done = out_dir / "summary.json"
+            typer.echo(f"interrupted: {out_dir} holds a finished log and a summary with status interrupted"
+                       if done.is_file() else "interrupted", err=True)
+            raise typer.Exit(130) from None
     if quiet:
         return
     typer.echo(f"{'K':>4}  {'max e':>10}  {'final e':>10}  {'median step':>12}  {'max step':>10}  {'failed':>6}")

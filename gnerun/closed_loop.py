@@ -13,9 +13,12 @@ is a fixed point of the Newton step.
 
 from __future__ import annotations
 
+import contextlib
 import math
+import signal
+import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -48,6 +51,8 @@ class ClosedLoopResult:
     reference_status: list[str]  # per t: the status of the z*(t) solve
     z: np.ndarray = field(repr=False)  # (steps, size): z^K(t)
     z_star: np.ndarray = field(repr=False)  # (steps, size): z*(t)
+    completed: int | None = None  # sampling times done; fewer than steps if the loop stopped or was interrupted
+    ended: str = "completed"  # completed | stopped (on_failure: stop) | interrupted
 
     @property
     def steps(self) -> int:
@@ -55,23 +60,27 @@ class ClosedLoopResult:
 
     def summary(self, game: CompiledGame) -> dict:
         failed = [t for t, s in enumerate(self.status) if s in {str(f) for f in FAILURES}]
+        done = self.steps if self.completed is None else self.completed
+        states = done + 1 if self.ended == "completed" else done  # x(0..steps), or the states reached
         return json_ready({
             "K": self.K,
-            "x": self.x.tolist(),
-            "u": self.u.tolist(),
-            "w": self.w.tolist(),
-            "e_norm": self.e_norm.tolist(),
-            "e_norm_agent": {k: v.tolist() for k, v in self.e_norm_agent.items()},
-            "residual_norm": self.residual_norm.tolist(),
-            "iterations": self.iterations.tolist(),
-            "solve_time_s": self.solve_time_s.tolist(),
+            "ended": self.ended,
+            "completed_steps": done,
+            "x": self.x[:states].tolist(),
+            "u": self.u[:done].tolist(),
+            "w": self.w[:done].tolist(),
+            "e_norm": self.e_norm[:done].tolist(),
+            "e_norm_agent": {k: v[:done].tolist() for k, v in self.e_norm_agent.items()},
+            "residual_norm": self.residual_norm[:done].tolist(),
+            "iterations": self.iterations[:done].tolist(),
+            "solve_time_s": self.solve_time_s[:done].tolist(),
             "status": self.status,
             "reference_status": self.reference_status,
             "failed_steps": failed,
             "max_e_norm": _nanmax(self.e_norm),
-            "final_e_norm": float(self.e_norm[-1]),
-            "median_solve_time_s": float(np.median(self.solve_time_s)),
-            "max_solve_time_s": float(np.max(self.solve_time_s)),
+            "final_e_norm": float(self.e_norm[done - 1]) if done else math.nan,
+            "median_solve_time_s": float(np.median(self.solve_time_s[:done])) if done else math.nan,
+            "max_solve_time_s": float(np.max(self.solve_time_s[:done])) if done else math.nan,
         })
 
 
@@ -85,12 +94,20 @@ class Simulation(dict[int, ClosedLoopResult]):
 
     run_dir: Path | None = None
     game: CompiledGame | None = None
+    interrupted: bool = False
+
+    @property
+    def status(self) -> str:
+        """completed | stopped (a loop ended at a failed step, on_failure: stop) | interrupted (Ctrl-C)."""
+        if self.interrupted:
+            return "interrupted"
+        return "stopped" if any(r.ended == "stopped" for r in self.values()) else "completed"
 
     def summary(self) -> dict:
         assert self.game is not None
         return {
             "command": "simulate",
-            "status": "completed",
+            "status": self.status,
             "K": list(self),
             "steps": next(iter(self.values())).steps if self else 0,
             "state_names": self.game.state_names,
@@ -123,9 +140,43 @@ class PlantNoise:
 Progress = Callable[[int, int, int, float], None]
 
 
+class Interrupt:
+    """Ctrl-C (SIGINT) as a request: the closed loop finishes the sampling time in progress, then ends.
+
+    A second Ctrl-C interrupts at once. Outside the main thread (where signals cannot be handled) this does
+    nothing and Ctrl-C raises KeyboardInterrupt as usual.
+    """
+
+    def __init__(self) -> None:
+        self.requested = False
+
+    @contextlib.contextmanager
+    def installed(self) -> Iterator[Interrupt]:
+        if threading.current_thread() is not threading.main_thread():
+            yield self
+            return
+
+        def handler(signum, frame) -> None:
+            if self.requested:
+                raise KeyboardInterrupt
+            self.requested = True
+
+        previous = signal.signal(signal.SIGINT, handler)
+        try:
+            yield self
+        finally:
+            signal.signal(signal.SIGINT, previous)
+
+
 def closed_loop(cfg: Config, game: CompiledGame, K: int, run: RunDirectory | None = None,
-                progress: Progress | None = None) -> ClosedLoopResult:
-    """One closed loop of ``cfg.run.steps`` sampling times with at most K solver steps each."""
+                progress: Progress | None = None, interrupt: Interrupt | None = None) -> ClosedLoopResult:
+    """One closed loop of ``cfg.run.steps`` sampling times with at most K solver steps each.
+
+    A failed solver step (singular JPhi, NaN, divergence) is recorded in ``status`` and ``/log``; then
+    ``run.on_failure`` decides: ``continue`` applies the inputs of the last iterate before the failed step
+    (and warm-starts from it) and goes on, ``stop`` ends this loop at that step.
+    Arrays keep their length; the sampling times not run are NaN (``completed`` says how many ran).
+    """
     solver = make_solver(cfg, game)
     steps = cfg.run.steps
     nx, size = game.nx, game.size
@@ -152,7 +203,13 @@ def closed_loop(cfg: Config, game: CompiledGame, K: int, run: RunDirectory | Non
     z_star_prev = game.z_start()
     rng = None
     topic = f"/K{K}/mpc"
+    ended, completed = "completed", steps
     for t in range(steps):
+        if interrupt is not None and interrupt.requested:
+            ended, completed = "interrupted", t
+            if run is not None:
+                run.log("warning", f"K={K}: interrupted (Ctrl-C) after {t} sampling times")
+            break
         xs[t] = x
         # z*(t): the solution the solver reaches from the same warm start with an unlimited budget (so that e(t)
         # measures the effect of the budget K, on the branch the loop follows when equilibria are not unique);
@@ -185,12 +242,15 @@ def closed_loop(cfg: Config, game: CompiledGame, K: int, run: RunDirectory | Non
             trace.append((state.k, state.residual_norm, state.z))
         rng = state.rng
         done, final = solver.terminate(state)
+        failed = final in FAILURES
         if final == Status.CONVERGED:
             status.append("converged")
-        elif final in FAILURES:
+        elif failed:
             status.append(str(final))
             if run is not None:
-                run.log("warning", f"K={K} t={t}: {state.message}")
+                action = ("the closed loop stops here (on_failure: stop)" if cfg.run.on_failure == "stop" else
+                          "the plant gets the inputs of the last iterate before it (on_failure: continue)")
+                run.log("warning", f"K={K} t={t}: {final}: {state.message}; {action}")
         else:
             status.append("incomplete")
 
@@ -204,6 +264,19 @@ def closed_loop(cfg: Config, game: CompiledGame, K: int, run: RunDirectory | Non
             e[t] = np.linalg.norm(z - z_star)
             for a, idx in zip(agents, agent_idx, strict=True):
                 e_agent[a][t] = np.linalg.norm(z[idx] - z_star[idx])
+        if failed and cfg.run.on_failure == "stop":
+            if run is not None:
+                for k, r, zk in trace:
+                    err = None if z_star is None else float(np.linalg.norm(zk - z_star))
+                    run.write(f"{topic}/iterate", MpcIterate(t=t, k=k, residual_norm=r, error_norm=err))
+                run.write(f"{topic}/state", MpcState(t=t, x=x.tolist(), u=None))
+                run.write(f"{topic}/error", MpcError(t=t, e_norm=float(e[t]),
+                                                      e_norm_agent={a: float(v[t]) for a, v in e_agent.items()}))
+                run.flush()
+            ended, completed = "stopped", t + 1
+            break
+        if failed:
+            z = trace[-1][2]  # the last iterate before the failed step (a diverged or NaN one is not used)
         u = game.first_inputs(z[: game.n])
         us[t] = u
         w = plant()
@@ -222,13 +295,14 @@ def closed_loop(cfg: Config, game: CompiledGame, K: int, run: RunDirectory | Non
 
         x = game.step_dynamics(x, u) + w
         z_warm = game.shift(z) if cfg.run.warm_start == "shift" else z
-    xs[steps] = x
-    if run is not None:
-        run.write(f"{topic}/state", MpcState(t=steps, x=x.tolist(), u=None))
-        run.flush()
+    else:
+        xs[steps] = x
+        if run is not None:
+            run.write(f"{topic}/state", MpcState(t=steps, x=x.tolist(), u=None))
+            run.flush()
     return ClosedLoopResult(K=K, x=xs, u=us, w=ws, e_norm=e, e_norm_agent=e_agent, residual_norm=res,
                             iterations=its, solve_time_s=times, status=status, reference_status=ref_status,
-                            z=zs, z_star=zstars)
+                            z=zs, z_star=zstars, completed=completed, ended=ended)
 
 
 def simulate(cfg: Config, out: str | Path | None = None, *, force: bool = False,
@@ -242,17 +316,25 @@ def simulate(cfg: Config, out: str | Path | None = None, *, force: bool = False,
     sim = Simulation()
     sim.game = game
     sim.run_dir = run.path if run is not None else None
-    with recording(run):
+    interrupt = Interrupt()
+    with recording(run), interrupt.installed():
         if run is not None:
             run.log("info", f"simulate {cfg.name}: K = {cfg.run.K}, {cfg.run.steps} steps, warm start "
                             f"{cfg.run.warm_start}, solver {cfg.solver.kind}, solver disturbance "
-                            f"{cfg.disturbance.kind}, plant {cfg.disturbance.plant.kind}")
+                            f"{cfg.disturbance.kind}, plant {cfg.disturbance.plant.kind}, on_failure "
+                            f"{cfg.run.on_failure}")
         for K in dict.fromkeys(cfg.run.K):
-            sim[K] = closed_loop(cfg, game, K, run, progress)
+            if interrupt.requested:
+                break
+            sim[K] = r = closed_loop(cfg, game, K, run, progress, interrupt)
             if run is not None:
-                r = sim[K]
-                run.log("info", f"K={K}: max e {_nanmax(r.e_norm):.3e}, final e {r.e_norm[-1]:.3e}, "
-                                f"failed steps {r.summary(game)['failed_steps']}")
+                summary = r.summary(game)
+                run.log("info", f"K={K}: {r.ended} after {summary['completed_steps']} sampling times, max e "
+                                f"{_nanmax(r.e_norm):.3e}, final e {summary['final_e_norm']}, failed steps "
+                                f"{summary['failed_steps']}")
+        sim.interrupted = interrupt.requested
         if run is not None:
             run.write_summary(sim.summary())
-        return sim
+    if sim.interrupted:
+        raise KeyboardInterrupt  # after the summary and a finished log: the caller decides what it means
+    return sim

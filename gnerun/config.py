@@ -176,6 +176,9 @@ class RunConfig(Strict):
     steps: int = Field(30, ge=1, le=10_000_000)
     warm_start: Literal["previous", "shift"] = Field(
         "previous", description="previous: the last iterate (the paper's rule); shift: drop stage 0, repeat the last")
+    on_failure: Literal["continue", "stop"] = Field(
+        "continue", description="a failed solver step in simulate: continue (the plant gets the inputs of the "
+                                "last iterate before it) or stop that closed loop there")
 
 
 class Config(Strict):

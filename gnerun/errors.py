@@ -31,3 +31,10 @@ class Unavailable(Exception):
 
     Reported as ``error: <message>`` with exit code 1: the input is fine, the environment is not.
     """
+
+
+class WriteError(Unavailable):
+    """A run's output could not be written (disk full, file too large, permissions changed mid-run).
+
+    Reported like :class:`Unavailable` (exit code 1); what was flushed before stays readable.
+    """

@@ -21,6 +21,7 @@ from typing import IO, Any
 import numpy as np
 from mcap.writer import CompressionType, Writer
 
+from .errors import WriteError
 from .messages import TOPICS, LogEntry, Message
 
 PROFILE = "gnerun"
@@ -54,6 +55,7 @@ class RunLog:
         self._checked: dict[tuple[str, type], int] = {}
         self._sequence = 0
         self._closed = False
+        self._broken: str | None = None  # why writing failed; the log then accepts nothing more
         now = time.time_ns()
         self._writer.add_metadata("gnerun.run", {k: str(v) for k, v in metadata.items()})
         self._writer.add_attachment(create_time=now, log_time=now, name="config.yaml",
@@ -70,8 +72,21 @@ class RunLog:
             self._channels[topic] = channel
         return channel
 
+    def _failed(self, e: OSError) -> WriteError:
+        self._broken = e.strerror or str(e)
+        return WriteError(f"{self.path}: cannot write the run log: {self._broken} (is the disk full?); "
+                          "everything flushed before is readable (gnerun inspect)")
+
     def write(self, topic: str, message: Message, *, log_time: int | None = None) -> None:
         """Append ``message`` on ``topic`` (its model's schema is registered on first use)."""
+        if self._broken is not None:
+            return
+        try:
+            self._write(topic, message, log_time)
+        except OSError as e:
+            raise self._failed(e) from None
+
+    def _write(self, topic: str, message: Message, log_time: int | None) -> None:
         model = type(message)
         channel = self._checked.get((topic, model))
         if channel is None:
@@ -91,16 +106,32 @@ class RunLog:
 
     def flush(self) -> None:
         """Close the chunk in progress and write it out (a killed run keeps it)."""
-        self._writer.flush()
+        if self._broken is not None:
+            return
+        try:
+            self._writer.flush()
+        except OSError as e:
+            raise self._failed(e) from None
+
+    @property
+    def broken(self) -> str | None:
+        """Why writing failed (None while it works)."""
+        return self._broken
 
     def close(self) -> None:
         if self._closed:
             return
         self._closed = True
         try:
-            self._writer.finish()
+            if self._broken is None:
+                self._writer.finish()
+        except OSError as e:
+            raise self._failed(e) from None
         finally:
-            self._file.close()
+            try:
+                self._file.close()
+            except OSError:  # the buffer could not be written: what was flushed is on disk
+                pass
 
     def __enter__(self) -> RunLog:
         return self

@@ -13,7 +13,7 @@ from pathlib import Path
 
 from . import __version__
 from .config import Config
-from .errors import InputError
+from .errors import InputError, WriteError
 from .mcap_log import RunLog, json_ready
 from .messages import Message, SolveIterate
 
@@ -96,8 +96,13 @@ class RunDirectory:
 
     def write_summary(self, summary: dict) -> None:
         tmp = self.path / "summary.json.tmp"
-        tmp.write_text(json.dumps(json_ready(summary), indent=2, allow_nan=False) + "\n")
-        tmp.replace(self.path / "summary.json")
+        try:
+            tmp.write_text(json.dumps(json_ready(summary), indent=2, allow_nan=False) + "\n")
+            tmp.replace(self.path / "summary.json")
+        except OSError as e:
+            tmp.unlink(missing_ok=True)
+            raise WriteError(f"{self.path / 'summary.json'}: cannot write the summary: {e.strerror or e} "
+                             "(is the disk full?); the run log holds every flushed step") from None
 
     def close(self) -> None:
         self.log_sink.close()
@@ -110,8 +115,12 @@ def recording(run: RunDirectory | None) -> Iterator[RunDirectory | None]:
         yield run
     except BaseException as exc:
         if run is not None:
-            run.log("error", f"the run stopped: {type(exc).__name__}: {exc}")
+            # the error that ends the run is on its way: a log that cannot be written must not replace it
+            with contextlib.suppress(WriteError):
+                run.log("error", f"the run stopped: {type(exc).__name__}: {exc}")
+            with contextlib.suppress(WriteError):
+                run.close()
         raise
-    finally:
+    else:
         if run is not None:
             run.close()
