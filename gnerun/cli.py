@@ -139,7 +139,11 @@ def solve(config: ConfigArg, out: OutOpt = None, set_: SetOpt = None, quiet: Qui
             typer.echo(f"{state.k:>4}  {_fmt(state.residual_norm):>10}  {_fmt(error_norm):>10}  "
                        f"{_fmt(state.step_norm):>10}  {state.active_set_changes:>7}")
 
-        result = run_solve(cfg, out=out_dir, force=force, on_iterate=show)
+        try:
+            result = run_solve(cfg, out=out_dir, force=force, on_iterate=show)
+        except KeyboardInterrupt:
+            typer.echo(f"interrupted: {out_dir} holds the log of the iterates made", err=True)
+            raise typer.Exit(130) from None
     if quiet:
         return
     cert = result.certificate
