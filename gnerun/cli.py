@@ -142,7 +142,8 @@ def solve(config: ConfigArg, out: OutOpt = None, set_: SetOpt = None, quiet: Qui
         try:
             result = run_solve(cfg, out=out_dir, force=force, on_iterate=show)
         except KeyboardInterrupt:
-            typer.echo(f"interrupted: {out_dir} holds the log of the iterates made", err=True)
+            typer.echo(f"interrupted: {out_dir} holds the log of the iterates made"
+                       if (out_dir / "run.mcap").is_file() else "interrupted", err=True)
             raise typer.Exit(130) from None
     if quiet:
         return
