@@ -18,7 +18,7 @@ from typing import Annotated, NoReturn
 import typer
 
 from . import __version__
-from .errors import InputError, Unavailable
+from .errors import InputError, Unavailable, one_line
 
 app = typer.Typer(
     add_completion=False,
@@ -64,12 +64,12 @@ def _fail(exc: BaseException) -> NoReturn:
     if _options["debug"]:
         traceback.print_exception(exc)
     if isinstance(exc, InputError):
-        typer.echo(f"error: {exc}", err=True)
+        typer.echo(f"error: {one_line(str(exc))}", err=True)
         raise typer.Exit(2)
     if isinstance(exc, Unavailable):
-        typer.echo(f"error: {exc}", err=True)
+        typer.echo(f"error: {one_line(str(exc))}", err=True)
         raise typer.Exit(1)
-    typer.echo(f"error: {type(exc).__name__}: {exc} (run with --debug for the traceback)", err=True)
+    typer.echo(f"error: {type(exc).__name__}: {one_line(str(exc))} (run with --debug for the traceback)", err=True)
     raise typer.Exit(1)
 
 

@@ -16,6 +16,7 @@ from typing import Annotated, Any, Literal
 
 import yaml
 from pydantic import (
+    AfterValidator,
     BaseModel,
     BeforeValidator,
     ConfigDict,
@@ -35,6 +36,7 @@ from .expr import (
     parse_expression,
 )
 from .yaml_source import PathKey, SourceMap, parse_yaml, read_yaml
+from .yaml_source import dotted as show_path
 
 CONFIG_VERSION = 1
 _IDENTIFIER = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
@@ -53,14 +55,27 @@ Expr = Annotated[str, BeforeValidator(_number_to_text)]
 
 
 class Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", validate_default=True)
+    # numbers are finite (.nan and .inf are refused) except where a field says otherwise
+    model_config = ConfigDict(extra="forbid", validate_default=True, allow_inf_nan=False)
+
+
+def _bound(side: str, unbounded: float) -> Any:
+    def check(v: Any) -> Any:
+        if isinstance(v, float) and math.isnan(v):
+            raise ValueError(f"the {side} bound is NaN; leave it out (or write {unbounded:+}) for no bound"
+                             .replace("inf", ".inf"))
+        if isinstance(v, float) and v == -unbounded:
+            raise ValueError(f"{side} bound {v:+} admits no value".replace("inf", ".inf"))
+        return v
+
+    return AfterValidator(check)
 
 
 class Variable(Strict):
-    """A decision variable: bounds (constraints of its owner) and a start value."""
+    """A decision variable: bounds (constraints of its owner) and a start value; ±.inf is no bound."""
 
-    lower: float | None = None
-    upper: float | None = None
+    lower: Annotated[float | None, Field(allow_inf_nan=True), _bound("lower", -math.inf)] = None
+    upper: Annotated[float | None, Field(allow_inf_nan=True), _bound("upper", math.inf)] = None
     start: float = 0.0
 
 
@@ -330,7 +345,7 @@ def _validation_problems(err: ValidationError, data: Any, smap: SourceMap) -> li
     problems = []
     for e in err.errors(include_url=False):
         path = _data_path(e["loc"], data)
-        dotted = ".".join(str(p) for p in path) or "<config>"
+        dotted = show_path(path, "<config>")
         kind = e["type"]
         if kind == "extra_forbidden":
             where = smap.locate(path, key=True)
@@ -344,6 +359,8 @@ def _validation_problems(err: ValidationError, data: Any, smap: SourceMap) -> li
             msg = e["msg"]
             if kind == "union_tag_invalid" or kind == "literal_error":
                 msg = msg.replace("Input tag", "kind")
+            elif kind == "value_error":
+                msg = msg.removeprefix("Value error, ")
         problems.append(f"{where}: {dotted}: {msg}")
     return problems
 

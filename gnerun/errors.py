@@ -3,6 +3,14 @@
 from __future__ import annotations
 
 
+def one_line(text: str) -> str:
+    """``text`` with every non-printable character (newlines, carriage returns, NUL, ...) escaped, so
+    that a message quoting a user's key or value stays one line on any terminal."""
+    if text.isprintable():
+        return text
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
+
+
 class InputError(Exception):
     """Bad input from the user: a config, an argument, an unreadable file.
 
@@ -19,7 +27,7 @@ class ConfigError(InputError):
     """
 
     def __init__(self, problems: list[str]):
-        self.problems = list(problems)
+        self.problems = [one_line(p) for p in problems]
         first = self.problems[0] if self.problems else "invalid config"
         more = len(self.problems) - 1
         suffix = f" (and {more} more problem{'s' if more > 1 else ''}: run `gnerun validate` for all)" if more else ""

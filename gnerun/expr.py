@@ -467,12 +467,28 @@ def evaluate(node: Node | Expression, env: Mapping[str, Any], functions: Mapping
     return values[0]
 
 
+def _ieee(op: Callable[[Any, Any], Any]) -> Callable[[Any, Any], Any]:
+    """``op`` on symbols and arrays as is; on two plain numbers with IEEE semantics, as CasADi and numpy
+    compute (1/0 = inf, 0/0 = nan, (-8)**0.5 = nan, 10**400 = inf) instead of Python's exceptions and
+    complex powers."""
+
+    def f(a: Any, b: Any) -> Any:
+        if isinstance(a, float | int) and isinstance(b, float | int):
+            import numpy as np
+
+            with np.errstate(all="ignore"):
+                return float(op(np.float64(a), np.float64(b)))
+        return op(a, b)
+
+    return f
+
+
 _BINARY: dict[str, Callable[[Any, Any], Any]] = {
-    "+": lambda a, b: a + b,
-    "-": lambda a, b: a - b,
-    "*": lambda a, b: a * b,
-    "/": lambda a, b: a / b,
-    "**": lambda a, b: a**b,
+    "+": _ieee(lambda a, b: a + b),
+    "-": _ieee(lambda a, b: a - b),
+    "*": _ieee(lambda a, b: a * b),
+    "/": _ieee(lambda a, b: a / b),
+    "**": _ieee(lambda a, b: a**b),
 }
 
 

@@ -7,6 +7,7 @@ column where it was written. Duplicate keys, which PyYAML silently accepts, are 
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -17,6 +18,11 @@ from .errors import ConfigError
 
 MAX_CONFIG_BYTES = 1_000_000
 MAX_NODES = 200_000
+MAX_DEPTH = 64  # nested mappings and sequences; a config needs about 6
+
+# Plain data only: tags that construct Python objects (!!python/...), binary data, sets or
+# custom tags are refused, whether written explicitly or not.
+_PLAIN_TAGS = {"tag:yaml.org,2002:" + t for t in ("str", "int", "float", "bool", "null", "seq", "map", "timestamp")}
 
 PathKey = tuple[str | int, ...]
 
@@ -83,9 +89,17 @@ def _yaml_error_position(err: yaml.YAMLError, file: str) -> str:
 def _build(node: yaml.Node, path: PathKey, smap: SourceMap, loader: yaml.SafeLoader, problems: list[str],
            budget: list[int]) -> Any:
     budget[0] -= 1
+    pos = _mark_to_position(node)
+    where = f"{smap.file}:{pos.line}:{pos.column}"
     if budget[0] < 0:
-        raise ConfigError([f"{smap.locate(path)}: the document has more than {MAX_NODES} nodes (alias expansion?)"])
-    smap.values[path] = _mark_to_position(node)
+        raise ConfigError([f"{where}: the document has more than {MAX_NODES} nodes (alias expansion?)"])
+    if len(path) > MAX_DEPTH:
+        raise ConfigError([f"{where}: the document is nested deeper than {MAX_DEPTH} levels (a recursive alias?)"])
+    if node.tag not in _PLAIN_TAGS:
+        tag = node.tag.replace("tag:yaml.org,2002:", "!!")
+        raise ConfigError([f"{where}: the YAML tag {tag!r} is not allowed: configs hold plain data "
+                           "(mappings, lists, strings, numbers, booleans)"])
+    smap.values[path] = pos
     if isinstance(node, yaml.MappingNode):
         loader.flatten_mapping(node)
         out: dict[Any, Any] = {}
@@ -99,18 +113,88 @@ def _build(node: yaml.Node, path: PathKey, smap: SourceMap, loader: yaml.SafeLoa
                 key = str(key).lower() if isinstance(key, bool) else str(key)
             if key in out:
                 pos = _mark_to_position(key_node)
-                problems.append(f"{smap.file}:{pos.line}:{pos.column}: {_dotted(path + (key,))}: duplicate key")
+                problems.append(f"{smap.file}:{pos.line}:{pos.column}: {dotted(path + (key,))}: duplicate key")
                 continue
             smap.keys[path + (key,)] = _mark_to_position(key_node)
             out[key] = _build(value_node, path + (key,), smap, loader, problems, budget)
         return out
     if isinstance(node, yaml.SequenceNode):
         return [_build(v, path + (i,), smap, loader, problems, budget) for i, v in enumerate(node.value)]
-    return loader.construct_object(node, deep=True)
+    try:
+        return loader.construct_object(node, deep=True)
+    except (ValueError, OverflowError):  # e.g. an integer with more digits than Python converts
+        shown = node.value if len(node.value) <= 40 else node.value[:37] + "..."
+        raise ConfigError([f"{where}: {dotted(path)}: cannot read {shown!r} ({len(node.value)} characters) "
+                           "as a number"]) from None
 
 
-def _dotted(path: PathKey) -> str:
-    return ".".join(str(p) for p in path) or "<document>"
+def _check_depth(text: str, file: str) -> None:
+    """Refuse documents nested deeper than MAX_DEPTH before composing them (the composer recurses)."""
+    depth = 0
+    for event in yaml.parse(text, Loader=yaml.SafeLoader):
+        if isinstance(event, yaml.CollectionStartEvent):
+            depth += 1
+            if depth > MAX_DEPTH:
+                m = event.start_mark
+                raise ConfigError([f"{file}:{m.line + 1}:{m.column + 1}: the document is nested deeper than "
+                                   f"{MAX_DEPTH} levels"])
+        elif isinstance(event, yaml.CollectionEndEvent):
+            depth -= 1
+
+
+def _check_expansion(root: yaml.Node, file: str) -> None:
+    """Refuse alias bombs, recursive aliases and nesting through aliases on the node graph, before a
+    single value is built: sizes and heights are counted once per node."""
+    sizes: dict[int, tuple[int, int]] = {}  # id(node) -> (nodes when expanded, height)
+    open_: set[int] = set()
+
+    def refuse(node: yaml.Node, what: str) -> ConfigError:
+        m = node.start_mark
+        return ConfigError([f"{file}:{m.line + 1}:{m.column + 1}: {what}"])
+
+    def visit(node: yaml.Node, depth: int) -> tuple[int, int]:
+        key = id(node)
+        if key in open_:
+            raise refuse(node, "a recursive alias (an anchor used inside itself)")
+        if key not in sizes:
+            if depth > MAX_DEPTH:
+                raise refuse(node, f"the document is nested deeper than {MAX_DEPTH} levels")
+            open_.add(key)
+            children: list[yaml.Node] = []
+            if isinstance(node, yaml.MappingNode):
+                children = [n for pair in node.value for n in pair]
+            elif isinstance(node, yaml.SequenceNode):
+                children = list(node.value)
+            size, height = 1, 1
+            for child in children:
+                s, h = visit(child, depth + 1)
+                size += s
+                height = max(height, h + 1)
+                if size > MAX_NODES:
+                    raise refuse(node, f"the document expands to more than {MAX_NODES} values (an alias bomb?)")
+            open_.discard(key)
+            sizes[key] = (size, height)
+        size, height = sizes[key]
+        if depth + height - 1 > MAX_DEPTH:
+            raise refuse(node, f"the document is nested deeper than {MAX_DEPTH} levels (through aliases)")
+        return size, height
+
+    visit(root, 1)
+
+
+def _reader_error_position(err: yaml.reader.ReaderError, text: str, file: str) -> str:
+    before = text[: err.position]
+    line = before.count("\n") + 1
+    column = err.position - (before.rfind("\n") + 1) + 1
+    return f"{file}:{line}:{column}: not a YAML text: character U+{err.character:04X} is not allowed"
+
+
+_PLAIN_KEY = re.compile(r"[\w\-]+")
+
+
+def dotted(path: PathKey, empty: str = "<document>") -> str:
+    """``game.agents.0.cost``; a key that is not a plain name is quoted (``solver.' tol'``)."""
+    return ".".join(str(p) if isinstance(p, int) or _PLAIN_KEY.fullmatch(p) else repr(p) for p in path) or empty
 
 
 def read_yaml(path: str | Path) -> tuple[Any, SourceMap]:
@@ -136,17 +220,24 @@ def read_yaml(path: str | Path) -> tuple[Any, SourceMap]:
 
 def parse_yaml(text: str, file: str = "<string>") -> tuple[Any, SourceMap]:
     smap = SourceMap(file)
-    loader = yaml.SafeLoader(text)
     problems: list[str] = []
+    try:
+        _check_depth(text, file)
+        loader = yaml.SafeLoader(text)
+    except yaml.reader.ReaderError as e:
+        raise ConfigError([_reader_error_position(e, text, file)]) from None
+    except yaml.YAMLError as e:
+        raise ConfigError([_yaml_error_position(e, file)]) from None
     try:
         node = loader.get_single_node()
         if node is None:
             raise ConfigError([f"{file}:1:1: the config is empty"])
+        _check_expansion(node, file)
         data = _build(node, (), smap, loader, problems, [MAX_NODES])
     except yaml.YAMLError as e:
         raise ConfigError([_yaml_error_position(e, file)]) from None
-    except RecursionError:
-        raise ConfigError([f"{file}: the document is nested too deeply"]) from None
+    except RecursionError:  # a backstop: depth and recursive aliases are caught above
+        raise ConfigError([f"{file}:1:1: the document is nested too deeply"]) from None
     finally:
         loader.dispose()
     if problems:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import pytest
@@ -104,6 +105,40 @@ def test_duplicate_keys_are_errors() -> None:
 ])
 def test_malformed_documents(content: str, fragment: str) -> None:
     assert fragment in _problems(content)[0]
+
+
+@pytest.mark.parametrize("content, fragment", [
+    ("name: !!python/object/apply:os.system ['true']\n", "1:7: the YAML tag '!!python/object/apply:os.system' is not"),
+    ("name: !!binary AAAA\n", "tag '!!binary'"),
+    ("name: !mine x\n", "tag '!mine'"),
+    ("name: x\nrun: {K: [1]}\x00\n", "2:14: not a YAML text: character U+0000"),
+    ("name: x\nsolver: {max_iter: " + "9" * 5000 + "}\n", "2:20: solver.max_iter: cannot read '999"),
+    ("a: &a [*a]\n", "1:4: a recursive alias"),
+    ("a0: &a0 [x]\n" + "".join(f"a{i}: &a{i} [*a{i - 1}]\n" for i in range(1, 80)), "(through aliases)"),
+    ("name: " + "[" * 100 + "]" * 100 + "\n", "1:70: the document is nested deeper than 64 levels"),
+    ("a: &a [x, x, x, x, x, x, x, x, x, x]\n" + "".join(
+        f"{c}: &{c} [{', '.join([f'*{p}'] * 10)}]\n" for p, c in zip("abcdef", "bcdefg", strict=True)), "alias bomb"),
+    ('"\\r": 1\n', "'\\r': unknown key"),
+    ("solver: {' tol': 1}\n", "solver.' tol': unknown key"),
+])
+def test_hostile_documents_are_refused_in_one_line(content: str, fragment: str) -> None:
+    problems = _problems(content)
+    assert any(fragment in p for p in problems), problems
+    assert all("\n" not in p and "\r" not in p for p in problems)
+
+
+@pytest.mark.parametrize("variable, fragment", [
+    ("{lower: .nan}", "lower: the lower bound is NaN"),
+    ("{lower: .inf}", "lower bound +.inf admits no value"),
+    ("{upper: -.inf}", "upper bound -.inf admits no value"),
+    ("{start: .nan}", "start: Input should be a finite number"),
+])
+def test_non_finite_numbers(variable: str, fragment: str) -> None:
+    assert any(fragment in p for p in _problems(STATIC.replace("{lower: 0, upper: 10}", variable, 1)))
+    assert any("solver.tol: Input should be a finite number" in p
+               for p in _problems(STATIC.replace("tol: 1.0e-10", "tol: .inf")))
+    cfg = load_config(text=STATIC.replace("{lower: 0, upper: 10}", "{lower: -.inf, upper: .inf}", 1))
+    assert math.isinf(cfg.game.agents[0].variables["x1"].lower)  # +-.inf: no bound, as leaving it out
 
 
 def test_unreadable_files(tmp_path: Path) -> None:

@@ -194,3 +194,19 @@ def test_nesting_below_the_limit_parses() -> None:
     assert evaluate(parsed, {"x": 3.0}) == 3.0
     long_sum = " + ".join(["x"] * 2000)  # long but flat: fine
     assert evaluate(parse_expression(long_sum), {"x": 1.0}) == 2000.0
+
+
+@pytest.mark.parametrize("text, expected", [
+    ("1/0", math.inf), ("-1/0", -math.inf), ("0/0", math.nan), ("(-8)**0.5", math.nan), ("10**400", math.inf),
+    ("2**-1", 0.5), ("(1/0) - (1/0)", math.nan),
+])
+def test_constant_arithmetic_is_ieee(text: str, expected: float) -> None:
+    """Constant subexpressions follow IEEE arithmetic (as CasADi and numpy): no ZeroDivisionError,
+    OverflowError or complex number while a config is compiled; the solver then reports nan/inf."""
+    for table in (None, casadi_functions()):
+        value = float(evaluate(parse_expression(text), {}, table))
+        assert (math.isnan(value) and math.isnan(expected)) or value == expected
+    x = ca.SX.sym("x")
+    f = ca.Function("f", [x], [ca.SX(evaluate(parse_expression(f"x + ({text})"), {"x": x}, casadi_functions()))])
+    got = float(f(1.0))
+    assert (math.isnan(got) and math.isnan(expected)) or got == expected + 1
