@@ -261,11 +261,13 @@ def parse_override(text: str) -> tuple[str, Any]:
     key = key.strip()
     if not key or any(not part for part in key.split(".")):
         raise InputError(f"--set {text}: expected key.path=value")
-    try:
-        value = yaml.safe_load(raw) if raw.strip() else ""
-    except yaml.YAMLError as e:
-        problem = getattr(e, "problem", None) or "cannot read the value"
-        raise InputError(f"--set {text}: the value is not valid YAML: {problem}") from None
+    if not raw.strip():
+        return key, ""
+    try:  # the same reader as config files: plain data only, bounded depth and size
+        value, _ = parse_yaml(raw, "--set")
+    except ConfigError as e:
+        problem = re.sub(r"^--set(:\d+:\d+)?: ", "", e.problems[0])
+        raise InputError(f"--set {text}: the value is not valid: {problem}") from None
     return key, value
 
 

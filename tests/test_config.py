@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 
 import pytest
@@ -207,7 +208,12 @@ def test_overrides() -> None:
     assert cfg.disturbance.kind == "jacobian_noise" and cfg.disturbance.plant.kind == "gaussian"
     with pytest.raises(InputError, match="no such list element"):
         load_config(path, ["game.agents.9.stage_cost=u1"])
-    with pytest.raises(InputError, match="not valid YAML"):
+    for hostile, fragment in [("solver.tol=!!python/object/apply:os.system ['true']", "tag '!!python/object/apply"),
+                              ("solver.tol=" + "[" * 5000, "nested deeper than 64"),
+                              ("name=!!binary AAAA", "!!binary")]:
+        with pytest.raises(InputError, match=re.escape(fragment)):
+            load_config(path, [hostile])
+    with pytest.raises(InputError, match="not valid: YAML syntax error"):
         load_config(path, ["run.K=[1,"])
     with pytest.raises(ConfigError) as err:
         load_config(path, ["solver.tol=-3"])
