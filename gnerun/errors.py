@@ -16,7 +16,13 @@ class InputError(Exception):
 
     ``str(err)`` is the complete one-line message, e.g.
     ``configs/x.yaml:12:7: game.agents.0.cost: unknown name 'y' at column 5 of expression 'x + y'``.
+    Control characters quoted from the input are escaped (:func:`one_line`).
     """
+
+    def __init__(self, *args: object):
+        if len(args) == 1 and isinstance(args[0], str):
+            args = (one_line(args[0]),)
+        super().__init__(*args)
 
 
 class ConfigError(InputError):

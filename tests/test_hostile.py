@@ -55,6 +55,7 @@ EXPECTED = {  # test name -> max_examples; the module checks that all of them ra
     "structured_yaml": 1500,
     "hostile_yaml": 400,
     "mutated_configs": 2500,
+    "overrides": 1000,
     "cli_validate": 30,
 }
 HARD_LIMIT = 30.0  # seconds per case: a hang fails the case instead of stalling the suite
@@ -104,7 +105,7 @@ def _totals() -> Iterator[None]:
 # Outcomes
 # -------------------------------------------------------------------------------------------------
 
-LOCATED = re.compile(r"^(<string>|\S+\.yaml)(:\d+:\d+)?: \S")
+LOCATED = re.compile(r"^(<string>|\S+\.yaml|--set .*)(:\d+:\d+)?: \S")
 
 
 def assert_one_line(err: BaseException) -> None:
@@ -459,6 +460,25 @@ def test_mutated_configs(case, flow) -> None:
         else:
             run_outcome(cfg)
     assert not CANARY.exists()
+
+
+OVERRIDE_KEYS = [".".join(map(str, p)) for p in _paths(BASE_DOCS["paper_study1"]) if p] + [
+    "solver.tol", "run.K", "disturbance.plant.scale", "game.agents.9.cost", "a..b", "", ".", "game.agents.-1"]
+
+
+@_settings("overrides")
+@given(st.sampled_from(OVERRIDE_KEYS), st.one_of(yaml_text, FIELD_VALUE.map(lambda v: yaml.safe_dump(v).strip())),
+       st.sampled_from(["=", "", " = ", "=="]))
+def test_overrides(key: str, value: str, sep: str) -> None:
+    """`--set key=value` with generated keys and values: a Config, or one InputError line."""
+    _count("overrides")
+    with bounded():
+        try:
+            cfg = load_config(CONFIGS / "paper_study1.yaml", [f"{key}{sep}{value}"])
+        except InputError as e:
+            assert_one_line(e)
+            return
+    assert cfg.game.kind in ("static", "dynamic")
 
 
 # -------------------------------------------------------------------------------------------------
