@@ -190,7 +190,59 @@ def simulate(config: ConfigArg, out: OutOpt = None, set_: SetOpt = None, quiet: 
     typer.echo(f"run directory: {sim.run_dir}")
 
 
-RunArgs = Annotated[list[Path], typer.Argument(help="Run directories or their run.mcap files.", show_default=False)]
+@app.command()
+def sweep(
+    spec: Annotated[Path, typer.Argument(help="Sweep spec (YAML): base config, set, grid.", show_default=False)],
+    out: Annotated[Path | None, typer.Option("--out", help="Sweep directory (default: runs/<sweep name>/; "
+                                             "running again resumes it).", show_default=False)] = None,
+    executor: Annotated[str, typer.Option("--executor", help="local (process pool) or dask.")] = "local",
+    workers: Annotated[int, typer.Option("--workers", help="Worker processes (local, and a dask LocalCluster).")] = 2,
+    address: Annotated[str | None, typer.Option("--address", help="A running Dask scheduler (tcp://host:8786); "
+                                                "default: a LocalCluster.", show_default=False)] = None,
+    quiet: QuietOpt = False,
+    force: Annotated[bool, typer.Option("--force", help="Write into an existing non-sweep directory.")] = False,
+) -> None:
+    """Run a grid of runs (every point a run directory) and write the index table; resumable."""
+    with _reported():
+        from .errors import InputError
+        from .sweep import default_sweep_dir, load_sweep, run_sweep
+
+        if executor not in ("local", "dask"):
+            raise InputError(f"--executor {executor}: choose local or dask")
+        if address is not None and executor != "dask":
+            raise InputError("--address needs --executor dask")
+        sw = load_sweep(spec)
+        out_dir = out if out is not None else default_sweep_dir(sw)
+        if not quiet:
+            where = f"dask at {address}" if address else f"{executor}, {workers} worker{'s' * (workers > 1)}"
+            typer.echo(f"gnerun sweep {spec}: {len(sw.points)} points ({sw.spec.mode} of "
+                       f"{', '.join(sw.axes)}), {sw.spec.command} {sw.base.name}, {where}")
+
+        def progress(done: int, total: int, task: dict, rows: list[dict]) -> None:
+            if quiet:
+                return
+            params = " ".join(f"{k}={v}" for k, v in task["params"].items())
+            figures = "; ".join(
+                f"{'K=' + str(r['K']) + ' ' if r['K'] is not None and 'run.K' not in task['params'] else ''}"
+                f"{r['status']}" + (f", max e {_fmt(r['max_e'], '.2e')}, final e {_fmt(r['final_e'], '.2e')}"
+                                    if r["status"] != "error" else f": {r['message']}") for r in rows)
+            typer.echo(f"[{done}/{total}] {params}: {figures}")
+
+        try:
+            result = run_sweep(sw, out_dir, executor=executor, workers=workers, address=address, force=force,
+                               progress=progress)
+        except KeyboardInterrupt:
+            typer.echo(f"interrupted: {out_dir} holds the index of the finished points; run again to resume",
+                       err=True)
+            raise typer.Exit(130) from None
+    if not quiet:
+        typer.echo(f"{result.ran} run, {result.skipped} already finished (skipped), {result.failed} failed; "
+                   f"{result.wall_s:.1f} s with {executor}")
+        typer.echo("index: " + ", ".join(str(p) for p in result.index_files))
+
+
+RunArgs = Annotated[list[Path], typer.Argument(
+    help="Run directories or their run.mcap files (figures: also sweep directories).", show_default=False)]
 
 
 def _existing_logs(runs: list[Path]) -> list[Path]:
@@ -210,7 +262,7 @@ def figures(
     format_: Annotated[str, typer.Option("--format", help="Comma-separated: png, pdf, svg.")] = "png,pdf",
     quiet: QuietOpt = False,
 ) -> None:
-    """Paper-style figures (Studies 1-3) from run logs."""
+    """Paper-style figures (Studies 1-3) from run logs, and sweep figures from sweep directories."""
     with _reported():
         from .errors import InputError
         from .figures import write_figures
@@ -219,7 +271,10 @@ def figures(
         bad = [f for f in formats if f not in ("png", "pdf", "svg")]
         if bad or not formats:
             raise InputError(f"--format {format_}: choose from png, pdf, svg")
-        written = write_figures(_existing_logs(runs), out, formats)
+        from .sweep import is_sweep_dir
+
+        sweeps = [r for r in runs if is_sweep_dir(r)]
+        written = write_figures(_existing_logs([r for r in runs if r not in sweeps]), out, formats, sweeps=sweeps)
         if not written:
             raise InputError("the runs hold nothing to draw (no /solve/iterate and no /K<k>/mpc topics)")
     if not quiet:

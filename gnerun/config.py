@@ -186,8 +186,13 @@ class DisturbanceConfig(Strict):
     plant: PlantDisturbance = Field(default_factory=PlantDisturbance)
 
 
+def _one_or_list(v: Any) -> Any:
+    return [v] if isinstance(v, int) and not isinstance(v, bool) else v
+
+
 class RunConfig(Strict):
-    K: list[Annotated[int, Field(ge=1, le=100_000)]] = Field(default_factory=lambda: [5], min_length=1)
+    K: Annotated[list[Annotated[int, Field(ge=1, le=100_000)]], BeforeValidator(_one_or_list)] = Field(
+        default_factory=lambda: [5], min_length=1, description="iteration budgets; one number is a list of one")
     steps: int = Field(30, ge=1, le=10_000_000)
     warm_start: Literal["previous", "shift"] = Field(
         "previous", description="previous: the last iterate (the paper's rule); shift: drop stage 0, repeat the last")

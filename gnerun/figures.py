@@ -162,14 +162,111 @@ def make_figures(paths: list[str | Path]) -> dict[str, object]:
     return figures
 
 
-def write_figures(paths: list[str | Path], out: str | Path, formats: list[str]) -> list[Path]:
+# ---------------------------------------------------------------------------------------------
+# Sweeps (from the index table alone)
+# ---------------------------------------------------------------------------------------------
+
+SCALE_AXES = ("disturbance.scale", "disturbance.plant.scale")
+
+
+def _groups(rows: list[dict], axes: list[str], exclude: tuple[str, ...]) -> dict[str, list[dict]]:
+    """Rows by the values of the axes that are neither plotted nor averaged (seeds), and by K."""
+    keys = [a for a in axes if a not in exclude and a not in ("disturbance.seed", "disturbance.plant.seed")]
+    with_K = "run.K" not in exclude and len({r.get("K") for r in rows}) > 1
+    out: dict[str, list[dict]] = {}
+    for r in rows:
+        label = ", ".join([f"{k.rsplit('.', 1)[-1]} {r.get(k)}" for k in keys] + ([f"K = {r.get('K')}"] if with_K
+                                                                                   else []))
+        out.setdefault(label, []).append(r)
+    return out
+
+
+def _seed_means(rows: list[dict], x_of, y_key: str) -> tuple[list[float], list[float]]:
+    by_x: dict[float, list[float]] = {}
+    for r in rows:
+        y = r.get(y_key)
+        if r.get("status") != "error" and y is not None and math.isfinite(y):
+            by_x.setdefault(x_of(r), []).append(y)
+    xs = sorted(by_x)
+    return xs, [sum(by_x[x]) / len(by_x[x]) for x in xs]
+
+
+def iss_figure(name: str, rows: list[dict], axes: list[str], scale_axis: str):
+    """Asymptotic ||e|| against the disturbance scale on log-log axes, seeds as dots, their mean as a
+    line, and the fitted slope (the ISS gain's order) in the legend."""
+    import matplotlib.pyplot as plt
+
+    from .sweep import loglog_slope
+
+    fig, ax = plt.subplots(figsize=(4.2, 3.2))
+    for label, group in _groups(rows, axes, (scale_axis,)).items():
+        xs = [r[scale_axis] for r in group if r.get("status") != "error"]
+        ys = [r.get("asymptotic_e") for r in group if r.get("status") != "error"]
+        mx, my = _seed_means(group, lambda r: r[scale_axis], "asymptotic_e")
+        slope = loglog_slope(mx, my)
+        line, = ax.loglog(mx, _log_values(my), "o-", ms=3,
+                          label=(f"{label}: " if label else "mean over seeds: ")
+                          + (f"slope {slope:.3f}" if slope is not None else "no fit"))
+        ax.loglog(xs, _log_values(ys), ".", ms=3, alpha=0.35, color=line.get_color())
+    ax.set_xlabel(f"disturbance scale ({scale_axis})")
+    ax.set_ylabel(r"asymptotic $\|e(t)\|$ (mean, 2nd half)")
+    ax.set_title(f"{name}: error against disturbance", fontsize=9)
+    ax.legend(loc="upper left")
+    fig.tight_layout()
+    return fig
+
+
+def k_figure(name: str, rows: list[dict], axes: list[str]):
+    """max_t ||e(t)|| against K (Theorem "bounded error"), mean over seeds."""
+    import matplotlib.pyplot as plt
+    from matplotlib.ticker import MaxNLocator
+
+    fig, ax = plt.subplots(figsize=(4.2, 3.2))
+    for label, group in _groups(rows, axes, ("run.K",)).items():
+        ks, ys = _seed_means(group, lambda r: r["K"], "max_e")
+        ax.semilogy(ks, _log_values(ys), "o-", ms=3, label=label or "max e")
+        _note_zeros(ax, ys)
+    ax.set_xlabel("K (solver iterations per sampling time)")
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+    ax.set_ylabel(r"$\max_t \|e(t)\|$")
+    ax.set_title(f"{name}: tracking error against K", fontsize=9)
+    ax.legend(loc="best")
+    fig.tight_layout()
+    return fig
+
+
+def sweep_figures(sweep_dir: str | Path) -> dict[str, object]:
+    """The figures a sweep's index supports: <name>-iss (a disturbance-scale axis), <name>-k (a run.K axis)."""
+    import json
+
+    from .sweep import SWEEP_JSON, read_index
+
+    _style()
+    meta = json.loads((Path(sweep_dir) / SWEEP_JSON).read_text())
+    rows = read_index(sweep_dir)
+    axes, name = list(meta["axes"]), str(meta["name"])
+    figures: dict[str, object] = {}
+    for scale_axis in SCALE_AXES:
+        if scale_axis in axes:
+            figures[f"{name}-iss"] = iss_figure(name, rows, axes, scale_axis)
+            break
+    if "run.K" in axes:
+        figures[f"{name}-k"] = k_figure(name, rows, axes)
+    return figures
+
+
+def write_figures(paths: list[str | Path], out: str | Path, formats: list[str],
+                  sweeps: list[str | Path] = ()) -> list[Path]:
     """Draw and save; returns the files written."""
     import matplotlib.pyplot as plt
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     written = []
-    for stem, fig in make_figures(paths).items():
+    drawn = make_figures(paths) if paths else {}
+    for s in sweeps:
+        drawn.update(sweep_figures(s))
+    for stem, fig in drawn.items():
         for fmt in formats:
             target = out / f"{stem}.{fmt}"
             fig.savefig(target)

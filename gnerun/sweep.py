@@ -1,0 +1,539 @@
+"""Sweeps: a grid of runs over config fields (`gnerun sweep SWEEP.yaml`).
+
+A sweep spec names a base config, fixed overrides (``set``) and a grid over any field paths, taken as a
+product or zipped. Every point is a normal run directory under ``<out>/points/``; the index table
+(``index.csv``, and ``index.parquet`` when pyarrow is installed) has one row per point and K with the
+point's parameters and its key figures. Points run on a local process pool or on Dask (a LocalCluster,
+or a running scheduler: a lab server or an HPC queue through dask-jobqueue). A point is a function of
+its config alone, so every executor writes the same index (timings aside).
+
+Re-running a sweep into the same directory skips the points already finished with the same config (their
+summary.json exists and their config hash matches); points that failed or were interrupted run again.
+A point that fails (an exception, not a solver status) is recorded with status ``error`` and its
+message; the sweep goes on.
+"""
+
+from __future__ import annotations
+
+import csv
+import itertools
+import json
+import math
+import re
+import time
+import traceback
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from .config import CONFIG_VERSION, Config, load_config
+from .errors import ConfigError, InputError, Unavailable
+from .yaml_source import SourceMap, dotted, read_yaml
+
+MAX_POINTS = 100_000
+INDEX_CSV = "index.csv"
+INDEX_PARQUET = "index.parquet"
+SPEC_FILE = "sweep.yaml"
+SWEEP_JSON = "sweep.json"
+POINT_JSON = "point.json"
+TIMING_COLUMNS = ("step_time_median_s", "step_time_max_s", "wall_s")
+SEED_AXES = ("disturbance.seed", "disturbance.plant.seed")
+
+
+# ---------------------------------------------------------------------------------------------
+# The spec
+# ---------------------------------------------------------------------------------------------
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+
+
+class Logspace(_Strict):
+    """``{logspace: [first exponent, last exponent, count]}``: 10**first .. 10**last."""
+
+    logspace: tuple[float, float, Annotated[int, Field(ge=1, le=MAX_POINTS)]]
+
+
+class Linspace(_Strict):
+    linspace: tuple[float, float, Annotated[int, Field(ge=1, le=MAX_POINTS)]]
+
+
+class Range(_Strict):
+    """``{range: [first, last]}`` or ``{range: [first, last, step]}``: integers, last included."""
+
+    range: tuple[int, int] | tuple[int, int, int]
+
+    @model_validator(mode="after")
+    def _step(self) -> Range:
+        if len(self.range) == 3 and self.range[2] == 0:
+            raise ValueError("the step of a range cannot be 0")
+        return self
+
+
+Axis = Annotated[list[Any], Field(min_length=1, max_length=MAX_POINTS)] | Logspace | Linspace | Range
+
+
+class SweepSpec(_Strict):
+    version: Literal[1] = CONFIG_VERSION
+    name: str = "sweep"
+    base: str = Field(description="the base config, relative to the sweep file")
+    command: Literal["simulate", "solve"] = "simulate"
+    set: dict[str, Any] = Field(default_factory=dict, description="overrides applied to every point")
+    mode: Literal["product", "zip"] = "product"
+    grid: dict[str, Axis] = Field(min_length=1, description="field path -> values")
+
+
+def axis_values(axis: Any) -> list[Any]:
+    if isinstance(axis, Logspace):
+        a, b, n = axis.logspace
+        return [float(v) for v in np.logspace(a, b, n)]
+    if isinstance(axis, Linspace):
+        a, b, n = axis.linspace
+        return [float(v) for v in np.linspace(a, b, n)]
+    if isinstance(axis, Range):
+        first, last, *rest = axis.range
+        step = rest[0] if rest else (1 if last >= first else -1)
+        return list(range(first, last + (1 if step > 0 else -1), step))
+    return list(axis)
+
+
+class Point(BaseModel):
+    """One run of the sweep: its number, parameters and the overrides that make its config."""
+
+    index: int
+    params: dict[str, Any]
+    overrides: dict[str, Any]
+    config_hash: str
+    directory: str  # relative to the sweep directory
+
+
+class Sweep(BaseModel):
+    model_config = ConfigDict(arbitrary_types_allowed=True)
+
+    spec: SweepSpec
+    source: str
+    base: Path
+    points: list[Point]
+
+    @property
+    def axes(self) -> list[str]:
+        return list(self.spec.grid)
+
+
+def _slug(params: dict[str, Any]) -> str:
+    parts = [f"{k.rsplit('.', 1)[-1]}={_short(v)}" for k, v in params.items()]
+    return re.sub(r"[^A-Za-z0-9.=_+-]", "", "_".join(parts))[:80]
+
+
+def _short(v: Any) -> str:
+    if isinstance(v, float):
+        return f"{v:.6g}"
+    if isinstance(v, list):
+        return "-".join(_short(x) for x in v)
+    return str(v)
+
+
+def load_sweep(path: str | Path) -> Sweep:
+    """Read and check a sweep spec and every point's config; every problem is a ConfigError."""
+    data, smap = read_yaml(path)
+    file = str(path)
+    if not isinstance(data, dict) or "grid" not in data and "base" not in data:
+        kind = "a config" if isinstance(data, dict) and "game" in data else "not a sweep"
+        raise ConfigError([f"{file}:1:1: {kind}: a sweep spec has `base:` (a config) and `grid:` (field -> values); "
+                           "run configs with `gnerun simulate` or `gnerun solve`"])
+    if "name" not in data:
+        data["name"] = Path(file).stem
+    try:
+        spec = SweepSpec.model_validate(data)
+    except ValidationError as e:
+        raise ConfigError([f"{smap.locate(_loc(err['loc'], data))}: {dotted(_loc(err['loc'], data), '<sweep>')}: "
+                           f"{err['msg'].removeprefix('Value error, ')}" for err in e.errors()]) from None
+    base = (Path(file).parent / spec.base).resolve()
+    if not base.is_file():
+        raise ConfigError([f"{smap.locate(('base',))}: base: no config file {spec.base!r} next to the sweep"])
+    for key in spec.grid:
+        if key in spec.set:
+            raise ConfigError([f"{smap.locate(('set', key), key=True)}: set.{key}: also an axis of the grid"])
+    axes = {k: axis_values(v) for k, v in spec.grid.items()}
+    if spec.mode == "zip":
+        lengths = {k: len(v) for k, v in axes.items()}
+        if len(set(lengths.values())) > 1:
+            raise ConfigError([f"{smap.locate(('grid',))}: grid: mode zip needs axes of one length, got "
+                               + ", ".join(f"{k} {n}" for k, n in lengths.items())])
+        combos = list(zip(*axes.values(), strict=True))
+    else:
+        count = math.prod(len(v) for v in axes.values())
+        if count > MAX_POINTS:
+            raise ConfigError([f"{smap.locate(('grid',))}: grid: {count} points; the limit is {MAX_POINTS}"])
+        combos = list(itertools.product(*axes.values()))
+    points = []
+    for i, combo in enumerate(combos):
+        params = dict(zip(axes, combo, strict=True))
+        overrides = {**spec.set, **params}
+        cfg = _point_config(base, overrides, params, i, smap)
+        if spec.command == "simulate" and cfg.game.kind != "dynamic":
+            raise ConfigError([f"{smap.locate(('command',))}: command: simulate needs a dynamic game; "
+                               f"{spec.base} is static (use command: solve)"])
+        points.append(Point(index=i, params=params, overrides=overrides, config_hash=cfg.config_hash(),
+                            directory=f"points/{i:04d}-{_slug(params)}"))
+    return Sweep(spec=spec, source=file, base=base, points=points)
+
+
+def _loc(loc: tuple, data: Any) -> tuple:
+    out: list[Any] = []
+    node = data
+    for part in loc:
+        if isinstance(node, dict) and part in node:
+            out.append(part)
+            node = node[part]
+        elif isinstance(node, list) and isinstance(part, int) and part < len(node):
+            out.append(part)
+            node = node[part]
+        else:
+            break
+    return tuple(out)
+
+
+def _point_config(base: Path, overrides: dict[str, Any], params: dict[str, Any], i: int, smap: SourceMap) -> Config:
+    """The config of one point; a problem in an override is located at its line in the sweep file."""
+    try:
+        return load_config(base, overrides)
+    except ConfigError as e:
+        problems = []
+        shown = ", ".join(f"{k}={v!r}" for k, v in params.items())
+        for p in e.problems:
+            for k, v in overrides.items():
+                prefix = f"--set {k}={v!r}: "
+                if p.startswith(prefix):
+                    where = smap.locate(("grid", k) if k in params else ("set", k))
+                    p = f"{where}: {p[len(prefix):]} (point {i}: {shown})"
+                    break
+            problems.append(p)
+        raise ConfigError(problems) from None
+
+
+# ---------------------------------------------------------------------------------------------
+# Running one point (in a worker)
+# ---------------------------------------------------------------------------------------------
+
+
+def run_point(task: dict[str, Any]) -> list[dict[str, Any]]:
+    """Run one point into its run directory and return its index rows; never raises.
+
+    ``task``: base (config path), overrides, out (the point's run directory), command, params, index,
+    directory, config_hash. Module-level and plain-data in and out, so that any executor can ship it.
+    """
+    from .closed_loop import simulate
+    from .solving import solve
+
+    out = Path(task["out"])
+    t0 = time.perf_counter()
+    try:
+        cfg = load_config(task["base"], task["overrides"])
+        if task["command"] == "simulate":
+            simulate(cfg, out=out, force=True)
+        else:
+            solve(cfg, out=out, force=True)
+        wall = time.perf_counter() - t0
+        (out / POINT_JSON).write_text(json.dumps({"index": task["index"], "params": task["params"],
+                                                  "config_hash": task["config_hash"], "wall_s": wall}) + "\n")
+        return rows_from_run(task, out, wall)
+    except BaseException as e:  # noqa: BLE001 - a failed point is a row, never the end of the sweep
+        if isinstance(e, KeyboardInterrupt):
+            raise
+        message = f"{type(e).__name__}: {e}" if not isinstance(e, InputError | Unavailable) else str(e)
+        try:
+            out.mkdir(parents=True, exist_ok=True)
+            (out / POINT_JSON).write_text(json.dumps({"index": task["index"], "params": task["params"],
+                                                      "config_hash": task["config_hash"], "status": "error",
+                                                      "message": message,
+                                                      "traceback": traceback.format_exc()}) + "\n")
+        except OSError:
+            pass
+        return [_row(task, K=None, status="error", message=message.splitlines()[0] if message else "",
+                     wall=time.perf_counter() - t0)]
+
+
+def _row(task: dict[str, Any], *, K: int | None, status: str, message: str = "", iterations: int | None = None,
+         failed_steps: int | None = None, max_e: float | None = None, final_e: float | None = None,
+         asymptotic_e: float | None = None, step_median: float | None = None, step_max: float | None = None,
+         wall: float | None = None) -> dict[str, Any]:
+    row: dict[str, Any] = {"point": task["index"], "directory": task["directory"]}
+    row.update(task["params"])
+    row.update({"K": K, "status": status, "failed_steps": failed_steps, "iterations": iterations, "max_e": max_e,
+                "final_e": final_e, "asymptotic_e": asymptotic_e, "step_time_median_s": step_median,
+                "step_time_max_s": step_max, "wall_s": wall, "message": message})
+    return row
+
+
+def _finite(values: list[Any]) -> list[float]:
+    return [float(v) for v in values if v is not None and math.isfinite(v)]
+
+
+def rows_from_run(task: dict[str, Any], out: Path, wall: float | None) -> list[dict[str, Any]]:
+    """Index rows from a finished point's summary.json.
+
+    simulate: one row per K; ``asymptotic_e`` is the mean of ||e(t)|| over the second half of the sampling
+    times (the level the error settles at), ``iterations`` the solver steps of the whole loop.
+    solve: one row; e is ||z^k - z*|| along the iterations.
+    """
+    summary = json.loads((out / "summary.json").read_text())
+    if task["command"] == "solve":
+        errors = _finite(summary.get("error_history") or [])
+        its = summary.get("iterations") or 0
+        return [_row(task, K=None, status=summary["status"], message=summary.get("message", ""), iterations=its,
+                     max_e=max(errors) if errors else None, final_e=errors[-1] if errors else None,
+                     asymptotic_e=errors[-1] if errors else None,
+                     step_median=summary["time_s"] / its if its else None, step_max=None, wall=wall)]
+    rows = []
+    for K, loop in summary["by_K"].items():
+        e = loop["e_norm"]
+        tail = _finite(e[len(e) // 2:])
+        times = _finite(loop["solve_time_s"])
+        rows.append(_row(
+            task, K=int(K), status=loop["ended"] if loop["ended"] != "completed" else summary["status"],
+            iterations=int(sum(loop["iterations"])), failed_steps=len(loop["failed_steps"]),
+            max_e=loop["max_e_norm"], final_e=loop["final_e_norm"],
+            asymptotic_e=float(np.mean(tail)) if tail else None,
+            step_median=float(np.median(times)) if times else None, step_max=max(times) if times else None,
+            wall=wall))
+    return rows
+
+
+# ---------------------------------------------------------------------------------------------
+# Executors
+# ---------------------------------------------------------------------------------------------
+
+Completed = Iterator[tuple[dict[str, Any], list[dict[str, Any]]]]
+
+
+def _local(tasks: list[dict[str, Any]], workers: int) -> Completed:
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+
+    # spawn: workers start clean (no forked BLAS or CasADi state), as on any platform
+    with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn")) as pool:
+        futures = {pool.submit(run_point, t): t for t in tasks}
+        try:
+            for f in as_completed(futures):
+                task = futures[f]
+                try:
+                    rows = f.result()
+                except Exception as e:  # noqa: BLE001 - a worker process died (killed, out of memory)
+                    rows = [_row(task, K=None, status="error", message=f"worker process failed: {e}")]
+                yield task, rows
+        except BaseException:
+            pool.shutdown(wait=False, cancel_futures=True)
+            raise
+
+
+def _dask(tasks: list[dict[str, Any]], workers: int, address: str | None) -> Completed:
+    try:
+        from dask.distributed import Client, LocalCluster, as_completed
+    except ImportError:
+        raise Unavailable("the dask executor needs Dask: pip install 'gnerun[dask]'") from None
+    cluster = None
+    try:
+        if address is None:
+            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None)
+            client = Client(cluster)
+        else:
+            client = Client(address, timeout="20s")
+    except OSError as e:
+        if cluster is not None:
+            cluster.close()
+        raise Unavailable(f"cannot reach the Dask scheduler at {address}: {e}") from None
+    try:
+        futures = {client.submit(run_point, t, pure=False, key=f"gnerun-point-{t['index']}-{t['config_hash'][:12]}"):
+                   t for t in tasks}
+        for f in as_completed(futures):
+            task = futures[f]
+            try:
+                rows = f.result()
+            except Exception as e:  # noqa: BLE001 - a worker died or the task could not run there
+                rows = [_row(task, K=None, status="error", message=f"dask: {type(e).__name__}: {e}")]
+            yield task, rows
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+# ---------------------------------------------------------------------------------------------
+# The sweep
+# ---------------------------------------------------------------------------------------------
+
+
+class SweepResult(BaseModel):
+    directory: Path
+    rows: list[dict[str, Any]]
+    ran: int
+    skipped: int
+    failed: int
+    wall_s: float
+    executor: str
+    index_files: list[Path]
+
+
+def _finished(sweep_dir: Path, point: Point) -> bool:
+    out = sweep_dir / point.directory
+    try:
+        meta = json.loads((out / POINT_JSON).read_text())
+        summary = json.loads((out / "summary.json").read_text())
+    except (OSError, ValueError):
+        return False
+    return (meta.get("config_hash") == point.config_hash and meta.get("status") != "error"
+            and summary.get("status") != "interrupted")
+
+
+def _task(sweep: Sweep, sweep_dir: Path, p: Point) -> dict[str, Any]:
+    return {"index": p.index, "params": p.params, "overrides": p.overrides, "config_hash": p.config_hash,
+            "directory": p.directory, "base": str(sweep.base), "command": sweep.spec.command,
+            "out": str((sweep_dir / p.directory).resolve())}
+
+
+def run_sweep(sweep: Sweep, out: str | Path, *, executor: str = "local", workers: int = 2,
+              address: str | None = None, force: bool = False,
+              progress: Callable[[int, int, dict[str, Any], list[dict[str, Any]]], None] | None = None) -> SweepResult:
+    """Run the points not yet finished in ``out`` and write the index (after every point)."""
+    if executor not in ("local", "dask"):
+        raise InputError(f"--executor {executor}: choose local or dask")
+    if workers < 1:
+        raise InputError(f"--workers {workers}: at least 1")
+    sweep_dir = Path(out)
+    if sweep_dir.exists() and not sweep_dir.is_dir():
+        raise InputError(f"{sweep_dir}: exists and is not a directory")
+    if sweep_dir.is_dir() and any(sweep_dir.iterdir()) and not (sweep_dir / SPEC_FILE).is_file() and not force:
+        raise InputError(f"{sweep_dir}: exists, is not empty and holds no sweep (use --force to write into it)")
+    try:
+        sweep_dir.mkdir(parents=True, exist_ok=True)
+        (sweep_dir / SPEC_FILE).write_text(Path(sweep.source).read_text())
+    except OSError as e:
+        raise InputError(f"{sweep_dir}: cannot write the sweep directory: {e.strerror or e}") from None
+    t0 = time.perf_counter()
+    rows: dict[int, list[dict[str, Any]]] = {}
+    tasks = []
+    for p in sweep.points:
+        task = _task(sweep, sweep_dir, p)
+        if _finished(sweep_dir, p):
+            meta = json.loads((sweep_dir / p.directory / POINT_JSON).read_text())
+            rows[p.index] = rows_from_run(task, sweep_dir / p.directory, meta.get("wall_s"))
+        else:
+            tasks.append(task)
+    skipped = len(rows)
+    failed = 0
+    done = skipped
+    completed = _local(tasks, workers) if executor == "local" else _dask(tasks, workers, address)
+    try:
+        for task, task_rows in completed if tasks else ():
+            rows[task["index"]] = task_rows
+            failed += any(r["status"] == "error" for r in task_rows)
+            done += 1
+            write_index(sweep, sweep_dir, rows)
+            if progress is not None:
+                progress(done, len(sweep.points), task, task_rows)
+    finally:
+        files = write_index(sweep, sweep_dir, rows)
+        wall = time.perf_counter() - t0
+        (sweep_dir / SWEEP_JSON).write_text(json.dumps({
+            "name": sweep.spec.name, "source": sweep.source, "base": str(sweep.base), "axes": sweep.axes,
+            "mode": sweep.spec.mode, "command": sweep.spec.command, "points": len(sweep.points),
+            "finished": len(rows), "ran": len(rows) - skipped, "skipped": skipped, "failed": failed,
+            "executor": executor, "workers": workers, "address": address, "wall_s": wall}, indent=2) + "\n")
+    return SweepResult(directory=sweep_dir, rows=[r for i in sorted(rows) for r in rows[i]], ran=len(rows) - skipped,
+                       skipped=skipped, failed=failed, wall_s=wall, executor=executor, index_files=files)
+
+
+def columns(sweep: Sweep) -> list[str]:
+    return ["point", "directory", *sweep.axes, "K", "status", "failed_steps", "iterations", "max_e", "final_e",
+            "asymptotic_e", "step_time_median_s", "step_time_max_s", "wall_s", "message"]
+
+
+def _cell(v: Any) -> str:
+    if v is None:
+        return ""
+    if isinstance(v, float):
+        return repr(v)  # round-trips exactly
+    if isinstance(v, list | dict):
+        return json.dumps(v)
+    return str(v)
+
+
+def write_index(sweep: Sweep, sweep_dir: Path, rows: dict[int, list[dict[str, Any]]]) -> list[Path]:
+    """index.csv (and index.parquet when pyarrow is installed), rows by point; replaced atomically."""
+    cols = columns(sweep)
+    ordered = [r for i in sorted(rows) for r in rows[i]]
+    target = sweep_dir / INDEX_CSV
+    tmp = target.with_suffix(".csv.tmp")
+    with tmp.open("w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(cols)
+        for r in ordered:
+            w.writerow([_cell(r.get(c)) for c in cols])
+    tmp.replace(target)
+    written = [target]
+    try:
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+    except ImportError:
+        return written
+    table = pa.table({c: [_parquet_value(r.get(c)) for r in ordered] for c in cols})
+    tmp = sweep_dir / (INDEX_PARQUET + ".tmp")
+    pq.write_table(table, tmp)
+    tmp.replace(sweep_dir / INDEX_PARQUET)
+    written.append(sweep_dir / INDEX_PARQUET)
+    return written
+
+
+def _parquet_value(v: Any) -> Any:
+    return json.dumps(v) if isinstance(v, list | dict) else v
+
+
+def read_index(sweep_dir: str | Path) -> list[dict[str, Any]]:
+    """index.csv as rows of typed values (numbers as numbers, empty as None)."""
+    path = Path(sweep_dir) / INDEX_CSV
+    if not path.is_file():
+        raise InputError(f"{sweep_dir}: no sweep index here (expected {INDEX_CSV})")
+    with path.open(newline="") as f:
+        return [{k: _parse_cell(v) for k, v in r.items()} for r in csv.DictReader(f)]
+
+
+def _parse_cell(text: str) -> Any:
+    if text == "":
+        return None
+    for conv in (int, float):
+        try:
+            return conv(text)
+        except ValueError:
+            pass
+    if text[:1] in "[{":
+        try:
+            return json.loads(text)
+        except ValueError:
+            pass
+    return text
+
+
+def is_sweep_dir(path: str | Path) -> bool:
+    p = Path(path)
+    return p.is_dir() and (p / INDEX_CSV).is_file() and (p / SWEEP_JSON).is_file()
+
+
+def loglog_slope(x: list[float], y: list[float]) -> float | None:
+    """Least-squares slope of log10 y against log10 x over the positive finite pairs."""
+    pairs = [(a, b) for a, b in zip(x, y, strict=True) if a and b and a > 0 and b > 0
+             and math.isfinite(a) and math.isfinite(b)]
+    if len(pairs) < 2:
+        return None
+    lx, ly = np.log10([p[0] for p in pairs]), np.log10([p[1] for p in pairs])
+    return float(np.polyfit(lx, ly, 1)[0])
+
+
+def default_sweep_dir(sweep: Sweep) -> Path:
+    """runs/<sweep name>/: one stable place, so that running the sweep again resumes it."""
+    name = re.sub(r"[^A-Za-z0-9._-]+", "-", sweep.spec.name).strip("-") or "sweep"
+    return Path("runs") / name
