@@ -9,6 +9,7 @@ the commands, so that ``gnerun --help`` stays fast.
 from __future__ import annotations
 
 import contextlib
+import re
 import sys
 import traceback
 from collections.abc import Iterator
@@ -90,6 +91,15 @@ def _load(config: Path, overrides: list[str] | None):
     return load_config(config, overrides or [])
 
 
+def _is_sweep_spec(path: Path) -> bool:
+    """A YAML file with top-level `grid:` and `base:` keys (read cheaply; errors are left to the loaders)."""
+    try:
+        text = path.read_text(errors="replace") if path.is_file() and path.stat().st_size < 1_000_000 else ""
+    except OSError:
+        return False
+    return bool(re.search(r"^grid:", text, re.M) and re.search(r"^base:", text, re.M))
+
+
 def _fmt(v: float | None, spec: str = ".3e") -> str:
     if v is None or v != v:
         return "-"
@@ -98,11 +108,21 @@ def _fmt(v: float | None, spec: str = ".3e") -> str:
 
 @app.command()
 def validate(config: ConfigArg, set_: SetOpt = None, quiet: QuietOpt = False) -> None:
-    """Check a config without running it; print every problem found."""
+    """Check a config (or a sweep spec and every point of it) without running it; print every problem found."""
     from .errors import ConfigError
 
     with _reported():
         try:
+            if _is_sweep_spec(config):
+                from .sweep import load_sweep
+
+                if set_:
+                    raise ConfigError(["--set applies to configs; a sweep's fixed overrides are its `set:`"])
+                sw = load_sweep(config)
+                if not quiet:
+                    typer.echo(f"{config}: ok (sweep '{sw.spec.name}': {len(sw.points)} points, {sw.spec.mode} of "
+                               f"{', '.join(sw.axes)}, {sw.spec.command} {sw.base.name})")
+                return
             cfg = _load(config, set_)
         except ConfigError as e:
             for p in e.problems:

@@ -326,6 +326,8 @@ def load_config(
         raise InputError("load_config needs a path or text")
     if not isinstance(data, dict):
         raise ConfigError([f"{smap.locate(())}: the config must be a mapping of fields, got {type(data).__name__}"])
+    if "grid" in data and "base" in data and "game" not in data:
+        raise ConfigError([f"{smap.locate(())}: a sweep spec, not a config: run it with `gnerun sweep`"])
     items: list[tuple[str, Any, str]] = []
     if isinstance(overrides, dict):
         items = [(k, v, f"{k}={v!r}") for k, v in overrides.items()]

@@ -129,6 +129,13 @@ def _slug(params: dict[str, Any]) -> str:
     return re.sub(r"[^A-Za-z0-9.=_+-]", "", "_".join(parts))[:80]
 
 
+def _digest(params: dict[str, Any]) -> str:
+    """8 hex digits of the parameters: a point keeps its directory when the grid around it changes."""
+    import hashlib
+
+    return hashlib.sha256(json.dumps(params, sort_keys=True, default=str).encode()).hexdigest()[:8]
+
+
 def _short(v: Any) -> str:
     if isinstance(v, float):
         return f"{v:.6g}"
@@ -150,8 +157,9 @@ def load_sweep(path: str | Path) -> Sweep:
     try:
         spec = SweepSpec.model_validate(data)
     except ValidationError as e:
-        raise ConfigError([f"{smap.locate(_loc(err['loc'], data))}: {dotted(_loc(err['loc'], data), '<sweep>')}: "
-                           f"{err['msg'].removeprefix('Value error, ')}" for err in e.errors()]) from None
+        raise ConfigError([f"{smap.locate(_loc(err['loc'], data), key=err['type'] == 'extra_forbidden')}: "
+                           f"{dotted(_loc(err['loc'], data), '<sweep>')}: {err['msg'].removeprefix('Value error, ')}"
+                           for err in e.errors()]) from None
     base = (Path(file).parent / spec.base).resolve()
     if not base.is_file():
         raise ConfigError([f"{smap.locate(('base',))}: base: no config file {spec.base!r} next to the sweep"])
@@ -179,7 +187,7 @@ def load_sweep(path: str | Path) -> Sweep:
             raise ConfigError([f"{smap.locate(('command',))}: command: simulate needs a dynamic game; "
                                f"{spec.base} is static (use command: solve)"])
         points.append(Point(index=i, params=params, overrides=overrides, config_hash=cfg.config_hash(),
-                            directory=f"points/{i:04d}-{_slug(params)}"))
+                            directory=f"points/{_slug(params)}-{_digest(params)}"))
     return Sweep(spec=spec, source=file, base=base, points=points)
 
 
