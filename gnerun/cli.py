@@ -217,8 +217,9 @@ def sweep(
                                              "running again resumes it).", show_default=False)] = None,
     executor: Annotated[str, typer.Option("--executor", help="local (process pool) or dask.")] = "local",
     workers: Annotated[int, typer.Option("--workers", help="Worker processes (local, and a dask LocalCluster).")] = 2,
-    address: Annotated[str | None, typer.Option("--address", help="A running Dask scheduler (tcp://host:8786); "
-                                                "default: a LocalCluster.", show_default=False)] = None,
+    address: Annotated[str | None, typer.Option("--address", help="A running Dask scheduler: tcp://host:8786 or "
+                                                "its scheduler file (default: a LocalCluster).",
+                                                show_default=False)] = None,
     quiet: QuietOpt = False,
     force: Annotated[bool, typer.Option("--force", help="Write into an existing non-sweep directory.")] = False,
 ) -> None:

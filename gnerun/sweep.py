@@ -33,7 +33,7 @@ from .config import CONFIG_VERSION, Config, load_config
 from .errors import ConfigError, InputError, Unavailable
 from .yaml_source import SourceMap, dotted, read_yaml
 
-MAX_POINTS = 100_000
+MAX_POINTS = 10_000  # every point's config is checked before the sweep starts
 INDEX_CSV = "index.csv"
 INDEX_PARQUET = "index.parquet"
 SPEC_FILE = "sweep.yaml"
@@ -55,7 +55,8 @@ class _Strict(BaseModel):
 class Logspace(_Strict):
     """``{logspace: [first exponent, last exponent, count]}``: 10**first .. 10**last."""
 
-    logspace: tuple[float, float, Annotated[int, Field(ge=1, le=MAX_POINTS)]]
+    logspace: tuple[Annotated[float, Field(ge=-300, le=300)], Annotated[float, Field(ge=-300, le=300)],
+                    Annotated[int, Field(ge=1, le=MAX_POINTS)]]
 
 
 class Linspace(_Strict):
@@ -69,8 +70,15 @@ class Range(_Strict):
 
     @model_validator(mode="after")
     def _step(self) -> Range:
-        if len(self.range) == 3 and self.range[2] == 0:
+        first, last, *rest = self.range
+        if rest and rest[0] == 0:
             raise ValueError("the step of a range cannot be 0")
+        step = rest[0] if rest else (1 if last >= first else -1)
+        n = max(0, (last - first) // step + 1)  # len(range(...)) without building it (or overflowing)
+        if n == 0:
+            raise ValueError(f"range {list(self.range)} is empty (the step goes away from the last value)")
+        if n > MAX_POINTS:
+            raise ValueError(f"range {list(self.range)} has {n} values; the limit is {MAX_POINTS}")
         return self
 
 
@@ -349,6 +357,8 @@ def _dask(tasks: list[dict[str, Any]], workers: int, address: str | None) -> Com
         if address is None:
             cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None)
             client = Client(cluster)
+        elif Path(address).is_file():  # a scheduler file (`dask scheduler --scheduler-file F`), as on HPC
+            client = Client(scheduler_file=address, timeout="20s")
         else:
             client = Client(address, timeout="20s")
     except OSError as e:

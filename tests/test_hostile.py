@@ -56,6 +56,7 @@ EXPECTED = {  # test name -> max_examples; the module checks that all of them ra
     "hostile_yaml": 400,
     "mutated_configs": 2500,
     "overrides": 1000,
+    "sweep_specs": 400,
     "cli_validate": 30,
 }
 HARD_LIMIT = 30.0  # seconds per case: a hang fails the case instead of stalling the suite
@@ -428,16 +429,16 @@ def mutated_config(draw):
         op = draw(st.sampled_from(["replace", "replace", "replace", "delete", "add", "duplicate"]))
         if not path:
             if op == "replace":
-                doc = draw(FIELD_VALUE)
+                doc = copy.deepcopy(draw(FIELD_VALUE))
             continue
         parent, key = _at(doc, path[:-1]), path[-1]
         if op == "replace":
-            parent[key] = draw(FIELD_VALUE)
+            parent[key] = copy.deepcopy(draw(FIELD_VALUE))
         elif op == "delete":
             del parent[key]
         elif op == "add" and isinstance(parent, dict):
             parent[draw(st.one_of(st.text(max_size=8), st.sampled_from(["kind", "tol", "K", "lower", "seed"])))] = (
-                draw(FIELD_VALUE))
+                copy.deepcopy(draw(FIELD_VALUE)))
         elif op == "duplicate" and isinstance(parent, list):
             parent.append(copy.deepcopy(parent[key]))
         if not isinstance(doc, dict):
@@ -479,6 +480,59 @@ def test_overrides(key: str, value: str, sep: str) -> None:
             assert_one_line(e)
             return
     assert cfg.game.kind in ("static", "dynamic")
+
+
+SWEEP_DOC = {"version": 1, "name": "s", "base": str(CONFIGS / "paper_study2.yaml"), "command": "simulate",
+             "set": {"run.K": 3, "disturbance.kind": "residual"}, "mode": "product",
+             "grid": {"disturbance.scale": [1e-3, 1e-2], "disturbance.seed": {"range": [0, 1]}}}
+
+
+AXES = [{"logspace": [-3, -1, 3]}, {"range": [0, 10**9]}, {"range": [5, 1, 1]}, {"range": [5, 1]}, {"range": [1, 3, 0]},
+        {"linspace": [0, 1, 0]}, {"linspace": [0, 1, 10**9]}, {"logspace": [0, 400, 2]}, {"range": [1, 2**70]},
+        {"logspace": [-3, -1]}, {"range": "1..5"}, [], [1] * 20_000, {"range": [0, 3], "logspace": [0, 1, 2]}]
+
+
+@st.composite
+def mutated_sweep(draw):
+    doc = copy.deepcopy(SWEEP_DOC)
+    for _ in range(draw(st.integers(1, 3))):
+        path = draw(st.sampled_from([p for p in _paths(doc) if p]))
+        parent, key = _at(doc, path[:-1]), path[-1]
+        op = draw(st.sampled_from(["replace", "replace", "delete", "add", "axis"]))
+        if op == "axis" and isinstance(doc.get("grid"), dict):
+            doc["grid"][draw(st.sampled_from(["disturbance.scale", "disturbance.seed", "run.K", "solver.tol"]))] = (
+                copy.deepcopy(draw(st.sampled_from(AXES))))
+        elif op == "replace":
+            parent[key] = copy.deepcopy(draw(st.one_of(FIELD_VALUE, st.sampled_from(
+                AXES + ["zip", "solve", "../configs/harker.yaml", "/dev/null", "/"]))))
+        elif op == "delete":
+            del parent[key]
+        elif isinstance(parent, dict):
+            parent[draw(st.sampled_from(["solver.tol", "run.steps", "game.horizon", "x", "disturbance.seed"]))] = (
+                copy.deepcopy(draw(FIELD_VALUE)))
+    return doc
+
+
+@_settings("sweep_specs")
+@given(mutated_sweep())
+def test_sweep_specs(doc) -> None:
+    """Mutated sweep specs: a sweep (every point's config valid), or located one-line ConfigErrors."""
+    from gnerun.sweep import load_sweep
+
+    _count("sweep_specs")
+    path = Path(f"/tmp/gnerun-hostile-sweep-{uuid.uuid4().hex[:8]}.yaml")
+    try:
+        path.write_text(yaml.safe_dump(doc, sort_keys=False))
+        with bounded():
+            try:
+                sweep = load_sweep(path)
+            except ConfigError as e:
+                assert_one_line(e)
+                assert all(p.startswith(str(path)) for p in e.problems), e.problems
+                return
+        assert 1 <= len(sweep.points) <= 10_000
+    finally:
+        path.unlink(missing_ok=True)
 
 
 # -------------------------------------------------------------------------------------------------

@@ -126,6 +126,7 @@ def test_local_and_dask_executors_write_identical_indexes(tmp_path: Path) -> Non
         worker = _start("worker", address, "--nworkers", "2", "--nthreads", "1", "--no-dashboard",
                         "--host", "127.0.0.1")
         remote = run_sweep(sw, tmp_path / "remote", executor="dask", address=address)
+        by_file = run_sweep(sw, tmp_path / "by-file", executor="dask", address=str(scheduler_file))
     finally:
         for proc in (worker, scheduler):
             if proc is not None:
@@ -133,7 +134,7 @@ def test_local_and_dask_executors_write_identical_indexes(tmp_path: Path) -> Non
     assert scheduler.returncode is not None and (worker is None or worker.returncode is not None)
     reference = _without_timings(read_index(tmp_path / "local"))
     assert len(reference) == 6 and all(r["status"] == "completed" for r in reference)
-    for result in (cluster, remote):
+    for result in (cluster, remote, by_file):
         assert result.ran == 6 and result.failed == 0
         assert _without_timings(read_index(result.directory)) == reference
     # the CSV files themselves agree outside the timing columns, and so do the parquet files
