@@ -34,3 +34,9 @@ def gnerun_command() -> list[str]:
 def run_cli(*args: str, cwd: Path | None = None, timeout: float = 120) -> subprocess.CompletedProcess:
     return subprocess.run([*gnerun_command(), *args], capture_output=True, text=True, cwd=cwd, timeout=timeout,
                           stdin=subprocess.DEVNULL)
+
+
+def shipped_configs() -> list[Path]:
+    """The shipped experiment configs (configs/*.yaml without the sweep specs, tested in test_sweep.py)."""
+    return sorted(p for p in CONFIGS.glob("*.yaml") if not any(line.startswith("grid:")
+                                                              for line in p.read_text().splitlines()))

@@ -12,9 +12,9 @@ from gnerun.config import load_config, parse_override
 from gnerun.errors import ConfigError, InputError
 from gnerun.yaml_source import MAX_CONFIG_BYTES
 
-from .conftest import CONFIGS
+from .conftest import CONFIGS, shipped_configs
 
-SHIPPED = sorted(p for p in CONFIGS.glob("*.yaml") if "\ngrid:" not in p.read_text())  # sweeps: test_sweep.py
+SHIPPED = shipped_configs()
 
 STATIC = """\
 name: t

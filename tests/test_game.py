@@ -18,7 +18,7 @@ from gnerun.config import load_config
 from gnerun.game import CompiledGame, compile_game
 from gnerun.solving import solve
 
-from .conftest import CONFIGS
+from .conftest import CONFIGS, shipped_configs
 
 H_FD = 1e-6  # central-difference step
 RTOL_FD = 1e-6
@@ -79,7 +79,7 @@ def _assert_matches_fd(exact: np.ndarray, fd: np.ndarray, what: str) -> None:
 
 
 def _fd_games() -> list[tuple[str, object]]:
-    games = [(p.stem, load_config(p)) for p in sorted(CONFIGS.glob("*.yaml"))]
+    games = [(p.stem, load_config(p)) for p in shipped_configs()]
     games += [(f"nonlinear-{eq}", nonlinear_config(eq)) for eq in EQUILIBRIA]
     return games
 
