@@ -327,24 +327,43 @@ def rows_from_run(task: dict[str, Any], out: Path, wall: float | None) -> list[d
 Completed = Iterator[tuple[dict[str, Any], list[dict[str, Any]]]]
 
 
+def _ignore_sigint() -> None:
+    """Workers leave Ctrl-C to the sweep, which stops them (their points then run again on resume)."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
 def _local(tasks: list[dict[str, Any]], workers: int) -> Completed:
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
     # spawn: workers start clean (no forked BLAS or CasADi state), as on any platform
-    with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn")) as pool:
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
+                               initializer=_ignore_sigint)
+    try:
         futures = {pool.submit(run_point, t): t for t in tasks}
-        try:
-            for f in as_completed(futures):
-                task = futures[f]
-                try:
-                    rows = f.result()
-                except Exception as e:  # noqa: BLE001 - a worker process died (killed, out of memory)
-                    rows = [_row(task, K=None, status="error", message=f"worker process failed: {e}")]
-                yield task, rows
-        except BaseException:
-            pool.shutdown(wait=False, cancel_futures=True)
-            raise
+        for f in as_completed(futures):
+            task = futures[f]
+            try:
+                rows = f.result()
+            except Exception as e:  # noqa: BLE001 - a worker process died (killed, out of memory)
+                rows = [_row(task, K=None, status="error", message=f"worker process failed: {e}")]
+            yield task, rows
+    except BaseException:  # Ctrl-C, or the consumer stopped: stop the points in progress too
+        stop = getattr(pool, "terminate_workers", None)  # Python 3.14
+        if stop is not None:
+            stop()
+        else:  # before shutdown, which forgets the processes
+            procs = list((getattr(pool, "_processes", None) or {}).values())
+            for proc in procs:
+                proc.terminate()
+            for proc in procs:
+                proc.join(timeout=10)
+        pool.shutdown(wait=False, cancel_futures=True)
+        raise
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
 
 
 def _dask(tasks: list[dict[str, Any]], workers: int, address: str | None) -> Completed:
@@ -355,7 +374,11 @@ def _dask(tasks: list[dict[str, Any]], workers: int, address: str | None) -> Com
     cluster = None
     try:
         if address is None:
-            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None)
+            import logging
+
+            # warnings of its own shutdown (Ctrl-C cancels the tasks in progress) are not the user's business
+            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
+                                   silence_logs=logging.ERROR)
             client = Client(cluster)
         elif Path(address).is_file():  # a scheduler file (`dask scheduler --scheduler-file F`), as on HPC
             client = Client(scheduler_file=address, timeout="20s")

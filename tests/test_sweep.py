@@ -19,7 +19,7 @@ import pytest
 from gnerun.errors import ConfigError
 from gnerun.sweep import TIMING_COLUMNS, columns, load_sweep, loglog_slope, read_index, run_sweep
 
-from .conftest import CONFIGS, run_cli
+from .conftest import CONFIGS, gnerun_command, run_cli
 
 SMALL = f"""\
 name: small-iss
@@ -262,3 +262,37 @@ def test_the_cli_refuses_bad_sweeps_in_one_line(tmp_path: Path) -> None:
     proc = run_cli("sweep", str(good), "--out", str(notsweep))
     assert proc.returncode == 2 and "holds no sweep" in proc.stderr
     assert not (tmp_path / "never").exists()
+
+
+def test_ctrl_c_stops_the_sweep_and_its_workers_and_the_sweep_resumes(tmp_path: Path) -> None:
+    """SIGINT to the process group (a terminal's Ctrl-C) while long points run: exit 130 with one line at
+    once, no worker left, the finished point in the index; the next run skips it."""
+    spec = _spec(tmp_path, SMALL.replace("  run.steps: 12\n", "").replace(
+        "  disturbance.scale: {logspace: [-6, -2, 3]}\n  disturbance.seed: [0, 1]\n",
+        "  run.steps: [4, 200000, 200000]\n"))
+    out = tmp_path / "out"
+    proc = subprocess.Popen([*gnerun_command(), "sweep", str(spec), "--out", str(out), "--workers", "2"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, stdin=subprocess.DEVNULL,
+                            start_new_session=True)
+    try:
+        deadline = time.monotonic() + 120
+        while not (out / "index.csv").is_file() or len(read_index(out)) < 1:
+            assert time.monotonic() < deadline and proc.poll() is None
+            time.sleep(0.2)
+        rows = read_index(out)
+        assert [r["run.steps"] for r in rows] == [4]
+    finally:
+        os.killpg(proc.pid, signal.SIGINT)
+        t0 = time.monotonic()
+        _, err = proc.communicate(timeout=60)
+    assert time.monotonic() - t0 < 10 and proc.returncode == 130
+    assert err.strip().splitlines() == [f"interrupted: {out} holds the index of the finished points; run again to "
+                                        "resume"]
+    left = subprocess.run(["ps", "-o", "stat=,args=", "-g", str(proc.pid)], capture_output=True, text=True).stdout
+    assert all(line.strip().startswith("Z") for line in left.splitlines()), left  # no worker runs on
+    sw = load_sweep(spec)
+    assert json.loads((out / "sweep.json").read_text())["finished"] == 1
+    assert [p.params["run.steps"] for p in sw.points if (out / p.directory / "summary.json").is_file()] == [4]
+    short = load_sweep(_spec(tmp_path, spec.read_text().replace("[4, 200000, 200000]", "[4, 6]"), "short.yaml"))
+    again = run_sweep(short, out)
+    assert (again.ran, again.skipped) == (1, 1)
