@@ -9,7 +9,6 @@ the commands, so that ``gnerun --help`` stays fast.
 from __future__ import annotations
 
 import contextlib
-import re
 import sys
 import traceback
 from collections.abc import Iterator
@@ -64,8 +63,8 @@ def _main(
 def _fail(exc: BaseException) -> NoReturn:
     if _options["debug"]:
         traceback.print_exception(exc)
-    if isinstance(exc, InputError):
-        typer.echo(f"error: {one_line(str(exc))}", err=True)
+    if isinstance(exc, InputError):  # one line already (InputError escapes what it quotes)
+        typer.echo(f"error: {exc}", err=True)
         raise typer.Exit(2)
     if isinstance(exc, Unavailable):
         typer.echo(f"error: {one_line(str(exc))}", err=True)
@@ -91,15 +90,6 @@ def _load(config: Path, overrides: list[str] | None):
     return load_config(config, overrides or [])
 
 
-def _is_sweep_spec(path: Path) -> bool:
-    """A YAML file with top-level `grid:` and `base:` keys (read cheaply; errors are left to the loaders)."""
-    try:
-        text = path.read_text(errors="replace") if path.is_file() and path.stat().st_size < 1_000_000 else ""
-    except OSError:
-        return False
-    return bool(re.search(r"^grid:", text, re.M) and re.search(r"^base:", text, re.M))
-
-
 def _fmt(v: float | None, spec: str = ".3e") -> str:
     if v is None or v != v:
         return "-"
@@ -113,7 +103,10 @@ def validate(config: ConfigArg, set_: SetOpt = None, quiet: QuietOpt = False) ->
 
     with _reported():
         try:
-            if _is_sweep_spec(config):
+            from .config import is_sweep_spec
+            from .yaml_source import read_yaml
+
+            if is_sweep_spec(read_yaml(config)[0]):
                 from .sweep import load_sweep
 
                 if set_:
@@ -225,13 +218,9 @@ def sweep(
 ) -> None:
     """Run a grid of runs (every point a run directory) and write the index table; resumable."""
     with _reported():
-        from .errors import InputError
-        from .sweep import default_sweep_dir, load_sweep, run_sweep
+        from .sweep import check_executor, default_sweep_dir, load_sweep, run_sweep
 
-        if executor not in ("local", "dask"):
-            raise InputError(f"--executor {executor}: choose local or dask")
-        if address is not None and executor != "dask":
-            raise InputError("--address needs --executor dask")
+        check_executor(executor, workers, address)  # before the points are loaded
         sw = load_sweep(spec)
         out_dir = out if out is not None else default_sweep_dir(sw)
         if not quiet:

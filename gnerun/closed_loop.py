@@ -58,9 +58,22 @@ class ClosedLoopResult:
     def steps(self) -> int:
         return int(self.u.shape[0])
 
+    @property
+    def done(self) -> int:
+        """Sampling times run."""
+        return self.steps if self.completed is None else self.completed
+
+    @property
+    def failed_steps(self) -> list[int]:
+        failures = {str(f) for f in FAILURES}
+        return [t for t, s in enumerate(self.status) if s in failures]
+
+    @property
+    def final_e_norm(self) -> float:
+        return float(self.e_norm[self.done - 1]) if self.done else math.nan
+
     def summary(self, game: CompiledGame) -> dict:
-        failed = [t for t, s in enumerate(self.status) if s in {str(f) for f in FAILURES}]
-        done = self.steps if self.completed is None else self.completed
+        done = self.done
         states = done + 1 if self.ended == "completed" else done  # x(0..steps), or the states reached
         return json_ready({
             "K": self.K,
@@ -76,9 +89,9 @@ class ClosedLoopResult:
             "solve_time_s": self.solve_time_s[:done].tolist(),
             "status": self.status,
             "reference_status": self.reference_status,
-            "failed_steps": failed,
+            "failed_steps": self.failed_steps,
             "max_e_norm": _nanmax(self.e_norm),
-            "final_e_norm": float(self.e_norm[done - 1]) if done else math.nan,
+            "final_e_norm": self.final_e_norm,
             "median_solve_time_s": float(np.median(self.solve_time_s[:done])) if done else math.nan,
             "max_solve_time_s": float(np.max(self.solve_time_s[:done])) if done else math.nan,
         })
@@ -204,6 +217,17 @@ def closed_loop(cfg: Config, game: CompiledGame, K: int, run: RunDirectory | Non
     rng = None
     topic = f"/K{K}/mpc"
     ended, completed = "completed", steps
+
+    def record(t: int, trace: list, z_star: np.ndarray | None, x: np.ndarray, u: np.ndarray | None) -> None:
+        """Sampling time t in the log (flushed): its iterates, the state with the inputs applied, the error."""
+        for k, r, zk in trace:
+            err = None if z_star is None else float(np.linalg.norm(zk - z_star))
+            run.write(f"{topic}/iterate", MpcIterate(t=t, k=k, residual_norm=r, error_norm=err))
+        run.write(f"{topic}/state", MpcState(t=t, x=x.tolist(), u=None if u is None else u.tolist()))
+        run.write(f"{topic}/error", MpcError(t=t, e_norm=float(e[t]),
+                                              e_norm_agent={a: float(v[t]) for a, v in e_agent.items()}))
+        run.flush()
+
     for t in range(steps):
         if interrupt is not None and interrupt.requested:
             ended, completed = "interrupted", t
@@ -266,13 +290,7 @@ def closed_loop(cfg: Config, game: CompiledGame, K: int, run: RunDirectory | Non
                 e_agent[a][t] = np.linalg.norm(z[idx] - z_star[idx])
         if failed and cfg.run.on_failure == "stop":
             if run is not None:
-                for k, r, zk in trace:
-                    err = None if z_star is None else float(np.linalg.norm(zk - z_star))
-                    run.write(f"{topic}/iterate", MpcIterate(t=t, k=k, residual_norm=r, error_norm=err))
-                run.write(f"{topic}/state", MpcState(t=t, x=x.tolist(), u=None))
-                run.write(f"{topic}/error", MpcError(t=t, e_norm=float(e[t]),
-                                                      e_norm_agent={a: float(v[t]) for a, v in e_agent.items()}))
-                run.flush()
+                record(t, trace, z_star, x, None)
             ended, completed = "stopped", t + 1
             break
         if failed:
@@ -283,13 +301,7 @@ def closed_loop(cfg: Config, game: CompiledGame, K: int, run: RunDirectory | Non
         ws[t] = w
 
         if run is not None:
-            for k, r, zk in trace:
-                err = None if z_star is None else float(np.linalg.norm(zk - z_star))
-                run.write(f"{topic}/iterate", MpcIterate(t=t, k=k, residual_norm=r, error_norm=err))
-            run.write(f"{topic}/state", MpcState(t=t, x=x.tolist(), u=u.tolist()))
-            run.write(f"{topic}/error", MpcError(t=t, e_norm=float(e[t]),
-                                                  e_norm_agent={a: float(v[t]) for a, v in e_agent.items()}))
-            run.flush()
+            record(t, trace, z_star, x, u)
         if progress is not None:
             progress(K, t, steps, float(e[t]))
 
@@ -328,10 +340,8 @@ def simulate(cfg: Config, out: str | Path | None = None, *, force: bool = False,
                 break
             sim[K] = r = closed_loop(cfg, game, K, run, progress, interrupt)
             if run is not None:
-                summary = r.summary(game)
-                run.log("info", f"K={K}: {r.ended} after {summary['completed_steps']} sampling times, max e "
-                                f"{_nanmax(r.e_norm):.3e}, final e {summary['final_e_norm']}, failed steps "
-                                f"{summary['failed_steps']}")
+                run.log("info", f"K={K}: {r.ended} after {r.done} sampling times, max e "
+                                f"{_nanmax(r.e_norm):.3e}, final e {r.final_e_norm}, failed steps {r.failed_steps}")
         sim.interrupted = interrupt.requested
         if run is not None:
             run.write_summary(sim.summary())

@@ -326,7 +326,7 @@ def load_config(
         raise InputError("load_config needs a path or text")
     if not isinstance(data, dict):
         raise ConfigError([f"{smap.locate(())}: the config must be a mapping of fields, got {type(data).__name__}"])
-    if "grid" in data and "base" in data and "game" not in data:
+    if is_sweep_spec(data):
         raise ConfigError([f"{smap.locate(())}: a sweep spec, not a config: run it with `gnerun sweep`"])
     items: list[tuple[str, Any, str]] = []
     if isinstance(overrides, dict):
@@ -353,7 +353,7 @@ def load_config(
 def _validation_problems(err: ValidationError, data: Any, smap: SourceMap) -> list[str]:
     problems = []
     for e in err.errors(include_url=False):
-        path = _data_path(e["loc"], data)
+        path = document_path(e["loc"], data)
         dotted = show_path(path, "<config>")
         kind = e["type"]
         if kind == "extra_forbidden":
@@ -374,7 +374,7 @@ def _validation_problems(err: ValidationError, data: Any, smap: SourceMap) -> li
     return problems
 
 
-def _data_path(loc: tuple, data: Any) -> PathKey:
+def document_path(loc: tuple, data: Any) -> PathKey:
     """Map a pydantic error location onto the document, dropping union tags."""
     out: list[str | int] = []
     node = data
@@ -442,13 +442,32 @@ def _field_model(model: Any, part: Any, node: Any) -> Any:
 # ---------------------------------------------------------------------------------------------
 
 
+def sparse_obstacles(cfg: Config) -> list[str]:
+    """Why the sparse formulation cannot solve this config (empty: it can)."""
+    why = []
+    if isinstance(cfg.game, StaticGame):
+        why.append("a static game has no states to keep")
+    if cfg.solver.kind != "ssn":
+        why.append(f"solver.kind is {cfg.solver.kind!r} (the sparse formulation is for 'ssn')")
+    if cfg.solver.complementarity != "min":
+        why.append("it takes min-map steps (solver.complementarity: min)")
+    if cfg.disturbance.kind in ("jacobian_noise", "residual") and cfg.disturbance.scale > 0:
+        why.append(f"disturbance {cfg.disturbance.kind!r} perturbs the whole condensed JPhi or its right-hand side")
+    return why
+
+
+def is_sweep_spec(data: Any) -> bool:
+    """A document with a base config and a grid (and no game of its own): a sweep spec, not a config."""
+    return isinstance(data, dict) and "grid" in data and "base" in data and "game" not in data
+
+
 def check_semantics(cfg: Config, smap: SourceMap) -> list[str]:
     """Every problem a schema cannot see, as ``file:line:column: path: message`` lines."""
     problems: list[str] = []
 
     def report(path: PathKey, message: str, *, key: bool = False, column: int | None = None) -> None:
         where = smap.locate_in_text(path, column) if column is not None else smap.locate(path, key=key)
-        problems.append(f"{where}: {'.'.join(str(p) for p in path)}: {message}")
+        problems.append(f"{where}: {show_path(path)}: {message}")
 
     g = cfg.game
     seen: dict[str, str] = {}
@@ -558,15 +577,7 @@ def check_semantics(cfg: Config, smap: SourceMap) -> list[str]:
         report(("disturbance", "kind"), "'pseudogradient' perturbs the Josephy-Newton method; with solver.kind "
                "'ssn' use 'jacobian_noise' or 'residual'")
     if cfg.solver.formulation == "sparse":
-        why = []
-        if static:
-            why.append("a static game has no states to keep")
-        if cfg.solver.kind != "ssn":
-            why.append(f"solver.kind is {cfg.solver.kind!r} (the sparse formulation is for 'ssn')")
-        if cfg.solver.complementarity != "min":
-            why.append("it takes min-map steps (solver.complementarity: min)")
-        if cfg.disturbance.kind in ("jacobian_noise", "residual") and cfg.disturbance.scale > 0:
-            why.append(f"disturbance {cfg.disturbance.kind!r} perturbs the whole condensed JPhi or its right-hand side")
+        why = sparse_obstacles(cfg)
         if why:
             report(("solver", "formulation"), "'sparse' is not available here: " + "; ".join(why)
                    + " (use 'condensed' or 'auto')")

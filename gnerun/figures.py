@@ -171,7 +171,9 @@ SCALE_AXES = ("disturbance.scale", "disturbance.plant.scale")
 
 def _groups(rows: list[dict], axes: list[str], exclude: tuple[str, ...]) -> dict[str, list[dict]]:
     """Rows by the values of the axes that are neither plotted nor averaged (seeds), and by K."""
-    keys = [a for a in axes if a not in exclude and a not in ("disturbance.seed", "disturbance.plant.seed")]
+    from .sweep import SEED_AXES
+
+    keys = [a for a in axes if a not in exclude and a not in SEED_AXES]
     with_K = "run.K" not in exclude and len({r.get("K") for r in rows}) > 1
     out: dict[str, list[dict]] = {}
     for r in rows:

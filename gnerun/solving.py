@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .config import Config
+from .config import Config, sparse_obstacles
 from .game import CompiledGame, compile_game
 from .mcap_log import json_ready
 from .rundir import RunDirectory, recording
@@ -53,10 +53,7 @@ def formulation(cfg: Config, game: CompiledGame) -> str:
     chosen = cfg.solver.formulation
     if chosen != "auto":
         return chosen
-    d = cfg.disturbance
-    eligible = (game.kind == "dynamic" and cfg.solver.kind == "ssn" and cfg.solver.complementarity == "min"
-                and not (d.kind in ("jacobian_noise", "residual") and d.scale > 0))
-    return "sparse" if eligible and game.size >= SPARSE_FROM else "condensed"
+    return "sparse" if game.size >= SPARSE_FROM and not sparse_obstacles(cfg) else "condensed"
 
 
 def iterate(solver: SemismoothNewton, state: SSNState,

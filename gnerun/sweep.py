@@ -29,7 +29,7 @@ from typing import Annotated, Any, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-from .config import CONFIG_VERSION, Config, load_config
+from .config import CONFIG_VERSION, Config, document_path, load_config
 from .errors import ConfigError, InputError, Unavailable
 from .yaml_source import SourceMap, dotted, read_yaml
 
@@ -40,7 +40,7 @@ SPEC_FILE = "sweep.yaml"
 SWEEP_JSON = "sweep.json"
 POINT_JSON = "point.json"
 TIMING_COLUMNS = ("step_time_median_s", "step_time_max_s", "wall_s")
-SEED_AXES = ("disturbance.seed", "disturbance.plant.seed")
+SEED_AXES = ("disturbance.seed", "disturbance.plant.seed")  # averaged over in the sweep figures
 
 
 # ---------------------------------------------------------------------------------------------
@@ -165,9 +165,12 @@ def load_sweep(path: str | Path) -> Sweep:
     try:
         spec = SweepSpec.model_validate(data)
     except ValidationError as e:
-        raise ConfigError([f"{smap.locate(_loc(err['loc'], data), key=err['type'] == 'extra_forbidden')}: "
-                           f"{dotted(_loc(err['loc'], data), '<sweep>')}: {err['msg'].removeprefix('Value error, ')}"
-                           for err in e.errors()]) from None
+        problems = []
+        for err in e.errors():
+            path = document_path(err["loc"], data)
+            where = smap.locate(path, key=err["type"] == "extra_forbidden")
+            problems.append(f"{where}: {dotted(path, '<sweep>')}: {err['msg'].removeprefix('Value error, ')}")
+        raise ConfigError(problems) from None
     base = (Path(file).parent / spec.base).resolve()
     if not base.is_file():
         raise ConfigError([f"{smap.locate(('base',))}: base: no config file {spec.base!r} next to the sweep"])
@@ -197,21 +200,6 @@ def load_sweep(path: str | Path) -> Sweep:
         points.append(Point(index=i, params=params, overrides=overrides, config_hash=cfg.config_hash(),
                             directory=f"points/{_slug(params)}-{_digest(params)}"))
     return Sweep(spec=spec, source=file, base=base, points=points)
-
-
-def _loc(loc: tuple, data: Any) -> tuple:
-    out: list[Any] = []
-    node = data
-    for part in loc:
-        if isinstance(node, dict) and part in node:
-            out.append(part)
-            node = node[part]
-        elif isinstance(node, list) and isinstance(part, int) and part < len(node):
-            out.append(part)
-            node = node[part]
-        else:
-            break
-    return tuple(out)
 
 
 def _point_config(base: Path, overrides: dict[str, Any], params: dict[str, Any], i: int, smap: SourceMap) -> Config:
@@ -257,10 +245,9 @@ def run_point(task: dict[str, Any]) -> list[dict[str, Any]]:
         wall = time.perf_counter() - t0
         (out / POINT_JSON).write_text(json.dumps({"index": task["index"], "params": task["params"],
                                                   "config_hash": task["config_hash"], "wall_s": wall}) + "\n")
-        return rows_from_run(task, out, wall)
-    except BaseException as e:  # noqa: BLE001 - a failed point is a row, never the end of the sweep
-        if isinstance(e, KeyboardInterrupt):
-            raise
+        # from the written summary, as for a point skipped on resume: the same rows either way
+        return rows_from_summary(task, json.loads((out / "summary.json").read_text()), wall)
+    except Exception as e:  # noqa: BLE001 - a failed point is a row, never the end of the sweep
         message = f"{type(e).__name__}: {e}" if not isinstance(e, InputError | Unavailable) else str(e)
         try:
             out.mkdir(parents=True, exist_ok=True)
@@ -290,14 +277,13 @@ def _finite(values: list[Any]) -> list[float]:
     return [float(v) for v in values if v is not None and math.isfinite(v)]
 
 
-def rows_from_run(task: dict[str, Any], out: Path, wall: float | None) -> list[dict[str, Any]]:
+def rows_from_summary(task: dict[str, Any], summary: dict[str, Any], wall: float | None) -> list[dict[str, Any]]:
     """Index rows from a finished point's summary.json.
 
     simulate: one row per K; ``asymptotic_e`` is the mean of ||e(t)|| over the second half of the sampling
     times (the level the error settles at), ``iterations`` the solver steps of the whole loop.
     solve: one row; e is ||z^k - z*|| along the iterations.
     """
-    summary = json.loads((out / "summary.json").read_text())
     if task["command"] == "solve":
         errors = _finite(summary.get("error_history") or [])
         its = summary.get("iterations") or 0
@@ -420,15 +406,18 @@ class SweepResult(BaseModel):
     index_files: list[Path]
 
 
-def _finished(sweep_dir: Path, point: Point) -> bool:
+def _finished(sweep_dir: Path, point: Point) -> tuple[dict[str, Any], dict[str, Any]] | None:
+    """(point.json, summary.json) of a point finished with this config, or None: it has to run."""
     out = sweep_dir / point.directory
     try:
         meta = json.loads((out / POINT_JSON).read_text())
         summary = json.loads((out / "summary.json").read_text())
     except (OSError, ValueError):
-        return False
-    return (meta.get("config_hash") == point.config_hash and meta.get("status") != "error"
-            and summary.get("status") != "interrupted")
+        return None
+    if (meta.get("config_hash") == point.config_hash and meta.get("status") != "error"
+            and summary.get("status") != "interrupted"):
+        return meta, summary
+    return None
 
 
 def _task(sweep: Sweep, sweep_dir: Path, p: Point) -> dict[str, Any]:
@@ -437,14 +426,20 @@ def _task(sweep: Sweep, sweep_dir: Path, p: Point) -> dict[str, Any]:
             "out": str((sweep_dir / p.directory).resolve())}
 
 
-def run_sweep(sweep: Sweep, out: str | Path, *, executor: str = "local", workers: int = 2,
-              address: str | None = None, force: bool = False,
-              progress: Callable[[int, int, dict[str, Any], list[dict[str, Any]]], None] | None = None) -> SweepResult:
-    """Run the points not yet finished in ``out`` and write the index (after every point)."""
+def check_executor(executor: str, workers: int, address: str | None) -> None:
     if executor not in ("local", "dask"):
         raise InputError(f"--executor {executor}: choose local or dask")
     if workers < 1:
         raise InputError(f"--workers {workers}: at least 1")
+    if address is not None and executor != "dask":
+        raise InputError("--address needs --executor dask")
+
+
+def run_sweep(sweep: Sweep, out: str | Path, *, executor: str = "local", workers: int = 2,
+              address: str | None = None, force: bool = False,
+              progress: Callable[[int, int, dict[str, Any], list[dict[str, Any]]], None] | None = None) -> SweepResult:
+    """Run the points not yet finished in ``out`` and write the index (after every point)."""
+    check_executor(executor, workers, address)
     sweep_dir = Path(out)
     if sweep_dir.exists() and not sweep_dir.is_dir():
         raise InputError(f"{sweep_dir}: exists and is not a directory")
@@ -460,9 +455,10 @@ def run_sweep(sweep: Sweep, out: str | Path, *, executor: str = "local", workers
     tasks = []
     for p in sweep.points:
         task = _task(sweep, sweep_dir, p)
-        if _finished(sweep_dir, p):
-            meta = json.loads((sweep_dir / p.directory / POINT_JSON).read_text())
-            rows[p.index] = rows_from_run(task, sweep_dir / p.directory, meta.get("wall_s"))
+        finished = _finished(sweep_dir, p)
+        if finished is not None:
+            meta, summary = finished
+            rows[p.index] = rows_from_summary(task, summary, meta.get("wall_s"))
         else:
             tasks.append(task)
     skipped = len(rows)
@@ -474,7 +470,8 @@ def run_sweep(sweep: Sweep, out: str | Path, *, executor: str = "local", workers
             rows[task["index"]] = task_rows
             failed += any(r["status"] == "error" for r in task_rows)
             done += 1
-            write_index(sweep, sweep_dir, rows)
+            if done < len(sweep.points):  # the last one is written below, with the parquet table
+                write_index(sweep, sweep_dir, rows, parquet=False)
             if progress is not None:
                 progress(done, len(sweep.points), task, task_rows)
     finally:
@@ -504,8 +501,10 @@ def _cell(v: Any) -> str:
     return str(v)
 
 
-def write_index(sweep: Sweep, sweep_dir: Path, rows: dict[int, list[dict[str, Any]]]) -> list[Path]:
-    """index.csv (and index.parquet when pyarrow is installed), rows by point; replaced atomically."""
+def write_index(sweep: Sweep, sweep_dir: Path, rows: dict[int, list[dict[str, Any]]], *,
+                parquet: bool = True) -> list[Path]:
+    """index.csv (and index.parquet when pyarrow is installed and ``parquet``), rows by point; replaced
+    atomically."""
     cols = columns(sweep)
     ordered = [r for i in sorted(rows) for r in rows[i]]
     target = sweep_dir / INDEX_CSV
@@ -517,6 +516,8 @@ def write_index(sweep: Sweep, sweep_dir: Path, rows: dict[int, list[dict[str, An
             w.writerow([_cell(r.get(c)) for c in cols])
     tmp.replace(target)
     written = [target]
+    if not parquet:
+        return written
     try:
         import pyarrow as pa
         import pyarrow.parquet as pq

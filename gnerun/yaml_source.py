@@ -86,15 +86,9 @@ def _yaml_error_position(err: yaml.YAMLError, file: str) -> str:
     return f"{where}: YAML syntax error: {text}"
 
 
-def _build(node: yaml.Node, path: PathKey, smap: SourceMap, loader: yaml.SafeLoader, problems: list[str],
-           budget: list[int]) -> Any:
-    budget[0] -= 1
-    pos = _mark_to_position(node)
+def _build(node: yaml.Node, path: PathKey, smap: SourceMap, loader: yaml.SafeLoader, problems: list[str]) -> Any:
+    pos = _mark_to_position(node)  # size and depth are bounded by _check_expansion
     where = f"{smap.file}:{pos.line}:{pos.column}"
-    if budget[0] < 0:
-        raise ConfigError([f"{where}: the document has more than {MAX_NODES} nodes (alias expansion?)"])
-    if len(path) > MAX_DEPTH:
-        raise ConfigError([f"{where}: the document is nested deeper than {MAX_DEPTH} levels (a recursive alias?)"])
     if node.tag not in _PLAIN_TAGS:
         tag = node.tag.replace("tag:yaml.org,2002:", "!!")
         raise ConfigError([f"{where}: the YAML tag {tag!r} is not allowed: configs hold plain data "
@@ -116,10 +110,10 @@ def _build(node: yaml.Node, path: PathKey, smap: SourceMap, loader: yaml.SafeLoa
                 problems.append(f"{smap.file}:{pos.line}:{pos.column}: {dotted(path + (key,))}: duplicate key")
                 continue
             smap.keys[path + (key,)] = _mark_to_position(key_node)
-            out[key] = _build(value_node, path + (key,), smap, loader, problems, budget)
+            out[key] = _build(value_node, path + (key,), smap, loader, problems)
         return out
     if isinstance(node, yaml.SequenceNode):
-        return [_build(v, path + (i,), smap, loader, problems, budget) for i, v in enumerate(node.value)]
+        return [_build(v, path + (i,), smap, loader, problems) for i, v in enumerate(node.value)]
     try:
         return loader.construct_object(node, deep=True)
     except (ValueError, OverflowError):  # e.g. an integer with more digits than Python converts
@@ -128,18 +122,27 @@ def _build(node: yaml.Node, path: PathKey, smap: SourceMap, loader: yaml.SafeLoa
                            "as a number"]) from None
 
 
-def _check_depth(text: str, file: str) -> None:
-    """Refuse documents nested deeper than MAX_DEPTH before composing them (the composer recurses)."""
-    depth = 0
-    for event in yaml.parse(text, Loader=yaml.SafeLoader):
-        if isinstance(event, yaml.CollectionStartEvent):
-            depth += 1
-            if depth > MAX_DEPTH:
-                m = event.start_mark
-                raise ConfigError([f"{file}:{m.line + 1}:{m.column + 1}: the document is nested deeper than "
-                                   f"{MAX_DEPTH} levels"])
-        elif isinstance(event, yaml.CollectionEndEvent):
-            depth -= 1
+class _Loader(yaml.SafeLoader):
+    """SafeLoader whose (recursive) composer refuses collections nested deeper than MAX_DEPTH."""
+
+    def __init__(self, text: str, file: str):
+        super().__init__(text)
+        self.file = file
+        self.depth = 0
+
+    def compose_node(self, parent: yaml.Node | None, index: Any) -> yaml.Node:
+        collection = self.check_event(yaml.SequenceStartEvent, yaml.MappingStartEvent)
+        if collection:
+            self.depth += 1
+            if self.depth > MAX_DEPTH:
+                m = self.peek_event().start_mark
+                raise ConfigError([f"{self.file}:{m.line + 1}:{m.column + 1}: the document is nested deeper "
+                                   f"than {MAX_DEPTH} levels"])
+        try:
+            return super().compose_node(parent, index)
+        finally:
+            if collection:
+                self.depth -= 1
 
 
 def _check_expansion(root: yaml.Node, file: str) -> None:
@@ -222,18 +225,15 @@ def parse_yaml(text: str, file: str = "<string>") -> tuple[Any, SourceMap]:
     smap = SourceMap(file)
     problems: list[str] = []
     try:
-        _check_depth(text, file)
-        loader = yaml.SafeLoader(text)
+        loader = _Loader(text, file)  # a str is checked for special characters here, at once
     except yaml.reader.ReaderError as e:
         raise ConfigError([_reader_error_position(e, text, file)]) from None
-    except yaml.YAMLError as e:
-        raise ConfigError([_yaml_error_position(e, file)]) from None
     try:
         node = loader.get_single_node()
         if node is None:
             raise ConfigError([f"{file}:1:1: the config is empty"])
         _check_expansion(node, file)
-        data = _build(node, (), smap, loader, problems, [MAX_NODES])
+        data = _build(node, (), smap, loader, problems)
     except yaml.YAMLError as e:
         raise ConfigError([_yaml_error_position(e, file)]) from None
     except RecursionError:  # a backstop: depth and recursive aliases are caught above
