@@ -36,12 +36,12 @@ import numpy as np  # noqa: E402
 from scipy import optimize  # noqa: E402
 
 from gnerun import __version__  # noqa: E402
-from gnerun.config import load_config  # noqa: E402
-from gnerun.game import CompiledGame, compile_game  # noqa: E402
-from gnerun.mcap_log import RunLog  # noqa: E402
-from gnerun.messages import MpcError, MpcIterate, MpcState  # noqa: E402
-from gnerun.solving import formulation, make_solver  # noqa: E402
-from gnerun.ssn import FAILURES, Status  # noqa: E402
+from gnerun.game.compile import CompiledGame, compile_game  # noqa: E402
+from gnerun.language.config import load_config  # noqa: E402
+from gnerun.log.mcap_log import RunLog  # noqa: E402
+from gnerun.log.messages import MpcError, MpcIterate, MpcState  # noqa: E402
+from gnerun.runs.solving import formulation, make_solver  # noqa: E402
+from gnerun.solvers.ssn import FAILURES, Status  # noqa: E402
 
 from . import peers  # noqa: E402
 from .family import family_config  # noqa: E402

@@ -12,7 +12,7 @@ diagonal dynamics, coupled costs through the states, one coupled constraint each
 
 from __future__ import annotations
 
-from gnerun.config import Config, load_config
+from gnerun.language.config import Config, load_config
 
 
 def family_yaml(N: int, T: int) -> str:

@@ -159,9 +159,9 @@ def _median_time(fn: Callable[[], Any], repeats: int) -> tuple[float, Any]:
 def gnerun_solution(T: int, repeats: int) -> tuple[np.ndarray, float, str]:
     """(inputs z, median time of the solve loop, a note) of gnerun's SSN; the game is compiled and the solver built
     once, outside the timing; the first solve (a fresh solver) is not in the median."""
-    from gnerun.config import load_config
-    from gnerun.game import compile_game
-    from gnerun.solving import make_solver
+    from gnerun.game.compile import compile_game
+    from gnerun.language.config import load_config
+    from gnerun.runs.solving import make_solver
 
     cfg = load_config(CONFIG, {"solver.kind": "ssn", "game.horizon": T})
     game = compile_game(cfg)

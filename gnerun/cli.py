@@ -85,7 +85,7 @@ def _reported() -> Iterator[None]:
 
 
 def _load(config: Path, overrides: list[str] | None):
-    from .config import load_config
+    from .language.config import load_config
 
     return load_config(config, overrides or [])
 
@@ -103,11 +103,11 @@ def validate(config: ConfigArg, set_: SetOpt = None, quiet: QuietOpt = False) ->
 
     with _reported():
         try:
-            from .config import is_sweep_spec
-            from .yaml_source import read_yaml
+            from .language.config import is_sweep_spec
+            from .language.yaml_source import read_yaml
 
             if is_sweep_spec(read_yaml(config)[0]):
-                from .sweep import load_sweep
+                from .runs.sweep import load_sweep
 
                 if set_:
                     raise ConfigError(["--set applies to configs; a sweep's fixed overrides are its `set:`"])
@@ -121,8 +121,8 @@ def validate(config: ConfigArg, set_: SetOpt = None, quiet: QuietOpt = False) ->
             for p in e.problems:
                 typer.echo(f"error: {p}", err=True)
             raise typer.Exit(2) from None
-        from .game import compile_game
-        from .solving import make_solver
+        from .game.compile import compile_game
+        from .runs.solving import make_solver
 
         game = compile_game(cfg)
         make_solver(cfg, game)  # refuses what the configured method cannot solve
@@ -137,8 +137,8 @@ def solve(config: ConfigArg, out: OutOpt = None, set_: SetOpt = None, quiet: Qui
     """Solve one equilibrium problem (a static game, or a dynamic game at its x0)."""
     with _reported():
         cfg = _load(config, set_)
-        from .rundir import default_run_dir
-        from .solving import solve as run_solve
+        from .runs.rundir import default_run_dir
+        from .runs.solving import solve as run_solve
 
         out_dir = out if out is not None else default_run_dir(cfg)
 
@@ -175,8 +175,8 @@ def simulate(config: ConfigArg, out: OutOpt = None, set_: SetOpt = None, quiet: 
     """Run the closed loop (time-distributed CG-MPC) for every K in run.K."""
     with _reported():
         cfg = _load(config, set_)
-        from .closed_loop import simulate as run_simulate
-        from .rundir import default_run_dir
+        from .runs.closed_loop import simulate as run_simulate
+        from .runs.rundir import default_run_dir
 
         out_dir = out if out is not None else default_run_dir(cfg)
         if not quiet:
@@ -218,7 +218,7 @@ def sweep(
 ) -> None:
     """Run a grid of runs (every point a run directory) and write the index table; resumable."""
     with _reported():
-        from .sweep import check_executor, default_sweep_dir, load_sweep, run_sweep
+        from .runs.sweep import check_executor, default_sweep_dir, load_sweep, run_sweep
 
         check_executor(executor, workers, address)  # before the points are loaded
         sw = load_sweep(spec)
@@ -257,7 +257,7 @@ RunArgs = Annotated[list[Path], typer.Argument(
 
 def _existing_logs(runs: list[Path]) -> list[Path]:
     from .errors import InputError
-    from .mcap_log import run_log_path
+    from .log.mcap_log import run_log_path
 
     for run in runs:
         if not run_log_path(run).is_file():
@@ -275,13 +275,13 @@ def figures(
     """Paper-style figures (Studies 1-3) from run logs, and sweep figures from sweep directories."""
     with _reported():
         from .errors import InputError
-        from .figures import write_figures
+        from .view.figures import write_figures
 
         formats = [f.strip().lower() for f in format_.split(",") if f.strip()]
         bad = [f for f in formats if f not in ("png", "pdf", "svg")]
         if bad or not formats:
             raise InputError(f"--format {format_}: choose from png, pdf, svg")
-        from .sweep import is_sweep_dir
+        from .runs.sweep import is_sweep_dir
 
         sweeps = [r for r in runs if is_sweep_dir(r)]
         written = write_figures(_existing_logs([r for r in runs if r not in sweeps]), out, formats, sweeps=sweeps)
@@ -299,7 +299,7 @@ def inspect(run: Annotated[Path, typer.Argument(help="A run directory or its run
         import datetime as dt
         import json
 
-        from .mcap_log import read_run
+        from .log.mcap_log import read_run
 
         record = read_run(_existing_logs([run])[0])
         summary_file = record.path.parent / "summary.json"
@@ -347,8 +347,8 @@ def replay(
         import os
         import tempfile
 
-        from . import replay as rp
         from .errors import InputError
+        from .view import replay as rp
 
         runs = _existing_logs(runs)
         rp.check_size(size)
@@ -385,8 +385,8 @@ def recover(
     """Write a finished, indexed copy of a run log whose writer was killed."""
     with _reported():
         from .errors import InputError
-        from .mcap_log import recover as recover_log
-        from .mcap_log import run_log_path
+        from .log.mcap_log import recover as recover_log
+        from .log.mcap_log import run_log_path
 
         source = run_log_path(_existing_logs([run])[0])
         target = out if out is not None else source.with_name("run.recovered.mcap")

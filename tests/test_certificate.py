@@ -1,4 +1,4 @@
-"""gnerun.certificate: best responses, gaps and KKT residuals against closed forms.
+"""gnerun.solvers.certificate: best responses, gaps and KKT residuals against closed forms.
 
 References: Facchinei & Kanzow (2010) Examples A.11 (variational GNE (3/4, 1/4), common multiplier 1/2)
 and A.12 (NE (16/3, 16/3)), Harker's game (GNE (5, 9), and the segment x1 + x2 = 15, 9 <= x1 <= 10),
@@ -11,10 +11,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gnerun.certificate import best_response, certificate, kkt_residuals
-from gnerun.config import load_config
-from gnerun.game import CompiledGame, compile_game
-from gnerun.solving import solve
+from gnerun.game.compile import CompiledGame, compile_game
+from gnerun.language.config import load_config
+from gnerun.runs.solving import solve
+from gnerun.solvers.certificate import best_response, certificate, kkt_residuals
 
 from .conftest import CONFIGS
 

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from gnerun.mcap_log import read_messages
+from gnerun.log.mcap_log import read_messages
 
 from .conftest import CONFIGS, run_cli
 

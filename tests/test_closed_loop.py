@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 from scipy.optimize import linprog
 
-from gnerun.closed_loop import simulate
-from gnerun.config import load_config
 from gnerun.errors import InputError
-from gnerun.game import compile_game
-from gnerun.mcap_log import read_messages
-from gnerun.solving import solve
+from gnerun.game.compile import compile_game
+from gnerun.language.config import load_config
+from gnerun.log.mcap_log import read_messages
+from gnerun.runs.closed_loop import simulate
+from gnerun.runs.solving import solve
 
 from .conftest import CONFIGS, run_cli
 

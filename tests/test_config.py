@@ -8,9 +8,9 @@ from pathlib import Path
 
 import pytest
 
-from gnerun.config import load_config, parse_override
 from gnerun.errors import ConfigError, InputError
-from gnerun.yaml_source import MAX_CONFIG_BYTES
+from gnerun.language.config import load_config, parse_override
+from gnerun.language.yaml_source import MAX_CONFIG_BYTES
 
 from .conftest import CONFIGS, shipped_configs
 

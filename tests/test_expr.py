@@ -10,7 +10,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from gnerun.expr import (
+from gnerun.language.expr import (
     MAX_DEPTH,
     MAX_LENGTH,
     ExpressionError,

@@ -8,11 +8,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gnerun.closed_loop import simulate
-from gnerun.config import load_config
-from gnerun.figures import make_figures, write_figures
-from gnerun.mcap_log import read_run
-from gnerun.solving import solve
+from gnerun.language.config import load_config
+from gnerun.log.mcap_log import read_run
+from gnerun.runs.closed_loop import simulate
+from gnerun.runs.solving import solve
+from gnerun.view.figures import make_figures, write_figures
 
 from .conftest import CONFIGS, run_cli
 

@@ -1,4 +1,4 @@
-"""gnerun.game: exact derivatives against central differences, the condensed games against hand-written
+"""gnerun.game.compile: exact derivatives against central differences, the condensed games against hand-written
 numpy models (the paper's Study 1 and a nonlinear unicycle-like game), layout, sparsity and dynamics.
 
 Every reference here is computed independently of gnerun: finite differences, explicit numpy roll-outs
@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from gnerun.config import load_config
-from gnerun.game import CompiledGame, compile_game
-from gnerun.solving import solve
+from gnerun.game.compile import CompiledGame, compile_game
+from gnerun.language.config import load_config
+from gnerun.runs.solving import solve
 
 from .conftest import CONFIGS, shipped_configs
 

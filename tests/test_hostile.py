@@ -26,9 +26,9 @@ import yaml
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
-from gnerun.config import load_config
 from gnerun.errors import ConfigError, InputError
-from gnerun.expr import (
+from gnerun.language.config import load_config
+from gnerun.language.expr import (
     MAX_LENGTH,
     ExpressionError,
     casadi_functions,
@@ -38,8 +38,8 @@ from gnerun.expr import (
     parse_constraint,
     parse_expression,
 )
-from gnerun.solving import solve
-from gnerun.yaml_source import MAX_CONFIG_BYTES
+from gnerun.language.yaml_source import MAX_CONFIG_BYTES
+from gnerun.runs.solving import solve
 
 from .conftest import CONFIGS, run_cli
 
@@ -517,7 +517,7 @@ def mutated_sweep(draw):
 @given(mutated_sweep())
 def test_sweep_specs(doc) -> None:
     """Mutated sweep specs: a sweep (every point's config valid), or located one-line ConfigErrors."""
-    from gnerun.sweep import load_sweep
+    from gnerun.runs.sweep import load_sweep
 
     _count("sweep_specs")
     path = Path(f"/tmp/gnerun-hostile-sweep-{uuid.uuid4().hex[:8]}.yaml")

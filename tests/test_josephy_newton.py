@@ -7,11 +7,11 @@ import math
 import numpy as np
 import pytest
 
-from gnerun.closed_loop import simulate
-from gnerun.config import load_config
 from gnerun.errors import InputError
-from gnerun.game import compile_game
-from gnerun.solving import iterate, make_solver, solve
+from gnerun.game.compile import compile_game
+from gnerun.language.config import load_config
+from gnerun.runs.closed_loop import simulate
+from gnerun.runs.solving import iterate, make_solver, solve
 
 from .conftest import CONFIGS, run_cli
 

@@ -7,8 +7,8 @@ import itertools
 import numpy as np
 import pytest
 
-from gnerun.josephy_newton import solve_affine_vi
-from gnerun.lcp import LCPStatus, lemke
+from gnerun.solvers.josephy_newton import solve_affine_vi
+from gnerun.solvers.lcp import LCPStatus, lemke
 
 
 def enumerate_solutions(M: np.ndarray, q: np.ndarray, tol: float = 1e-9) -> list[np.ndarray]:

@@ -14,10 +14,10 @@ from mcap.reader import make_reader
 from mcap.records import Message
 from mcap.stream_reader import StreamReader
 
-from gnerun.config import load_config
-from gnerun.mcap_log import RunLog, read_messages
-from gnerun.messages import SolveIterate
-from gnerun.solving import solve
+from gnerun.language.config import load_config
+from gnerun.log.mcap_log import RunLog, read_messages
+from gnerun.log.messages import SolveIterate
+from gnerun.runs.solving import solve
 
 from .conftest import CONFIGS
 
@@ -138,7 +138,7 @@ def test_a_killed_writer_keeps_every_flushed_message(tmp_path: Path) -> None:
 
 
 def test_topic_and_message_type_must_agree(tmp_path: Path) -> None:
-    from gnerun.messages import LogEntry
+    from gnerun.log.messages import LogEntry
 
     with RunLog(tmp_path / "x.mcap", config_yaml="", metadata={}) as log, pytest.raises(TypeError):
         log.write("/solve/iterate", LogEntry(level="info", message="wrong topic"))

@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gnerun.closed_loop import simulate
-from gnerun.config import load_config
 from gnerun.errors import InputError
-from gnerun.game import compile_agent_problem, compile_game
-from gnerun.solving import make_solver, solve
+from gnerun.game.compile import compile_agent_problem, compile_game
+from gnerun.language.config import load_config
+from gnerun.runs.closed_loop import simulate
+from gnerun.runs.solving import make_solver, solve
 
 from .conftest import CONFIGS
 

@@ -6,10 +6,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gnerun.config import load_config
-from gnerun.game import compile_game
-from gnerun.solving import make_solver
-from gnerun.ssn import Status
+from gnerun.game.compile import compile_game
+from gnerun.language.config import load_config
+from gnerun.runs.solving import make_solver
+from gnerun.solvers.ssn import Status
 
 from .conftest import CONFIGS
 

@@ -19,10 +19,10 @@ import pytest
 from mcap.reader import make_reader
 
 from gnerun import simulate, solve
-from gnerun.certificate import kkt_residuals
-from gnerun.config import ConfigError, load_config
-from gnerun.game import compile_game
-from gnerun.mcap_log import read_run
+from gnerun.game.compile import compile_game
+from gnerun.language.config import ConfigError, load_config
+from gnerun.log.mcap_log import read_run
+from gnerun.solvers.certificate import kkt_residuals
 
 from .conftest import CONFIGS, gnerun_command, run_cli
 

@@ -14,11 +14,11 @@ import numpy as np
 import pytest
 from rerun.chunk import RrdReader
 
-from gnerun.closed_loop import simulate
-from gnerun.config import load_config
-from gnerun.mcap_log import read_run
-from gnerun.replay import PALETTE, save, serve_command, vulkan_available
-from gnerun.solving import solve
+from gnerun.language.config import load_config
+from gnerun.log.mcap_log import read_run
+from gnerun.runs.closed_loop import simulate
+from gnerun.runs.solving import solve
+from gnerun.view.replay import PALETTE, save, serve_command, vulkan_available
 
 from .conftest import CONFIGS, gnerun_command, run_cli
 
@@ -186,7 +186,7 @@ def test_blueprint_has_one_view_per_paper_figure(runs, tmp_path: Path) -> None:
 
 def test_figure_views_fix_their_axes_to_the_data(runs) -> None:
     """The views' ranges hold every logged value: a viewer opening the recording shows all of it."""
-    from gnerun.replay import record
+    from gnerun.view.replay import record
 
     class Sink:  # a recording stream that keeps nothing
         def __getattr__(self, name):
@@ -234,7 +234,7 @@ def test_screenshots_show_the_figures(runs, tmp_path: Path) -> None:
 def test_screenshots_without_vulkan_say_what_to_install(runs, tmp_path: Path, monkeypatch) -> None:
     from typer.testing import CliRunner
 
-    import gnerun.replay as rp
+    import gnerun.view.replay as rp
     from gnerun.cli import app
 
     monkeypatch.setattr(rp, "_ICD_DIRS", ())

@@ -8,11 +8,11 @@ import pytest
 
 from benchmarks.family import family_config, family_yaml
 from gnerun import simulate, solve
-from gnerun.config import ConfigError, load_config
-from gnerun.game import compile_game
-from gnerun.solving import SPARSE_FROM, formulation, make_solver
-from gnerun.sparse import SparseSemismoothNewton
-from gnerun.ssn import SemismoothNewton, Status
+from gnerun.game.compile import compile_game
+from gnerun.language.config import ConfigError, load_config
+from gnerun.runs.solving import SPARSE_FROM, formulation, make_solver
+from gnerun.solvers.sparse_ssn import SparseSemismoothNewton
+from gnerun.solvers.ssn import SemismoothNewton, Status
 
 from .conftest import CONFIGS, run_cli
 

@@ -7,10 +7,10 @@ import math
 import numpy as np
 import pytest
 
-from gnerun.config import load_config
-from gnerun.game import KKTParts, compile_game
-from gnerun.solving import iterate, make_solver, solve
-from gnerun.ssn import SemismoothNewton, Status
+from gnerun.game.compile import KKTParts, compile_game
+from gnerun.language.config import load_config
+from gnerun.runs.solving import iterate, make_solver, solve
+from gnerun.solvers.ssn import SemismoothNewton, Status
 
 from .conftest import CONFIGS
 

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from gnerun.errors import ConfigError
-from gnerun.sweep import TIMING_COLUMNS, columns, load_sweep, loglog_slope, read_index, run_sweep
+from gnerun.runs.sweep import TIMING_COLUMNS, columns, load_sweep, loglog_slope, read_index, run_sweep
 
 from .conftest import CONFIGS, gnerun_command, run_cli
 

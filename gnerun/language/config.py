@@ -27,7 +27,7 @@ from pydantic import (
     ValidationError,
 )
 
-from .errors import ConfigError, InputError
+from ..errors import ConfigError, InputError
 from .expr import (
     FUNCTIONS,
     ExpressionError,

@@ -31,8 +31,8 @@ import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 
-from .config import Config, DynamicGame, LinearDynamics, StaticGame
-from .expr import casadi_functions, evaluate, parse_constraint, parse_expression
+from ..language.config import Config, DynamicGame, LinearDynamics, StaticGame
+from ..language.expr import casadi_functions, evaluate, parse_constraint, parse_expression
 
 
 class Evaluator:

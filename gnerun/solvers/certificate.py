@@ -19,7 +19,7 @@ import warnings
 import numpy as np
 from scipy.optimize import minimize
 
-from .game import CompiledGame
+from ..game.compile import CompiledGame
 
 FEASIBILITY_TOL = 1e-9
 

@@ -22,9 +22,9 @@ from dataclasses import replace
 
 import numpy as np
 
-from .config import DisturbanceConfig, SolverConfig
-from .errors import InputError
-from .game import CompiledGame
+from ..errors import InputError
+from ..game.compile import CompiledGame
+from ..language.config import DisturbanceConfig, SolverConfig
 from .lcp import lemke
 from .ssn import FAILURES, SemismoothNewton, SSNState, Status, _noise
 

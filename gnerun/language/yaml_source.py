@@ -14,7 +14,7 @@ from typing import Any
 
 import yaml
 
-from .errors import ConfigError
+from ..errors import ConfigError
 
 MAX_CONFIG_BYTES = 1_000_000
 MAX_NODES = 200_000

@@ -16,7 +16,7 @@ import math
 import re
 from pathlib import Path
 
-from .mcap_log import RunRecord, read_run
+from ..log.mcap_log import RunRecord, read_run
 
 _K_TOPIC = re.compile(r"^/K(\d+)/mpc/(state|error|iterate)$")
 
@@ -171,7 +171,7 @@ SCALE_AXES = ("disturbance.scale", "disturbance.plant.scale")
 
 def _groups(rows: list[dict], axes: list[str], exclude: tuple[str, ...]) -> dict[str, list[dict]]:
     """Rows by the values of the axes that are neither plotted nor averaged (seeds), and by K."""
-    from .sweep import SEED_AXES
+    from ..runs.sweep import SEED_AXES
 
     keys = [a for a in axes if a not in exclude and a not in SEED_AXES]
     with_K = "run.K" not in exclude and len({r.get("K") for r in rows}) > 1
@@ -198,7 +198,7 @@ def iss_figure(name: str, rows: list[dict], axes: list[str], scale_axis: str):
     line, and the fitted slope (the ISS gain's order) in the legend."""
     import matplotlib.pyplot as plt
 
-    from .sweep import loglog_slope
+    from ..runs.sweep import loglog_slope
 
     fig, ax = plt.subplots(figsize=(4.2, 3.2))
     for label, group in _groups(rows, axes, (scale_axis,)).items():
@@ -241,7 +241,7 @@ def sweep_figures(sweep_dir: str | Path) -> dict[str, object]:
     """The figures a sweep's index supports: <name>-iss (a disturbance-scale axis), <name>-k (a run.K axis)."""
     import json
 
-    from .sweep import SWEEP_JSON, read_index
+    from ..runs.sweep import SWEEP_JSON, read_index
 
     _style()
     meta = json.loads((Path(sweep_dir) / SWEEP_JSON).read_text())

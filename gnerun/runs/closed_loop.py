@@ -24,14 +24,14 @@ from pathlib import Path
 
 import numpy as np
 
-from .config import Config, PlantDisturbance
-from .errors import InputError
-from .game import CompiledGame, compile_game
-from .mcap_log import json_ready
-from .messages import MpcError, MpcIterate, MpcState
+from ..errors import InputError
+from ..game.compile import CompiledGame, compile_game
+from ..language.config import Config, PlantDisturbance
+from ..log.mcap_log import json_ready
+from ..log.messages import MpcError, MpcIterate, MpcState
+from ..solvers.ssn import FAILURES, Status
 from .rundir import RunDirectory, recording
 from .solving import make_solver, reference_solution
-from .ssn import FAILURES, Status
 
 
 @dataclass

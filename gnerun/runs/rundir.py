@@ -11,11 +11,11 @@ import subprocess
 from collections.abc import Iterator
 from pathlib import Path
 
-from . import __version__
-from .config import Config
-from .errors import InputError, WriteError
-from .mcap_log import RunLog, json_ready
-from .messages import Message, SolveIterate
+from .. import __version__
+from ..errors import InputError, WriteError
+from ..language.config import Config
+from ..log.mcap_log import RunLog, json_ready
+from ..log.messages import Message, SolveIterate
 
 
 def default_run_dir(cfg: Config, root: str | Path = "runs") -> Path:

@@ -21,9 +21,9 @@ from dataclasses import replace
 
 import numpy as np
 
-from .config import Config, SolverConfig
-from .errors import InputError
-from .game import CompiledGame, compile_agent_problem
+from ..errors import InputError
+from ..game.compile import CompiledGame, compile_agent_problem
+from ..language.config import Config, SolverConfig
 from .ssn import FAILURES, SemismoothNewton, SSNState
 
 

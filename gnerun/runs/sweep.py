@@ -29,9 +29,9 @@ from typing import Annotated, Any, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-from .config import CONFIG_VERSION, Config, document_path, load_config
-from .errors import ConfigError, InputError, Unavailable
-from .yaml_source import SourceMap, dotted, read_yaml
+from ..errors import ConfigError, InputError, Unavailable
+from ..language.config import CONFIG_VERSION, Config, document_path, load_config
+from ..language.yaml_source import SourceMap, dotted, read_yaml
 
 MAX_POINTS = 10_000  # every point's config is checked before the sweep starts
 INDEX_CSV = "index.csv"

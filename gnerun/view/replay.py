@@ -18,9 +18,9 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .errors import InputError, Unavailable
+from ..errors import InputError, Unavailable
+from ..log.mcap_log import RunRecord, read_run
 from .figures import ZERO_AT, closed_loops, disturbance, run_name, solver_kind
-from .mcap_log import RunRecord, read_run
 
 APPLICATION_ID = "gnerun"
 

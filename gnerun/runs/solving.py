@@ -13,27 +13,28 @@ from pathlib import Path
 
 import numpy as np
 
-from .config import Config, sparse_obstacles
-from .game import CompiledGame, compile_game
-from .mcap_log import json_ready
+from ..game.compile import CompiledGame, compile_game
+from ..language.config import Config, sparse_obstacles
+from ..log.mcap_log import json_ready
+from ..solvers.ssn import SemismoothNewton, SSNState, Status
 from .rundir import RunDirectory, recording
-from .ssn import SemismoothNewton, SSNState, Status
 
 
 def make_solver(cfg: Config, game: CompiledGame, *, disturbed: bool = True) -> SemismoothNewton:
     """The solver the config asks for (``solver.kind``), with its disturbance model (unless not ``disturbed``)."""
     disturbance = cfg.disturbance if disturbed else None
     if cfg.solver.kind == "distributed":
-        from .proximal_response import ProximalResponse
+        from ..solvers.proximal_response import ProximalResponse
 
         return ProximalResponse(cfg if disturbed else cfg.model_copy(update={"disturbance": type(cfg.disturbance)()}),
                                 game)
     if cfg.solver.kind == "jn":
-        from .josephy_newton import JosephyNewton
+        from ..solvers.josephy_newton import JosephyNewton
 
         return JosephyNewton(game, cfg.solver, disturbance)
     if formulation(cfg, game) == "sparse":
-        from .sparse import SparseSemismoothNewton, compile_sparse
+        from ..game.sparse import compile_sparse
+        from ..solvers.sparse_ssn import SparseSemismoothNewton
 
         system = game.derived.get("sparse")
         if system is None:
@@ -202,7 +203,7 @@ def solve(cfg: Config, out: str | Path | None = None, *, force: bool = False,
 
 def _solve(cfg: Config, game: CompiledGame, solver: SemismoothNewton, run: RunDirectory | None,
            compile_time: float, on_iterate: Callable[[SSNState, float | None], None] | None) -> SolveResult:
-    from .certificate import certificate
+    from ..solvers.certificate import certificate
 
     x = game.x0
     z0 = game.z_start()

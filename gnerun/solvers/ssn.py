@@ -32,8 +32,8 @@ from enum import StrEnum
 import numpy as np
 from scipy.linalg import lapack
 
-from .config import DisturbanceConfig, SolverConfig
-from .game import CompiledGame, KKTParts
+from ..game.compile import CompiledGame, KKTParts
+from ..language.config import DisturbanceConfig, SolverConfig
 
 _FB_TIE = 1.0 - 1.0 / math.sqrt(2.0)
 
@@ -90,7 +90,7 @@ class SSNState:
 class SemismoothNewton:
     """The semismooth Newton method for a compiled game (see the module docstring)."""
 
-    condensed = True  # steps through the condensed KKT system (see gnerun.sparse for the other formulation)
+    condensed = True  # steps through the condensed KKT system (see gnerun.game.sparse for the other formulation)
 
     def __init__(self, game: CompiledGame, solver: SolverConfig, disturbance: DisturbanceConfig | None = None):
         self.game = game

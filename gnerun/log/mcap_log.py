@@ -21,7 +21,7 @@ from typing import IO, Any
 import numpy as np
 from mcap.writer import CompressionType, Writer
 
-from .errors import WriteError
+from ..errors import WriteError
 from .messages import TOPICS, LogEntry, Message
 
 PROFILE = "gnerun"

@@ -1,0 +1,1 @@
+"""Config -> CompiledGame: the KKT system with exact derivatives, condensed and sparse."""

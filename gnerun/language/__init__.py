@@ -1,0 +1,1 @@
+"""YAML text -> validated Config: the reader, expressions and the config models."""

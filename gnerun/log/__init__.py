@@ -1,0 +1,1 @@
+"""The MCAP run log: the sink and its messages (knows no solver)."""

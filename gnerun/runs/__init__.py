@@ -1,0 +1,1 @@
+"""Drivers: solve, closed loop, sweeps and run directories (solvers + the log sink)."""

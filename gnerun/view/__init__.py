@@ -1,0 +1,1 @@
+"""Figures and Rerun replays, from run logs only."""
