@@ -109,3 +109,43 @@ def test_distributed_refuses_what_it_cannot_do() -> None:
         solve(load_config(CONFIGS / "fk_a11.yaml", {"solver.kind": "distributed"}))
     with pytest.raises(InputError, match="disturbance"):
         solve(load_config(STUDY3, {"disturbance.kind": "jacobian_noise", "disturbance.scale": 1e-3}))
+
+
+# Two players: each agent's "others" is one scalar. A Cournot duopoly with inverse demand 10 - (q1 + q2) and unit
+# costs c_i has the closed-form equilibrium q_i = (10 - 2 c_i + c_j) / 3: (10/3, 7/3) for c = (1, 2).
+DUOPOLY = """
+name: duopoly
+game:
+  kind: static
+  agents:
+    - name: firm1
+      variables: {q1: {lower: 0, upper: 10, start: 0}}
+      cost: "-(10 - q1 - q2)*q1 + 1*q1"
+    - name: firm2
+      variables: {q2: {lower: 0, upper: 10, start: 0}}
+      cost: "-(10 - q1 - q2)*q2 + 2*q2"
+solver: {kind: distributed, tol: 1.0e-11, max_iter: 200}
+"""
+
+
+@pytest.mark.parametrize("scheme", ["jacobi", "gauss_seidel"])
+@pytest.mark.parametrize("inner", ["ssn", "jn"])
+def test_two_player_distributed_games_reach_the_closed_form_equilibrium(scheme: str, inner: str) -> None:
+    cfg = load_config(text=DUOPOLY, overrides={"solver.scheme": scheme, "solver.inner": inner})
+    res = solve(cfg)
+    assert res.status == "converged", res.message
+    np.testing.assert_allclose(res.a, [10 / 3, 7 / 3], atol=1e-9)
+    a12 = solve(load_config(CONFIGS / "fk_a12.yaml", {"solver.kind": "distributed", "solver.scheme": scheme,
+                                                        "solver.inner": inner, "solver.max_iter": 200}))
+    assert a12.status == "converged", a12.message
+    np.testing.assert_allclose(a12.a, [16 / 3, 16 / 3], atol=1e-9)
+
+
+def test_a_two_player_agent_problem_sees_the_other_player() -> None:
+    # agent 1's proximal problem with the other's decision as a parameter: its cost at (q1; q2) is firm 1's cost
+    cfg = load_config(text=DUOPOLY)
+    problem = compile_agent_problem(cfg, 0, 0.0)
+    assert problem.n == 1
+    for q1, q2 in [(1.0, 2.0), (3.0, 0.5)]:
+        p = np.array([q2, q1])  # (x: none, others: q2, centre: q1)
+        assert problem.costs(np.array([q1]), p)[0] == pytest.approx(-(10 - q1 - q2) * q1 + q1)

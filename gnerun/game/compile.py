@@ -616,7 +616,9 @@ def compile_agent_problem(cfg: Config, agent: int, tau: float) -> CompiledGame:
     others = ca.SX.sym("abar_others", lay.n - ni)
     centre = ca.SX.sym("abar_i", ni)
     xs = ca.SX.sym("x", lay.nx)
-    a_full = ca.vertcat(others[: sl.start], ai, others[sl.start :])
+    # row and column slices: a one-element vector sliced by rows alone is 1 x 1, and its empty slice 1 x 0, which
+    # vertcat would turn into a structural zero row
+    a_full = ca.vertcat(others[: sl.start, :], ai, others[sl.start :, :])
     ex = _expressions(g, lay, a_full, xs, [agent], shared_as_own=True)
     cost = ex.costs[agent] + 0.5 * tau * ca.sumsqr(ai - centre)
     own_lay = _Layout([lay.variable_names[agent]], [slice(0, ni)], ni, lay.nx + lay.n, None,
