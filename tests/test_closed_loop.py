@@ -35,7 +35,7 @@ def _exact_closed_loop(steps: int) -> tuple[np.ndarray, np.ndarray]:
     x = np.array([1.0, 3.0, 5.0])
     xs, us = [x], []
     for _ in range(steps):
-        res = solve(load_config(STUDY2, {"game.x0": x.tolist(), "solver.line_search": True}))
+        res = solve(load_config(STUDY2, {"game.x0": x.tolist(), "solver.globalization": "hybrid"}))
         assert res.status == "converged"
         u = np.array([res.solution[f"agent{i}"][f"u{i}"][0] for i in (1, 2, 3)])
         x = A @ x + u

@@ -39,7 +39,8 @@ game:
 # (name, config, status): one injected fault each
 FAULTS = [
     ("singular JPhi: a plain GNE whose agents share one constraint",
-     lambda: load_config(CONFIGS / "fk_a11.yaml", {"game.equilibrium": "generalized"}), "singular_jacobian"),
+     lambda: load_config(CONFIGS / "fk_a11.yaml", {"game.equilibrium": "generalized", "solver.globalization": "none"}),
+     "singular_jacobian"),
     ("NaN from an expression: sqrt of a negative number", lambda: load_config(text=STATIC_SQRT), "nan"),
     ("divergence under large noise on JPhi",
      lambda: load_config(CONFIGS / "paper_study1.yaml", {"disturbance.kind": "jacobian_noise",

@@ -16,12 +16,12 @@ from gnerun.solvers.ssn import SemismoothNewton, Status
 
 from .conftest import CONFIGS, run_cli
 
-VEHICLES_SSN = {"solver.kind": "ssn", "solver.line_search": False, "solver.complementarity": "min"}
+VEHICLES_SSN = {"solver.kind": "ssn", "solver.globalization": "none", "solver.complementarity": "min"}
 CASES = [
     ("paper_study1", {}),
     ("vehicles", VEHICLES_SSN),  # nonlinear dynamics and costs, a nonconvex shared constraint
-    ("vehicles", {**VEHICLES_SSN, "solver.line_search": True}),
-    ("variational_gne", {"solver.kind": "ssn"}),  # bounds and a shared constraint with a common multiplier
+    ("vehicles", {**VEHICLES_SSN, "solver.globalization": "line_search"}),
+    ("variational_gne", {"solver.kind": "ssn", "solver.globalization": "none"}),  # bounds, a common multiplier
 ]
 
 
@@ -110,7 +110,8 @@ def test_a_singular_system_is_a_status_in_the_sparse_formulation_too() -> None:
     text = text.replace("equilibrium: variational", "equilibrium: generalized")
     statuses = {}
     for f in ("condensed", "sparse"):
-        cfg = load_config(text=text, overrides={"solver.kind": "ssn", "solver.formulation": f})
+        cfg = load_config(text=text, overrides={"solver.kind": "ssn", "solver.formulation": f,
+                                                "solver.globalization": "none"})
         statuses[f] = solve(cfg)
     assert statuses["condensed"].status == statuses["sparse"].status == "singular_jacobian"
     assert "continuum of equilibria" in statuses["sparse"].message

@@ -106,6 +106,8 @@ class CompiledGame:
     variable_names: list[list[str]]  # per agent: its variables (static) or inputs (dynamic)
     constraints: list[ConstraintInfo]
     a_start: np.ndarray
+    a_lower: np.ndarray  # bounds of the decision variables (-inf/inf: none); their rows are constraints too
+    a_upper: np.ndarray
     x0: np.ndarray  # current state of a dynamic game (empty for static games)
     horizon: int | None
     state_names: list[str]
@@ -145,6 +147,30 @@ class CompiledGame:
     @property
     def _kkt(self) -> Evaluator:
         return self._derivatives["kkt"]
+
+    @functools.cached_property
+    def _residual(self) -> Evaluator:
+        """L and c without derivatives: what a line search evaluates at its trial points."""
+        sym = self._symbolic
+        return Evaluator(ca.Function("kkt_residual", [sym.a, sym.lam, sym.x], [ca.densify(sym.L), ca.densify(sym.c)],
+                                     ["a", "lam", "x"], ["L", "c"]))
+
+    @functools.cached_property
+    def zero_gradient_rows(self) -> np.ndarray:
+        """Rows of c that depend on no decision variable (structurally): at a stage where the decisions cannot
+        reach a constraint (a position one step after an input that drives its second derivative), the row is a
+        condition on the plant state alone, not a Newton row (SPEC §3b)."""
+        rows = np.zeros(self.m, dtype=bool)
+        if self.m:
+            sym = self._symbolic
+            # sparsity propagation through the expression graph, without building the Jacobian
+            pattern = ca.Function("c", [sym.a, sym.x], [sym.c]).jac_sparsity(0, 0)
+            r, _ = pattern.get_triplet()
+            reached = np.zeros(self.m, dtype=bool)
+            reached[np.asarray(r, dtype=int)] = True
+            rows = ~reached
+        rows.flags.writeable = False
+        return rows
 
     @property
     def _sparsity(self) -> tuple[ca.Sparsity, ca.Sparsity]:
@@ -213,6 +239,11 @@ class CompiledGame:
     def equality_mask(self) -> np.ndarray:
         return np.array([c.equality for c in self.constraints], dtype=bool)
 
+    def constraint_pattern(self) -> tuple[np.ndarray, np.ndarray]:
+        """The structural nonzeros of dc/da as (rows, columns)."""
+        rows, cols = self._sparsity[1].get_triplet()
+        return np.asarray(rows, dtype=int), np.asarray(cols, dtype=int)
+
     def coupled_rows(self) -> list[int]:
         """Rows of c owned by one agent that involve another agent's decisions (what makes a GNE)."""
         pattern = self._sparsity[1]
@@ -257,6 +288,16 @@ class CompiledGame:
             return KKTParts(v[:n], v[n:], cache["dL"], cache["dc"])
         L, c, dL, dc = self._kkt(z[:n], z[n:], self._x(x))
         return KKTParts(L.reshape(-1), c.reshape(-1), dL, dc)
+
+    def kkt_residual(self, z: np.ndarray, x: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """L(z; x) and c(a; x) alone (no derivatives)."""
+        n = self.n
+        if self.affine:
+            v = self._affine_cache["W"] @ z
+            v += self.offsets(self._x(x))
+            return v[:n], v[n:]
+        L, c = self._residual(z[:n], z[n:], self._x(x))
+        return L.reshape(-1), c.reshape(-1)
 
     def offsets(self, x: np.ndarray) -> np.ndarray:
         """[L(0; x); c(0; x)] of an affine game, evaluated once per state x."""
@@ -422,6 +463,14 @@ class _Layout:
     horizon: int | None
     a_start: np.ndarray
     x0: np.ndarray
+    a_lower: np.ndarray  # the variables' bounds (-inf/inf: none), as declared
+    a_upper: np.ndarray
+
+
+def _bounds(variables) -> tuple[list[float], list[float]]:
+    lo = [-math.inf if v.lower is None else float(v.lower) for v in variables]
+    hi = [math.inf if v.upper is None else float(v.upper) for v in variables]
+    return lo, hi
 
 
 def _layout(g: StaticGame | DynamicGame) -> _Layout:
@@ -429,13 +478,20 @@ def _layout(g: StaticGame | DynamicGame) -> _Layout:
         names = [list(a.variables) for a in g.agents]
         sizes = [len(v) for v in names]
         starts = [var.start for a in g.agents for var in a.variables.values()]
-        return _Layout(names, _slices(sizes), sum(sizes), 0, None, np.asarray(starts, dtype=float), np.zeros(0))
+        lo, hi = _bounds([var for a in g.agents for var in a.variables.values()])
+        return _Layout(names, _slices(sizes), sum(sizes), 0, None, np.asarray(starts, dtype=float), np.zeros(0),
+                       np.asarray(lo), np.asarray(hi))
     T = g.horizon
     names = [list(a.inputs) for a in g.agents]
     sizes = [len(v) * (T + 1) for v in names]
     starts = [s for a in g.agents for s in [var.start for var in a.inputs.values()] * (T + 1)]
+    lo, hi = [], []
+    for a in g.agents:
+        l_a, h_a = _bounds(list(a.inputs.values()))
+        lo += l_a * (T + 1)
+        hi += h_a * (T + 1)
     return _Layout(names, _slices(sizes), sum(sizes), len(g.states), T, np.asarray(starts, dtype=float),
-                   np.asarray(g.x0, dtype=float))
+                   np.asarray(g.x0, dtype=float), np.asarray(lo, dtype=float), np.asarray(hi, dtype=float))
 
 
 def _slices(sizes: list[int]) -> list[slice]:
@@ -572,6 +628,8 @@ def _assemble(*, kind: str, a: ca.SX, x: ca.SX, costs: list[ca.SX], own_rows: li
         variable_names=lay.variable_names,
         constraints=[r.info for r in rows],
         a_start=lay.a_start,
+        a_lower=lay.a_lower,
+        a_upper=lay.a_upper,
         x0=lay.x0,
         horizon=lay.horizon,
         state_names=state_names,
@@ -622,7 +680,8 @@ def compile_agent_problem(cfg: Config, agent: int, tau: float) -> CompiledGame:
     ex = _expressions(g, lay, a_full, xs, [agent], shared_as_own=True)
     cost = ex.costs[agent] + 0.5 * tau * ca.sumsqr(ai - centre)
     own_lay = _Layout([lay.variable_names[agent]], [slice(0, ni)], ni, lay.nx + lay.n, None,
-                      lay.a_start[sl].copy(), np.concatenate([lay.x0, np.zeros(lay.n)]))
+                      lay.a_start[sl].copy(), np.concatenate([lay.x0, np.zeros(lay.n)]), lay.a_lower[sl].copy(),
+                      lay.a_upper[sl].copy())
     return _assemble(kind="static", a=ai, x=ca.vertcat(xs, others, centre), costs=[cost],
                      own_rows=[[_Row(r.expr, replace(r.info, owner=0)) for r in ex.own_rows[agent]]],
                      shared_common=[], agent_names=[g.agents[agent].name],

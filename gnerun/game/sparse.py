@@ -51,8 +51,10 @@ class SparseKKT:
     F = (G_a [n], G_xi [N S], d [S], c [m]). Build with :func:`compile_sparse`.
     """
 
-    def __init__(self, game: CompiledGame, function: ca.Function, pattern: ca.Sparsity, affine: bool, S: int):
+    def __init__(self, game: CompiledGame, function: ca.Function, residual: ca.Function, pattern: ca.Sparsity,
+                 affine: bool, S: int):
         self.game = game
+        self._residual = Evaluator(residual)
         self.n, self.m, self.S = game.n, game.m, S
         self.N = len(game.agent_names)
         self.size = self.n + S + self.N * S + self.m
@@ -63,6 +65,11 @@ class SparseKKT:
         self.affine = affine  # dF/dw constant: LQ games
         self._lam0 = self.size - self.m  # first multiplier column (and first c row)
         self._not_multipliers = np.arange(self._lam0)
+
+    def residual(self, z: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The condensed L(z) and c(a) alone (states rolled out, costates solved; no Jacobian)."""
+        L, c = self._residual(z[: self.n], z[self.n :], x)
+        return L.reshape(-1), c.reshape(-1)
 
     def evaluate(self, z: np.ndarray, x: np.ndarray) -> SparseParts:
         n = self.n
@@ -166,8 +173,10 @@ def compile_sparse(cfg: Config, game: CompiledGame) -> SparseKKT:
     F_proj, J_proj = full(a, X_roll, P_proj, lam, x)
     F0, _ = full(a, X_roll, ca.SX.zeros(N * S), ca.SX.zeros(m), x)
     function = ca.Function("sparse_kkt", [a, lam, x], [F_proj, J_proj, F0], ["a", "lam", "x"], ["F", "J", "F0"])
+    residual = ca.Function("sparse_residual", [a, lam, x], [ca.densify(F_proj[:n]), ca.densify(F_proj[F.numel() - m:])],
+                           ["a", "lam", "x"], ["L", "c"])
     affine = not ca.depends_on(J, ca.vertcat(a, X, P, lam, x))
-    return SparseKKT(game, function, function.sparsity_out(1), affine, S)
+    return SparseKKT(game, function, residual, function.sparsity_out(1), affine, S)
 
 
 def factor(M: sp.csc_matrix) -> tuple[spla.SuperLU | None, float]:

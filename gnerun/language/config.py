@@ -157,7 +157,11 @@ class SolverConfig(Strict):
         1e-12, ge=0, description="|-g_j - lambda_j| <= tie_tol is a tie; the multiplier row is chosen"
     )
     min_rcond: float = Field(1e-14, ge=0, description="JPhi with reciprocal condition below this is singular")
-    line_search: bool = Field(False, description="Armijo backtracking on 1/2||Phi||^2 (off: the paper's pure method)")
+    globalization: Literal["auto", "hybrid", "interior_point", "line_search", "none"] = Field(
+        "auto", description="ssn (and the inner ssn of distributed): hybrid, the default (auto), takes the paper's "
+                            "min-map steps where they decrease ||Phi|| and an interior-point phase elsewhere; none: "
+                            "the paper's pure local method; line_search: Armijo backtracking on 1/2||Phi||^2; "
+                            "interior_point: the interior-point phase alone")
     divergence_limit: float = Field(1e12, gt=0, description="||z||_inf beyond this is divergence")
     formulation: Literal["auto", "condensed", "sparse"] = Field(
         "auto", description="dynamic games, ssn: states eliminated (condensed, dense) or kept as unknowns (sparse, "
@@ -167,6 +171,14 @@ class SolverConfig(Strict):
     tau: float = Field(1.0, ge=0, description="proximal weight: tau/2 ||a_i - abar_i||^2")
     inner: Literal["ssn", "jn"] = "ssn"
     inner_max_iter: int = Field(20, ge=1, description="inner Newton iterations per proximal response")
+
+    @property
+    def method(self) -> str:
+        """The globalization in effect: ``auto`` is ``hybrid`` for semismooth Newton (also the inner one of
+        ``distributed``) and ``none`` for Josephy-Newton, which solves each step's subproblem exactly."""
+        if self.globalization != "auto":
+            return self.globalization
+        return "none" if self.kind == "jn" else "hybrid"
 
 
 class PlantDisturbance(Strict):
@@ -350,6 +362,13 @@ def load_config(
     return cfg
 
 
+# keys of earlier versions of the config format, and what replaced them
+RENAMED = {
+    ("solver", "line_search"): "solver.line_search was replaced by solver.globalization (line_search: true is "
+                               "globalization: line_search; the default, auto, is the globalized hybrid method)",
+}
+
+
 def _validation_problems(err: ValidationError, data: Any, smap: SourceMap) -> list[str]:
     problems = []
     for e in err.errors(include_url=False):
@@ -359,7 +378,8 @@ def _validation_problems(err: ValidationError, data: Any, smap: SourceMap) -> li
         if kind == "extra_forbidden":
             where = smap.locate(path, key=True)
             allowed = _allowed_keys(path[:-1], data)
-            msg = "unknown key" + (f" (allowed here: {', '.join(allowed)})" if allowed else "")
+            msg = RENAMED.get(path[-2:]) or "unknown key" + (f" (allowed here: {', '.join(allowed)})"
+                                                             if allowed else "")
         elif kind == "missing":
             where = smap.locate(path[:-1])
             msg = "required field is missing"
@@ -581,6 +601,9 @@ def check_semantics(cfg: Config, smap: SourceMap) -> list[str]:
         if why:
             report(("solver", "formulation"), "'sparse' is not available here: " + "; ".join(why)
                    + " (use 'condensed' or 'auto')")
+    if cfg.solver.kind == "jn" and cfg.solver.globalization not in ("auto", "none"):
+        report(("solver", "globalization"), f"{cfg.solver.globalization!r} globalizes semismooth Newton; "
+               "Josephy-Newton solves each step's affine VI exactly (use auto or none, or solver.kind 'ssn')")
     if cfg.disturbance.kind in ("jacobian_noise", "residual") and cfg.solver.kind == "jn":
         report(("disturbance", "kind"), f"{cfg.disturbance.kind!r} perturbs semismooth Newton; with solver.kind "
                "'jn' use 'pseudogradient' (noise on F and H)")

@@ -16,12 +16,14 @@ import numpy as np
 from ..game.compile import CompiledGame, compile_game
 from ..language.config import Config, sparse_obstacles
 from ..log.mcap_log import json_ready
+from ..solvers.hybrid import globalized
 from ..solvers.ssn import SemismoothNewton, SSNState, Status
 from .rundir import RunDirectory, recording
 
 
 def make_solver(cfg: Config, game: CompiledGame, *, disturbed: bool = True) -> SemismoothNewton:
-    """The solver the config asks for (``solver.kind``), with its disturbance model (unless not ``disturbed``)."""
+    """The solver the config asks for (``solver.kind``, ``solver.globalization``), with its disturbance model
+    (unless not ``disturbed``)."""
     disturbance = cfg.disturbance if disturbed else None
     if cfg.solver.kind == "distributed":
         from ..solvers.proximal_response import ProximalResponse
@@ -39,8 +41,10 @@ def make_solver(cfg: Config, game: CompiledGame, *, disturbed: bool = True) -> S
         system = game.derived.get("sparse")
         if system is None:
             system = game.derived["sparse"] = compile_sparse(cfg, game)
-        return SparseSemismoothNewton(game, cfg.solver, disturbance, system)
-    return SemismoothNewton(game, cfg.solver, disturbance)
+        newton: SemismoothNewton = SparseSemismoothNewton(game, cfg.solver, disturbance, system)
+    else:
+        newton = SemismoothNewton(game, cfg.solver, disturbance)
+    return globalized(newton)
 
 
 # auto: the sparse formulation from this many unknowns of the condensed system on (measured crossover,
@@ -89,7 +93,7 @@ class Reference:
 
 def reference_solution(game: CompiledGame, cfg: Config, z0: np.ndarray, x: np.ndarray | None = None,
                        polish: int = 3) -> Reference:
-    """Solve undisturbed from z0 with the configured method, then by semismooth Newton with line search if
+    """Solve undisturbed from z0 with the configured method, then by the globalized semismooth Newton method if
     that fails, and polish.
 
     Polishing takes up to ``polish`` further Newton steps while ||Phi|| keeps decreasing, so that z*
@@ -98,16 +102,17 @@ def reference_solution(game: CompiledGame, cfg: Config, z0: np.ndarray, x: np.nd
     last: SSNState | None = None
     # the exact solution is the centralised one: a distributed run is measured against SSN's
     first = cfg.solver.model_copy(update={"kind": "ssn"}) if cfg.solver.kind == "distributed" else cfg.solver
-    attempts = [first] + ([first.model_copy(update={"kind": "ssn", "line_search": True})]
-                          if first.kind != "ssn" or not first.line_search else [])
+    attempts = [first] + ([first.model_copy(update={"kind": "ssn", "globalization": "hybrid"})]
+                          if first.kind != "ssn" or first.method != "hybrid" else [])
     for options in attempts:
         opts = options.model_copy(update={"max_iter": max(options.max_iter, 100)})
         solver = make_solver(cfg.model_copy(update={"solver": opts}), game, disturbed=False)
         state = iterate(solver, solver.init(z0, x))
         last = state
         if state.converged:
+            newton = getattr(solver, "newton", solver)  # polishing takes plain Newton steps
             for _ in range(polish):
-                nxt = solver.step(state)
+                nxt = newton.step(state)
                 if nxt.status != Status.RUNNING or not nxt.residual_norm < state.residual_norm:
                     break
                 state = nxt

@@ -24,6 +24,7 @@ import numpy as np
 from ..errors import InputError
 from ..game.compile import CompiledGame, compile_agent_problem
 from ..language.config import Config, SolverConfig
+from .hybrid import globalized
 from .ssn import FAILURES, SemismoothNewton, SSNState
 
 
@@ -61,7 +62,7 @@ def make_agents(cfg: Config, game: CompiledGame) -> list[Agent]:
 
             inner: SemismoothNewton = JosephyNewton(problem, inner_opts)
         else:
-            inner = SemismoothNewton(problem, inner_opts)
+            inner = globalized(SemismoothNewton(problem, inner_opts))
         agents.append(Agent(name, problem, inner, opts.inner_max_iter))
     return agents
 

@@ -34,7 +34,10 @@ class SparseSemismoothNewton(SemismoothNewton):
         parts = self.system.evaluate(z, x)
         return parts, *self.residual(parts, z)
 
-    def _reduced_step(self, state: SSNState) -> SSNState:
+    def kkt_residual(self, z: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return self.system.residual(z, x)
+
+    def _reduced_point(self, state: SSNState) -> tuple[np.ndarray | None, float]:
         system, parts, z = self.system, state.parts, state.z
         A = np.flatnonzero(state.active | self._eq) if self._eq_rows.size else np.flatnonzero(state.active)
         keep = system.kept(A)
@@ -51,12 +54,33 @@ class SparseSemismoothNewton(SemismoothNewton):
             entry = factor(J[keep][:, keep].tocsc())
         lu, rcond = entry
         if lu is None or not rcond >= self.options.min_rcond:
-            return self._singular(state, rcond)
+            return None, rcond
         sol = lu.solve(system.rhs(parts)[keep])
-        z_new = system.new_iterate(z, sol, A)
-        if self.options.line_search:
-            dz = z_new - z
-            t = self._armijo(state, dz)
-            if t != 1.0:
-                z_new = z + t * dz
-        return self.advance(state, z_new, rcond=rcond)
+        return system.new_iterate(z, sol, A), rcond
+
+    def regularized_point(self, state: SSNState, mu: float) -> np.ndarray | None:
+        """Levenberg-Marquardt on the reduced full-space system (see the condensed method): the normal equations
+        keep the block-banded structure, with twice the bandwidth."""
+        import scipy.sparse as sp
+
+        system, parts, z = self.system, state.parts, state.z
+        n, m = self.game.n, self.game.m
+        A = np.flatnonzero(state.active | self._eq) if self._eq_rows.size else np.flatnonzero(state.active)
+        keep = system.kept(A)
+        J = system.matrix(parts.J)
+        lam = z[n:]
+        inactive = np.setdiff1d(np.arange(m), A)
+        lam0 = system.size - m
+        r = -(parts.F - J[:, lam0 + inactive] @ lam[inactive])  # F with the inactive multipliers at zero
+        M = J[keep][:, keep].tocsc()
+        N = (M.T @ M + mu * sp.identity(keep.size, format="csc")).tocsc()
+        lu, _ = factor(N)
+        if lu is None:
+            return None
+        dy = lu.solve(M.T @ r[keep])
+        if not np.all(np.isfinite(dy)):
+            return None
+        z_new = np.zeros_like(z)
+        z_new[:n] = z[:n] + dy[:n]
+        z_new[n + A] = lam[A] + dy[keep.size - A.size:]
+        return z_new

@@ -18,6 +18,14 @@ Perturbations (paper Study 1b and eq. inexact_seminewton), seeded: ``jacobian_no
 noise of the given scale to every element of JPhi(z^k); ``residual`` uses a right-hand side r^k of
 norm ``scale`` in a random direction.
 
+Constraint rows that depend on no decision variable (a condition on the plant state alone, e.g. a
+position one step after an input that drives its acceleration) are not Newton rows: their multipliers are
+held at zero, and a violated one ends the solve as ``infeasible_stage_constraint`` (SPEC §3b).
+
+This class is the paper's local method (``solver.globalization: none``), optionally with Armijo
+backtracking on 1/2||Phi||^2 along its direction (``line_search``). The default, globalized method
+(:mod:`gnerun.solvers.hybrid`) takes these steps where they work and an interior-point phase elsewhere.
+
 Shape (see STYLE.md): ``init(z0, x) -> state``, ``step(state) -> state`` (exactly one iteration,
 nothing else), ``terminate(state) -> (done, status)``. Failure is a status, never an exception:
 a singular or ill-conditioned JPhi (the step is not taken), a non-finite Phi, divergence.
@@ -30,10 +38,11 @@ from dataclasses import dataclass, replace
 from enum import StrEnum
 
 import numpy as np
-from scipy.linalg import lapack
+from scipy.linalg import cho_factor, cho_solve, lapack
 
 from ..game.compile import CompiledGame, KKTParts
 from ..language.config import DisturbanceConfig, SolverConfig
+from .line_search import backtrack
 
 _FB_TIE = 1.0 - 1.0 / math.sqrt(2.0)
 
@@ -46,9 +55,14 @@ class Status(StrEnum):
     DIVERGED = "diverged"
     NAN = "nan"
     SUBPROBLEM_FAILED = "subproblem_failed"  # a Josephy-Newton step whose LCP has no solution found
+    LINE_SEARCH_FAILED = "line_search_failed"  # no step length along the search direction decreases the merit
+    INFEASIBLE_STAGE_CONSTRAINT = "infeasible_stage_constraint"  # a row no decision reaches is violated
+    NOT_AN_EQUILIBRIUM = "not_an_equilibrium"  # a KKT point at which an agent can improve alone (certificate)
+    STALLED = "stalled"  # the globalized method made no progress from any of its starting points
 
 
-FAILURES = frozenset({Status.SINGULAR_JACOBIAN, Status.DIVERGED, Status.NAN, Status.SUBPROBLEM_FAILED})
+FAILURES = frozenset({Status.SINGULAR_JACOBIAN, Status.DIVERGED, Status.NAN, Status.SUBPROBLEM_FAILED,
+                      Status.LINE_SEARCH_FAILED, Status.INFEASIBLE_STAGE_CONSTRAINT, Status.STALLED})
 
 
 @dataclass(slots=True)
@@ -68,6 +82,7 @@ class SSNState:
     message: str
     rng: np.random.Generator | None
     rcond: float = math.nan  # reciprocal condition number of the last JPhi factorised
+    search: object | None = None  # what a globalization keeps between steps (gnerun.solvers.hybrid)
 
     @property
     def converged(self) -> bool:
@@ -99,18 +114,22 @@ class SemismoothNewton:
         self._eq = game.equality_mask
         self._ineq = ~self._eq
         self._fb = solver.complementarity == "fischer_burmeister"
+        self._line_search = solver.globalization == "line_search"
         d = self.disturbance
         # The min map's multiplier rows say lambda_j^+ = 0: solve only for a and the g-branch multipliers
         # (same step, smaller system). Noise on all of JPhi or on the right-hand side needs the full system.
         self.reduced = not self._fb and not (d.kind in ("jacobian_noise", "residual") and d.scale > 0)
         self._eq_rows = np.flatnonzero(self._eq)
+        # rows no decision reaches: multipliers held at zero, never g-branch rows (checked at init)
+        self._fixed = game.zero_gradient_rows
+        self._fixed_rows = np.flatnonzero(self._fixed)
         self._z_start = game.z_start()
         self._noisy = self.disturbance.kind in ("jacobian_noise", "residual")
         # LQ games: the reduced matrix depends on the active set only, and the step lands on the same
         # point from any z with that active set: z^+ = G_A w0(x). G_A (or the reason it does not exist)
         # is kept per active set, so a step is one product.
         self._lq = self.condensed and self.reduced and game.affine
-        self._lq_inline = self._lq and not self._eq_rows.size and not solver.line_search
+        self._lq_inline = self._lq and not self._eq_rows.size and not self._line_search and not self._fixed_rows.size
         self._tie_tol = solver.tie_tol
         self._maps: dict[bytes, tuple[np.ndarray | None, float]] = {}
         if self._lq:
@@ -120,12 +139,16 @@ class SemismoothNewton:
     # ------------------------------------------------------------------------------------
     def residual(self, parts: KKTParts, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Phi(z) [system_equations] and the g-branch rows (for the Jacobian element)."""
+        return self.phi(parts.L, parts.c, z)
+
+    def phi(self, L: np.ndarray, c: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Phi(z) from L(z) and c(a), and the g-branch rows."""
         n = self.game.n
         lam = z[n:]
-        a = -parts.c
+        a = -c
         tol = self.options.tie_tol
         phi = np.empty(n + a.size)
-        phi[:n] = parts.L
+        phi[:n] = L
         if self._fb:
             r = np.hypot(a, lam)
             phi[n:] = a + lam - r
@@ -134,13 +157,16 @@ class SemismoothNewton:
             np.minimum(a, lam, out=phi[n:])
             active = a < lam - tol
         if self._eq_rows.size:
-            phi[n + self._eq_rows] = parts.c[self._eq_rows]
+            phi[n + self._eq_rows] = c[self._eq_rows]
             active &= self._ineq
+        if self._fixed_rows.size:  # held at lambda = 0 and checked at init: not part of Phi
+            phi[n + self._fixed_rows] = 0.0
+            active &= ~self._fixed
         return phi, active
 
     def _evaluate(self, z: np.ndarray, x: np.ndarray) -> tuple[KKTParts, np.ndarray, np.ndarray]:
         """The parts, Phi and the g-branch rows at z; for LQ games with the min map, in a few products."""
-        if not (self._lq and self._eq_rows.size == 0):
+        if not (self._lq and self._eq_rows.size == 0 and self._fixed_rows.size == 0):
             parts = self.game.kkt_parts(z, x)
             return parts, *self.residual(parts, z)
         n = self.game.n
@@ -152,6 +178,10 @@ class SemismoothNewton:
         active = a < lam - self._tie_tol
         np.minimum(a, lam, out=a)
         return KKTParts(v[:n], v[n:], self._dL, self._dc), phi, active
+
+    def kkt_residual(self, z: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """L(z) and c(a) alone, without derivatives (what a line search evaluates)."""
+        return self.game.kkt_residual(z, x)
 
     def jacobian(self, parts: KKTParts, z: np.ndarray, active: np.ndarray) -> np.ndarray:
         """An element JPhi(z) of the limiting Jacobian of Phi (tie rule in the module docstring)."""
@@ -169,7 +199,7 @@ class SemismoothNewton:
             with np.errstate(invalid="ignore", divide="ignore"):
                 da = np.where(smooth, 1.0 - a / np.where(smooth, r, 1.0), _FB_TIE)
                 db = np.where(smooth, 1.0 - lam / np.where(smooth, r, 1.0), _FB_TIE)
-            ineq = self._ineq
+            ineq = self._ineq & ~self._fixed
             J[n:][ineq, :n] = -da[ineq, None] * parts.dc_da[ineq]
             J[n + rows[ineq], n + rows[ineq]] = db[ineq]
         else:
@@ -177,6 +207,9 @@ class SemismoothNewton:
             mult = self._ineq & ~active
             J[n + rows[mult], n + rows[mult]] = 1.0
         J[n:][self._eq, :n] = parts.dc_da[self._eq]
+        if self._fixed_rows.size:  # lambda_j = 0 for rows no decision reaches
+            J[n + self._fixed_rows] = 0.0
+            J[n + self._fixed_rows, n + self._fixed_rows] = 1.0
         return J
 
     # ------------------------------------------------------------------------------------
@@ -195,9 +228,29 @@ class SemismoothNewton:
         xv = game.x0 if x is None else game._x(x)
         if rng is None and self._noisy:
             rng = np.random.default_rng(self.disturbance.seed)
+        if self._fixed_rows.size:
+            z[game.n + self._fixed_rows] = 0.0
         parts, phi, active = self._evaluate(z, xv)
-        state = SSNState(z, xv, 0, phi, _norm(phi), parts, active, None, None, Status.RUNNING, "", rng)
-        return self._check_finite(state)
+        state = SSNState(z=z, x=xv, k=0, phi=phi, residual_norm=_norm(phi), parts=parts, active=active, z_prev=None,
+                         active_prev=None, status=Status.RUNNING, message="", rng=rng)
+        return self._check_stage_rows(self._check_finite(state))
+
+    def _check_stage_rows(self, state: SSNState) -> SSNState:
+        """A row that no decision reaches must hold at the plant state as it is; otherwise nothing can be done."""
+        if not self._fixed_rows.size or state.status != Status.RUNNING:
+            return state
+        c = state.parts.c[self._fixed_rows]
+        tol = max(self.options.tol, 1e-9)
+        bad = np.where(self._eq[self._fixed_rows], np.abs(c) > tol, c > tol)
+        if not bad.any():
+            return state
+        rows = self._fixed_rows[bad]
+        labels = "; ".join(f"{describe_row(self.game, self.game.n + r)} (violated by {c[bad][i]:.3g})"
+                           for i, r in enumerate(rows[:3]))
+        more = f" and {rows.size - 3} more" if rows.size > 3 else ""
+        return replace(state, status=Status.INFEASIBLE_STAGE_CONSTRAINT,
+                       message=f"{rows.size} constraint row(s) that no decision variable can change are violated at "
+                               f"this state: {labels}{more}")
 
     def step(self, state: SSNState) -> SSNState:
         """Exactly one (perturbed) semismooth Newton iteration; a failed state is returned unchanged."""
@@ -205,9 +258,18 @@ class SemismoothNewton:
             return state
         if self._lq_inline:
             return self._lq_step(state)
+        z_new, rcond = self.newton_point(state)
+        if z_new is None:
+            return self._singular(state, rcond)
+        if self._line_search:
+            return self._searched(state, z_new, rcond)
+        return self.advance(state, z_new, rcond=rcond)
+
+    def newton_point(self, state: SSNState) -> tuple[np.ndarray | None, float]:
+        """The end point z^k + dz of the (perturbed) Newton step from ``state``, and the reciprocal condition
+        number of the matrix factorised; ``None`` for the point when that matrix is singular or ill-conditioned."""
         if self.reduced:
-            return self._reduced_step(state)
-        opts = self.options
+            return self._reduced_point(state)
         J = self.jacobian(state.parts, state.z, state.active)
         rhs = -state.phi
         d = self.disturbance
@@ -217,13 +279,55 @@ class SemismoothNewton:
             w = _noise(state.rng, rhs.shape, d.distribution)
             rhs = rhs + d.scale * w / max(_norm(w), 1e-300)
         lu, piv, info, rcond = _factor(J)
-        if info != 0 or not rcond >= opts.min_rcond:
-            return self._singular(state, rcond)
+        if info != 0 or not rcond >= self.options.min_rcond:
+            return None, rcond
         dz, info = lapack.dgetrs(lu, piv, rhs)
-        t = 1.0
-        if opts.line_search:
-            t = self._armijo(state, dz)
-        return self.advance(state, state.z + t * dz, rcond=float(rcond))
+        return state.z + dz, float(rcond)
+
+    def regularized_point(self, state: SSNState, mu: float) -> np.ndarray | None:
+        """The end point of a Levenberg-Marquardt step: dz minimises ||JPhi dz + Phi||^2 + mu ||dz||^2, on the
+        reduced system for the min map (the inactive multipliers still go to zero). Where JPhi is singular, as on
+        a continuum of solutions, this step exists and, with mu ~ ||Phi||, converges to a point of the set (under
+        an error bound). Unperturbed; ``None`` if even the regularised system cannot be solved."""
+        game, parts, z = self.game, state.parts, state.z
+        n = game.n
+        if self.reduced:
+            A = np.flatnonzero(state.active | self._eq) if self._eq_rows.size else np.flatnonzero(state.active)
+            M = self._reduced_matrix(parts, A)
+            lam = z[n:]
+            rhs = np.concatenate([parts.dL_dz[:, n:] @ lam - parts.L, -parts.c[A]])
+            y0 = np.concatenate([np.zeros(n), lam[A]])
+            dy = levenberg_marquardt(M, rhs - M @ y0, mu)
+            if dy is None:
+                return None
+            z_new = np.zeros_like(z)
+            z_new[:n] = z[:n] + dy[:n]
+            z_new[n + A] = lam[A] + dy[n:]
+            return z_new
+        dz = levenberg_marquardt(self.jacobian(parts, z, state.active), -state.phi, mu)
+        return None if dz is None else z + dz
+
+    def _searched(self, state: SSNState, z_new: np.ndarray, rcond: float) -> SSNState:
+        """Armijo backtracking on 1/2||Phi||^2 from z^k towards ``z_new``, with the slope of the merit along the
+        direction actually taken (JPhi dz differs from -Phi under perturbations)."""
+        dz = z_new - state.z
+        if self.reduced:
+            slope = -state.residual_norm**2  # the exact min-map Newton step: JPhi dz = -Phi
+        else:
+            slope = float(state.phi @ (self.jacobian(state.parts, state.z, state.active) @ dz))
+
+        def trial(t: float) -> tuple[float, np.ndarray]:
+            z = state.z + t * dz
+            phi, _ = self.phi(*self.kkt_residual(z, state.x), z)
+            return 0.5 * float(phi @ phi), z
+
+        found = backtrack(0.5 * state.residual_norm**2, slope, trial)
+        if found is None:
+            return replace(state, status=Status.LINE_SEARCH_FAILED, rcond=rcond,
+                           message=f"no step length along the Newton direction from z^{state.k} decreases ||Phi|| = "
+                                   f"{state.residual_norm:.2e} (directional derivative {slope:.2e}); the step was not "
+                                   "taken (the default solver.globalization: hybrid leaves such points)")
+        return self.advance(state, found[1], rcond=rcond)
 
     def _singular(self, state: SSNState, rcond: float) -> SSNState:
         opts = self.options
@@ -232,12 +336,13 @@ class SemismoothNewton:
         if self.game.shares_constraints_generalized:
             msg += ("; this plain GNE has constraints shared by several agents, each with its own "
                     "multiplier: such games have a continuum of equilibria with a singular JPhi there "
-                    "(consider equilibrium: variational)")
-        elif not opts.line_search:
-            msg += "; the pure method may have left the region of convergence (try solver.line_search: true)"
+                    "(the default solver.globalization: hybrid returns one of them)")
+        else:
+            msg += ("; the local method may have left its region of convergence (the default "
+                    "solver.globalization: hybrid continues from such points)")
         return replace(state, status=Status.SINGULAR_JACOBIAN, message=msg, rcond=float(rcond))
 
-    def _reduced_step(self, state: SSNState) -> SSNState:
+    def _reduced_point(self, state: SSNState) -> tuple[np.ndarray | None, float]:
         """The min-map Newton step through the reduced system. With A the g-branch rows (and equalities),
         the multiplier rows give lambda_I^+ = 0 and the rest is
 
@@ -256,28 +361,22 @@ class SemismoothNewton:
                 entry = self._lq_map(state.active)
             G, rcond = entry
             if G is None:
-                return self._singular(state, rcond)
-            z_new = G @ game.offsets(state.x)
-        else:
-            A = np.flatnonzero(state.active | self._eq) if self._eq_rows.size else np.flatnonzero(state.active)
-            lu, piv, info, rcond = _factor(self._reduced_matrix(parts, A))
-            if info != 0 or not rcond >= opts.min_rcond:
-                return self._singular(state, rcond)
-            lam = z[n:]
-            rhs = np.concatenate([parts.dL_dz[:, n:] @ lam - parts.L, -parts.c[A]])
-            sol, _ = lapack.dgetrs(lu, piv, rhs)
-            z_new = np.zeros_like(z)
-            z_new[:n] = z[:n] + sol[:n]
-            z_new[n + A] = sol[n:]
-        if opts.line_search:
-            dz = z_new - z
-            t = self._armijo(state, dz)
-            if t != 1.0:
-                z_new = z + t * dz
-        return self.advance(state, z_new, rcond=float(rcond))
+                return None, rcond
+            return G @ game.offsets(state.x), float(rcond)
+        A = np.flatnonzero(state.active | self._eq) if self._eq_rows.size else np.flatnonzero(state.active)
+        lu, piv, info, rcond = _factor(self._reduced_matrix(parts, A))
+        if info != 0 or not rcond >= opts.min_rcond:
+            return None, rcond
+        lam = z[n:]
+        rhs = np.concatenate([parts.dL_dz[:, n:] @ lam - parts.L, -parts.c[A]])
+        sol, _ = lapack.dgetrs(lu, piv, rhs)
+        z_new = np.zeros_like(z)
+        z_new[:n] = z[:n] + sol[:n]
+        z_new[n + A] = sol[n:]
+        return z_new, float(rcond)
 
     def _lq_step(self, state: SSNState) -> SSNState:
-        """:meth:`_reduced_step` then :meth:`advance` for an LQ game without equalities or line search, in one
+        """:meth:`_reduced_point` then :meth:`advance` for an LQ game without equalities or line search, in one
         function: the same operations (z^+ = G_A w0, then Phi(z^+) = [L; min(-c, lambda)] with
         [L; c] = W z^+ + w0), without the calls between them."""
         entry = self._maps.get(state.active.tobytes())
@@ -297,8 +396,9 @@ class SemismoothNewton:
         lam = z[n:]
         active = a < lam - self._tie_tol
         np.minimum(a, lam, out=a)
-        new = SSNState(z, x, state.k + 1, phi, math.sqrt(phi @ phi), KKTParts(v[:n], v[n:], self._dL, self._dc),
-                       active, state.z, state.active, Status.RUNNING, "", state.rng, rcond)
+        new = SSNState(z=z, x=x, k=state.k + 1, phi=phi, residual_norm=math.sqrt(phi @ phi),
+                       parts=KKTParts(v[:n], v[n:], self._dL, self._dc), active=active, z_prev=state.z,
+                       active_prev=state.active, status=Status.RUNNING, message="", rng=state.rng, rcond=rcond)
         limit = self.options.divergence_limit
         if not math.isfinite(new.residual_norm) or z @ z > limit * limit:  # rare: the general checks decide
             return self._checked(new)
@@ -338,8 +438,9 @@ class SemismoothNewton:
         """The iterate after ``state``: z evaluated once (Phi, the parts for the next step), checked for
         NaN and divergence. Every method's step ends here."""
         parts, phi, active = self._evaluate(z, state.x)
-        new = SSNState(z, state.x, state.k + 1, phi, _norm(phi), parts, active, state.z, state.active,
-                       Status.RUNNING, "", state.rng, rcond)
+        new = SSNState(z=z, x=state.x, k=state.k + 1, phi=phi, residual_norm=_norm(phi), parts=parts, active=active,
+                       z_prev=state.z, active_prev=state.active, status=Status.RUNNING, message="", rng=state.rng,
+                       rcond=rcond)
         return self._checked(new)
 
     def _checked(self, new: SSNState) -> SSNState:
@@ -378,20 +479,6 @@ class SemismoothNewton:
         return replace(state, status=status, message=msg)
 
     # ------------------------------------------------------------------------------------
-    def _armijo(self, state: SSNState, dz: np.ndarray, sigma: float = 1e-4, beta: float = 0.5,
-                t_min: float = 1e-10) -> float:
-        """Backtracking on the merit 1/2||Phi||^2 along the Newton direction."""
-        theta0 = 0.5 * state.residual_norm**2
-        t = 1.0
-        while t >= t_min:
-            z = state.z + t * dz
-            _, phi, _ = self._evaluate(z, state.x)
-            theta = 0.5 * float(phi @ phi)
-            if math.isfinite(theta) and theta <= (1.0 - 2.0 * sigma * t) * theta0:
-                return t
-            t *= beta
-        return t / beta
-
     def _check_finite(self, state: SSNState) -> SSNState:
         if math.isfinite(state.residual_norm):  # a NaN or an infinity anywhere shows in the norm
             return state
@@ -428,6 +515,18 @@ def _factor(M: np.ndarray) -> tuple[np.ndarray, np.ndarray, int, float]:
     elif info == 0:
         rcond = 1.0
     return lu, piv, info, float(rcond)
+
+
+def levenberg_marquardt(M: np.ndarray, r: np.ndarray, mu: float) -> np.ndarray | None:
+    """d with (M'M + mu I) d = M'r (the minimiser of ||M d - r||^2 + mu ||d||^2), or None."""
+    N = M.T @ M
+    N[np.diag_indices_from(N)] += mu
+    try:
+        factor = cho_factor(N, check_finite=False)
+    except np.linalg.LinAlgError:
+        return None
+    d = cho_solve(factor, M.T @ r, check_finite=False)
+    return d if np.all(np.isfinite(d)) else None
 
 
 def _norm(v: np.ndarray) -> float:

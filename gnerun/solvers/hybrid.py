@@ -1,0 +1,201 @@
+"""The default semismooth Newton method: the paper's steps where they work, an interior-point phase elsewhere.
+
+The paper's semismooth Newton method [semi_newton] converges Q-quadratically near a solution, but it is a local
+method: from ordinary starts a zero multiplier meeting an active bound, a cost that is linear in a player's own
+variables, or dependent constraint gradients make JPhi singular, and far from a solution a full step can
+overshoot. This method keeps the local method's steps and adds what it lacks, after PATH's design (a Newton step
+first, judged by a nonmonotone watchdog; a more robust method when it fails; restarts when that stalls):
+
+1. **Newton phase.** The semismooth Newton step (min map or Fischer-Burmeister, with the configured perturbation)
+   is accepted when ||Phi|| falls ``SUFFICIENT`` below a nonmonotone reference, the largest of its last
+   ``MEMORY`` accepted values. A singular JPhi, a non-finite Phi, a refused step, or ``WATCHDOG`` accepted steps
+   without a new best value end the phase. On the paper's games this takes exactly the paper's steps.
+2. **Interior phase** (:mod:`gnerun.solvers.interior_point`), from the start: interior-point steps, well defined
+   at singular and degenerate points, that also reach a point of a non-isolated solution set (plain GNEs whose
+   shared constraints several players carry). If ||Phi|| makes no new best for ``STALL`` steps, or a step cannot
+   be computed, the phase restarts from the start with the next starting point of the interior-point method;
+   after ``RESTARTS`` restarts the solve ends with the status of what went wrong.
+3. **Hand-over.** Once ||Phi|| at an interior iterate is below a threshold, the Newton step is tried from it
+   (where JPhi is singular there, as on a continuum of solutions, the Levenberg-Marquardt step with mu = ||Phi||,
+   which converges to a point of the set under an error bound); when it reduces ||Phi|| at least
+   ``HANDOVER_DECREASE``-fold, the Newton phase resumes (and with it Q-quadratic convergence at a regular
+   solution), keeping the interior iterate to return to.
+
+One call of ``step`` is one iteration: one accepted step (a Newton step tried and refused costs an extra
+evaluation inside it). The iterate z = (a, lambda) and ||Phi|| are the semismooth Newton method's in every phase,
+so logs, tolerances and closed loops read the same.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from .interior_point import STARTS, InteriorIterate, InteriorPoint
+from .ssn import FAILURES, SemismoothNewton, SSNState, Status, _norm
+
+MEMORY = 4  # nonmonotone reference: the largest ||Phi|| of this many last accepted Newton iterates
+WATCHDOG = 8  # accepted Newton steps without a new best ||Phi|| before the interior phase takes over
+SUFFICIENT = 0.1  # a Newton step must reduce the reference by this fraction at least
+HANDOVER_AT = 1e-2  # try the Newton step from an interior iterate once ||Phi|| <= this x min(||Phi(z^0)||, 1)
+HANDOVER_DECREASE = 0.5  # ... and take it when it reduces ||Phi|| at least by this factor
+STALL = 25  # interior steps without a new best ||Phi|| (by 10%) before a restart
+RESTARTS = len(STARTS) - 1
+
+
+@dataclass(slots=True, frozen=True)
+class Memory:
+    """What the method keeps between steps (in ``SSNState.search``)."""
+
+    phase: str  # "newton" | "interior"
+    merits: tuple[float, ...]  # ||Phi|| of the last accepted Newton iterates (the nonmonotone reference)
+    best: float  # the best ||Phi|| of the current phase
+    stalls: int  # steps of the current phase since its best
+    interior: InteriorIterate | None  # the interior iterate (interior phase), or the one to return to
+    handover: float  # try the Newton step from the interior phase once ||Phi|| <= this
+    origin: np.ndarray  # z^0, where restarts begin
+    handover0: float  # the first hand-over threshold (restarts begin with it)
+    attempt: int = 0  # interior-phase starts so far
+
+
+class HybridNewton:
+    """Semismooth Newton with an interior-point phase (see the module docstring). ``newton`` is the paper's
+    method on the configured formulation (condensed or sparse); its init, terminate and finish are used as
+    they are."""
+
+    def __init__(self, newton: SemismoothNewton, *, handover: bool = True) -> None:
+        self.newton = newton
+        self.game = newton.game
+        self.options = newton.options
+        self.interior = InteriorPoint(newton)
+        self.handover = handover  # False: the interior phase alone (solver.globalization: interior_point)
+
+    # the step-wise interface (STYLE.md) ----------------------------------------------------
+    def init(self, z0: np.ndarray | None = None, x: np.ndarray | None = None,
+             rng: np.random.Generator | None = None) -> SSNState:
+        state = self.newton.init(z0, x, rng)
+        if state.status in FAILURES:
+            return state
+        merit = state.residual_norm
+        threshold = self._threshold(merit)
+        memory = Memory("newton", (merit,), merit, 0, None, threshold, state.z, threshold)
+        if not self.handover:  # the interior phase alone: its start point is z^0
+            return self._start_interior(replace(state, search=memory), 0, k=0)
+        return replace(state, search=memory)
+
+    def terminate(self, state: SSNState) -> tuple[bool, Status]:
+        return self.newton.terminate(state)
+
+    def finish(self, state: SSNState) -> SSNState:
+        return self.newton.finish(state)
+
+    def step(self, state: SSNState) -> SSNState:
+        """Exactly one iteration (see the module docstring)."""
+        if state.status in FAILURES:
+            return state
+        memory: Memory = state.search
+        if memory.phase == "newton":
+            return self._newton_step(state, memory)
+        return self._interior_step(state, memory)
+
+    # -------------------------------------------------------------------------------------
+    def _threshold(self, merit0: float) -> float:
+        """||Phi|| below which the Newton step is tried from an interior iterate."""
+        if not self.handover:
+            return -1.0
+        return HANDOVER_AT * min(merit0, 1.0) if math.isfinite(merit0) else HANDOVER_AT
+
+    def _candidate(self, state: SSNState, memory: Memory) -> SSNState:
+        """The Newton step from ``state``; where JPhi is singular close to a solution, the Levenberg-Marquardt step
+        instead (a proximal perturbation of the singular matrix, mu = ||Phi||)."""
+        candidate = self.newton.step(state)
+        if candidate.status != Status.SINGULAR_JACOBIAN or state.residual_norm > memory.handover:
+            return candidate
+        z = self.newton.regularized_point(state, state.residual_norm)
+        return candidate if z is None else self.newton.advance(state, z, rcond=candidate.rcond)
+
+    def _newton_step(self, state: SSNState, memory: Memory) -> SSNState:
+        candidate = self._candidate(state, memory)
+        merit = candidate.residual_norm
+        if candidate.status == Status.RUNNING and merit <= (1.0 - SUFFICIENT) * max(memory.merits[-MEMORY:]):
+            best, stalls = memory.best, memory.stalls + 1
+            if merit < (1.0 - SUFFICIENT) * best:
+                best, stalls = merit, 0
+            if stalls < WATCHDOG:
+                return replace(candidate, search=replace(memory, merits=(*memory.merits[-MEMORY + 1:], merit),
+                                                         best=best, stalls=stalls))
+        # refused: the interior phase, at the interior iterate left at the last hand-over, or from the start
+        if memory.interior is None:
+            return self._start_interior(state, 0)
+        it = memory.interior
+        memory = replace(memory, phase="interior", best=math.inf, stalls=0,
+                         handover=0.1 * min(memory.handover, state.residual_norm))
+        return self._interior_step(self._state_at(state, it.z, memory, k=state.k), memory)
+
+    def _start_interior(self, state: SSNState, attempt: int, *, k: int | None = None) -> SSNState:
+        """The interior phase from z^0 (``attempt``: which of the interior method's starting points), taking one
+        step unless ``k`` is given (then the start itself is the iterate k)."""
+        memory: Memory = state.search
+        z, w, eps = self.interior.start(memory.origin, state.x, attempt)
+        memory = replace(memory, phase="interior", best=math.inf, stalls=0, attempt=attempt,
+                         handover=memory.handover0)
+        start = self._state_at(state, z, memory, k=state.k if k is None else k)
+        memory = replace(memory, interior=self.interior.measure(z, w, start.parts.L, start.parts.c, eps))
+        start = replace(start, search=memory)
+        return start if k is not None else self._interior_step(start, memory)
+
+    def _interior_step(self, state: SSNState, memory: Memory) -> SSNState:
+        if state.residual_norm <= memory.handover:
+            candidate = self._candidate(state, memory)
+            merit = candidate.residual_norm
+            if candidate.status == Status.RUNNING and merit <= HANDOVER_DECREASE * state.residual_norm:
+                return replace(candidate, search=replace(memory, phase="newton", merits=(state.residual_norm, merit),
+                                                         best=merit, stalls=0))
+            memory = replace(memory, handover=0.1 * state.residual_norm)
+        proposal = self.interior.step(memory.interior, state.parts)
+        if proposal[0] is None:
+            return self._restart(state, memory, Status.SINGULAR_JACOBIAN, proposal[1])
+        z, w, t, rcond = proposal
+        new = self._state_at(state, z, memory, rcond=rcond)
+        if new.status in FAILURES:  # NaN or divergence: restart if a start is left
+            return self._restart(state, memory, new.status, new.message)
+        it = self.interior.measure(z, w, new.parts.L, new.parts.c, memory.interior.eps, t)
+        best, stalls = memory.best, memory.stalls + 1
+        if new.residual_norm < 0.9 * best:
+            best, stalls = new.residual_norm, 0
+        memory = replace(memory, interior=it, best=best, stalls=stalls)
+        if stalls >= STALL:
+            return self._restart(new, memory, Status.STALLED, f"||Phi|| made no progress in {STALL} interior-point "
+                                                               "steps")
+        return replace(new, search=memory)
+
+    def _restart(self, state: SSNState, memory: Memory, status: Status, why: str) -> SSNState:
+        """The interior phase again from z^0 with its next starting point, or the end of the solve."""
+        if memory.attempt < RESTARTS:
+            return self._start_interior(replace(state, search=memory), memory.attempt + 1)
+        return replace(state, status=status,
+                       message=f"interior-point phase at iteration {state.k}, after {memory.attempt + 1} start(s): "
+                               f"{why} (||Phi|| = {state.residual_norm:.2e})")
+
+    def _state_at(self, state: SSNState, z: np.ndarray, memory: Memory, *, k: int | None = None,
+                  rcond: float = math.nan) -> SSNState:
+        """The iterate after ``state`` (or ``state`` moved to iteration ``k``) at z, evaluated with its
+        derivatives for the next step."""
+        newton = self.newton
+        parts, phi, active = newton._evaluate(z, state.x)
+        new = SSNState(z=z, x=state.x, k=state.k + 1 if k is None else k, phi=phi, residual_norm=_norm(phi),
+                       parts=parts, active=active, z_prev=state.z if k is None else state.z_prev,
+                       active_prev=state.active if k is None else state.active_prev, status=Status.RUNNING,
+                       message="", rng=state.rng, rcond=rcond, search=memory)
+        return newton._checked(new)
+
+
+def globalized(newton: SemismoothNewton) -> SemismoothNewton | HybridNewton:
+    """``newton`` inside the globalization its options ask for (``hybrid``, ``interior_point``), or as it is
+    (``none``, ``line_search``: the semismooth Newton class takes those steps itself)."""
+    method = newton.options.method
+    if method in ("hybrid", "interior_point"):
+        return HybridNewton(newton, handover=method == "hybrid")
+    return newton

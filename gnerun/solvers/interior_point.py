@@ -1,0 +1,308 @@
+"""A primal-dual interior-point method on the KKT system of a GNE problem (the globalized method's robust phase).
+
+With slacks w for the inequality rows, the concatenated KKT system [KKT_concatenated] is the constrained equation
+
+    H(a, lambda, w) = ( L(a, lambda),  c_I(a) + w,  c_E(a),  lambda_I o w ) = 0,   lambda_I >= 0, w >= 0,
+
+as in Dreves, Facchinei, Kanzow and Sagratella (SIAM J. Optim. 21, 2011). Every iterate stays strictly inside
+(lambda_I, w > 0) and takes a Newton step towards H_eps = (L, c_I + w, c_E, lambda_I o w - eps) = 0, a point of
+the central path; eps shrinks (by ``SHRINK``) once the residual of H_eps is below ``KAPPA`` eps, as in the
+interior-point solver of MixedComplementarityProblems.jl (Nocedal and Wright, ch. 19). The Newton system is
+
+    [ dL/da     dL/dlambda ] [ da      ]   [ -L                     ]
+    [ dc/da     -D         ] [ dlambda ] = [ -(c_I + eps/lambda_I)  ]   (equality rows: -c_E, and D = 0)
+
+with D = diag(w / lambda_I) and dw = eps/lambda_I - w - D dlambda_I. It stays nonsingular where the semismooth
+Newton matrix is not (zero multipliers meeting active bounds, costs linear in a player's own variables, dependent
+constraint gradients), because lambda_I and w are positive.
+
+What makes it work on the field's games, measured on the benchmark suite (``python -m benchmarks robustness``):
+
+- **Each player's own block is made positive definite** (in its symmetric part), by the smallest multiple of the
+  identity that does, like the inertia correction of interior-point methods for one nonconvex program (IPOPT):
+  the direction is then a descent direction of every player's own barrier problem. Without it, trajectory games
+  with nonlinear dynamics send the inputs far away.
+- **Primal and dual variables take their own step lengths** to the boundary (``BOUNDARY`` of the way), so that a
+  multiplier heading for zero does not hold up the decisions.
+- **Multipliers start small**, at ``START_MU / w``: a multiplier of 1 on a constraint of a game whose costs are of
+  order 1e-2 starts the method far from the central path.
+- **No merit function**: every step is taken at its full length to the boundary. A potential-reduction line
+  search (Dreves et al.) and residual-based backtracking were both measured and lost robustness on nonconvex
+  games; instead, the globalized method (:mod:`gnerun.solvers.hybrid`) watches for stalls and restarts with
+  another ``START_MU``.
+
+The linear algebra has the two forms of the semismooth Newton step: condensed (the inequality multipliers
+eliminated, one dense factorisation of n unknowns and the equality multipliers; constraint rows with a single
+nonzero, such as bounds, add to the diagonal) and sparse (the full-space system of a dynamic game with -D on its
+multiplier block, factorised by SuperLU; there a player's block is regularised only when the matrix is singular).
+
+Rows that no decision variable reaches (SPEC §3b) take no part: their multipliers stay zero.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.linalg import lapack
+
+BOUNDARY = 0.995  # a step goes at most this fraction of the way to the boundary lambda_I = 0 or w = 0
+SHRINK = 0.2  # eps shrinks by this factor ...
+KAPPA = 10.0  # ... once every residual of H_eps is below KAPPA eps
+# lambda_i w_i starts at mu, times the size of the pseudogradient when scaled (it says how large the multipliers
+# must become); one start after another: the globalized method restarts with the next when the phase stalls
+STARTS = ((1e-3, False), (1e-4, False), (1e-2, True))
+START_FLOOR = 1.0  # slacks start at least this far inside
+BOUND_PUSH = 1e-2  # decisions start at least this far (relative) inside their bounds
+REGULARIZATION = 1e-10  # the first multiple of the identity tried where the Newton matrix is singular
+
+
+@dataclass(slots=True)
+class InteriorIterate:
+    """(a, lambda, w) with lambda_I, w > 0, the target eps and how far the last step went."""
+
+    z: np.ndarray  # (a, lambda) in the layout of the semismooth Newton iterate
+    w: np.ndarray  # slacks of the inequality rows
+    L: np.ndarray  # L(z)
+    c: np.ndarray  # c(a)
+    eps: float  # the target of lambda_i w_i
+    t: float = 1.0  # the step length that led here (fraction of the Newton step)
+
+
+class InteriorPoint:
+    """Interior-point steps for the game of ``newton`` (a :class:`~gnerun.solvers.ssn.SemismoothNewton`, whose
+    evaluations, condensed or sparse, it uses)."""
+
+    def __init__(self, newton) -> None:
+        self.newton = newton
+        game = newton.game
+        self.n = game.n
+        fixed = game.zero_gradient_rows
+        eq = game.equality_mask
+        self.I = np.flatnonzero(~eq & ~fixed)
+        self.E = np.flatnonzero(eq & ~fixed)
+        self.fixed = np.flatnonzero(fixed)
+        self.linear = DenseBarrier(self) if newton.condensed else SparseBarrier(newton.system, self)
+
+    def start(self, z: np.ndarray, x: np.ndarray, attempt: int = 0) -> tuple[np.ndarray, np.ndarray, float]:
+        """An interior start (z, w, eps) from z: decisions moved inside their bounds, slacks at least
+        ``START_FLOOR``, multipliers at least mu / w (``STARTS[attempt]``), the rows no decision reaches at zero."""
+        z = z.copy()
+        n, I = self.n, self.I
+        lo, hi = self.newton.game.a_lower, self.newton.game.a_upper
+        push = np.minimum(BOUND_PUSH * np.maximum(1.0, np.abs(z[:n])), 0.5 * (hi - lo))
+        z[:n] = np.clip(z[:n], lo + push, hi - push)
+        bare = z.copy()
+        bare[n:] = 0.0
+        F, c = self.newton.kkt_residual(bare, x)  # the pseudogradient: how large the multipliers must become
+        w = np.maximum(-c[I], START_FLOOR)
+        w[~np.isfinite(w)] = START_FLOOR
+        mu, scaled = STARTS[attempt % len(STARTS)]
+        if scaled:
+            size = float(np.max(np.abs(F), initial=0.0))
+            mu *= max(1.0, size) if math.isfinite(size) else 1.0
+        lam = z[n + I]
+        floor = mu / w
+        z[n + I] = np.where(lam >= floor, lam, floor)  # NaN too
+        z[n + self.fixed] = 0.0
+        return z, w, mu
+
+    def measure(self, z: np.ndarray, w: np.ndarray, L: np.ndarray, c: np.ndarray, eps: float,
+                t: float = 1.0) -> InteriorIterate:
+        """The iterate at (z, w) given L and c there; eps shrinks if H_eps is solved to KAPPA eps."""
+        I, E = self.I, self.E
+        lw = z[self.n + I] * w
+        err = max(float(np.max(np.abs(L), initial=0.0)), float(np.max(np.abs(c[I] + w), initial=0.0)),
+                  float(np.max(np.abs(c[E]), initial=0.0)), float(np.max(np.abs(lw - eps), initial=0.0)))
+        return InteriorIterate(z, w, L, c, eps * SHRINK if err <= KAPPA * eps else eps, t)
+
+    def step(self, it: InteriorIterate, parts) -> tuple[np.ndarray, np.ndarray, float, float] | tuple[None, str]:
+        """The next point (z, w), the step length taken and the reciprocal condition number of the matrix
+        factorised, from ``it`` (``parts``: the derivatives at it.z); or (None, why not)."""
+        n, I, E = self.n, self.I, self.E
+        z, w, eps = it.z, it.w, it.eps
+        lam = z[n + I]
+        D = w / lam
+        rhs_I = -(it.c[I] + eps / lam)
+        solve = self.linear.direction(parts, it, D, rhs_I)
+        delta = 0.0
+        while True:
+            solved = solve(delta)
+            if solved is not None:
+                da, dlam, rcond = solved
+                if np.all(np.isfinite(da)) and np.all(np.isfinite(dlam)):
+                    break
+            delta = REGULARIZATION * self.linear.scale if delta == 0.0 else 100.0 * delta
+            if delta > 1e10 * self.linear.scale:
+                return None, "the interior-point Newton matrix is singular even when regularised"
+        dw = eps / lam - w - D * dlam[I]
+        t_p = _to_boundary(w, dw)
+        t_d = _to_boundary(lam, dlam[I])
+        z_new = z.copy()
+        z_new[:n] += t_p * da
+        z_new[n + I] += t_d * dlam[I]
+        z_new[n + E] += t_d * dlam[E]
+        return z_new, w + t_p * dw, min(t_p, t_d), rcond
+
+
+def _to_boundary(v: np.ndarray, dv: np.ndarray) -> float:
+    """BOUNDARY times the largest t <= 1 with v + t dv >= 0 (v > 0), or 1."""
+    neg = dv < 0
+    if not neg.any():
+        return 1.0
+    return min(1.0, BOUNDARY * float(np.min(-v[neg] / dv[neg])))
+
+
+class DenseBarrier:
+    """The interior-point Newton system of the condensed KKT system, with the inequality multipliers eliminated:
+
+        (dL/da + dL/dlambda_I D^-1 dc_I/da) da + dL/dlambda_E dlambda_E = -L + dL/dlambda_I D^-1 rhs_I
+        dc_E/da da = -c_E,      dlambda_I = D^-1 (dc_I/da da - rhs_I),
+
+    each player's own block of the first matrix made positive definite (:func:`convexify`). Rows of dc/da with one
+    nonzero (bounds, and any constraint on a single decision) add to the diagonal instead of a dense product.
+    """
+
+    def __init__(self, ip: InteriorPoint) -> None:
+        self.ip = ip
+        self.scale = 1.0
+        self._pattern: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+
+    def _split(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Inequality rows whose gradient has a single structural nonzero (their positions in I, and their
+        columns), and the others."""
+        if self._pattern is None:
+            game, I = self.ip.newton.game, self.ip.I
+            rows, cols = game.constraint_pattern()
+            count = np.bincount(rows, minlength=game.m)
+            column = np.zeros(game.m, dtype=int)
+            column[rows] = cols
+            single = count[I] == 1
+            self._pattern = (np.flatnonzero(single), column[I[single]], np.flatnonzero(~single))
+        return self._pattern
+
+    def direction(self, parts, it: InteriorIterate, D: np.ndarray, rhs_I: np.ndarray):
+        ip = self.ip
+        n, I, E = ip.n, ip.I, ip.E
+        A = parts.dL_dz[:, :n]
+        B = parts.dL_dz[:, n:]
+        C = parts.dc_da
+        single, columns, general = self._split()
+        CI = C[I]
+        BI = B[:, I] / D
+        S = A.copy()
+        if general.size:
+            S += BI[:, general] @ CI[general]
+        if single.size:  # B_j D_j^-1 C_j with C_j = g_j e_col: a column update (one nonzero per row of C)
+            gains = BI[:, single] * CI[single, columns]
+            np.add.at(S.T, columns, gains.T)
+        convexify(S, ip.newton.game.agent_slices)
+        rhs_a = -it.L + BI @ rhs_I
+        k = E.size
+        M = np.empty((n + k, n + k))
+        M[:n, :n] = S
+        if k:
+            M[:n, n:] = B[:, E]
+            M[n:, :n] = C[E]
+            M[n:, n:] = 0.0
+        rhs = np.concatenate([rhs_a, -it.c[E]])
+        diag = np.diag(S).copy()
+        self.scale = max(1.0, float(np.max(np.abs(diag), initial=0.0)))
+        idx = np.arange(n)
+
+        def solve(delta: float):
+            if delta:
+                M[idx, idx] = diag + delta
+            lu, piv, info, rcond = _factor(M)
+            if info != 0 or not rcond > 0.0:
+                return None
+            sol, _ = lapack.dgetrs(lu, piv, rhs)
+            if rcond < 1e-8:  # one step of iterative refinement where the matrix is ill-conditioned
+                fix, _ = lapack.dgetrs(lu, piv, rhs - M @ sol)
+                sol += fix
+            da = sol[:n]
+            dlam = np.zeros(ip.newton.game.m)
+            dlam[I] = (CI @ da - rhs_I) / D
+            dlam[E] = sol[n:]
+            return da, dlam, rcond
+
+        return solve
+
+
+class SparseBarrier:
+    """The interior-point Newton system in the sparse formulation of a dynamic game: the full-space matrix of
+    (a, xi, p, lambda) with -D on the inequality multipliers' diagonal, factorised by SuperLU. Its Schur
+    complement on (a, lambda) is the condensed matrix, as for the semismooth Newton step."""
+
+    def __init__(self, system, ip: InteriorPoint) -> None:
+        self.system = system
+        self.ip = ip
+        self.scale = 1.0
+        size, m = system.size, system.m
+        self.lam0 = size - m
+        keep = np.ones(size, dtype=bool)
+        keep[self.lam0 + ip.fixed] = False
+        self.keep = np.flatnonzero(keep)
+
+    def direction(self, parts, it: InteriorIterate, D: np.ndarray, rhs_I: np.ndarray):
+        import scipy.sparse as sp
+
+        from ..game.sparse import factor
+
+        ip, system = self.ip, self.system
+        n, I, E, lam0, keep = ip.n, ip.I, ip.E, self.lam0, self.keep
+        diag = np.zeros(system.size)
+        diag[lam0 + I] = -D
+        base = (system.matrix(parts.J) + sp.diags(diag)).tocsc()[keep][:, keep]
+        rhs = -parts.F.copy()
+        rhs[lam0 + I] = rhs_I
+        rhs[lam0 + E] = -it.c[E]
+        self.scale = max(1.0, float(np.max(np.abs(base.diagonal()[:n]), initial=0.0)))
+        shift = np.zeros(keep.size)
+
+        def solve(delta: float):
+            shift[:n] = delta
+            lu, rcond = factor((base + sp.diags(shift)).tocsc() if delta else base)
+            if lu is None or not rcond > 0.0:
+                return None
+            sol = np.zeros(system.size)
+            sol[keep] = lu.solve(rhs[keep])
+            dlam = np.zeros(system.m)
+            dlam[I] = sol[lam0 + I]
+            dlam[E] = sol[lam0 + E]
+            return sol[:n], dlam, rcond
+
+        return solve
+
+
+def _factor(M: np.ndarray):
+    from .ssn import _factor as factor
+
+    return factor(M)
+
+
+def convexify(S: np.ndarray, blocks: list[slice]) -> None:
+    """Make each player's own block of the barrier Newton matrix positive definite (in its symmetric part), in
+    place, by adding the smallest multiple of the identity (from 1e-8 of the block's scale, times 10) that does:
+    the direction is then a descent direction of every player's own barrier problem. Convex players' blocks are
+    left as they are."""
+    for sl in blocks:
+        block = S[sl, sl]
+        sym = 0.5 * (block + block.T)
+        try:
+            np.linalg.cholesky(sym)
+            continue
+        except np.linalg.LinAlgError:
+            pass
+        scale = max(1.0, float(np.max(np.abs(np.diag(sym)), initial=0.0)))
+        delta = 1e-8 * scale
+        eye = np.eye(sym.shape[0])
+        while delta < 1e12 * scale:
+            try:
+                np.linalg.cholesky(sym + delta * eye)
+                break
+            except np.linalg.LinAlgError:
+                delta *= 10.0
+        idx = np.arange(sl.start, sl.stop)
+        S[idx, idx] += delta
