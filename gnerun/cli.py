@@ -195,7 +195,7 @@ def simulate(config: ConfigArg, out: OutOpt = None, set_: SetOpt = None, quiet: 
         return
     typer.echo(f"{'K':>4}  {'max e':>10}  {'final e':>10}  {'median step':>12}  {'max step':>10}  {'failed':>6}")
     for K, r in sim.items():
-        failed = sum(s in ("singular_jacobian", "diverged", "nan") for s in r.status)
+        failed = len(r.failed_steps)
         finite = r.e_norm[r.e_norm == r.e_norm]
         typer.echo(f"{K:>4}  {_fmt(float(finite.max()) if finite.size else None):>10}  {_fmt(float(r.e_norm[-1])):>10}"
                    f"  {_ms(float(sorted(r.solve_time_s)[len(r.solve_time_s) // 2])):>12}"

@@ -53,7 +53,8 @@ def test_shipped_configs_load_and_round_trip(path: Path) -> None:
 def test_defaults_are_filled_in() -> None:
     cfg = load_config("cfg.yaml", text=STATIC)
     assert cfg.version == 1
-    assert cfg.solver.kind == "ssn" and cfg.solver.complementarity == "min" and cfg.solver.max_iter == 50
+    assert cfg.solver.kind == "ssn" and cfg.solver.complementarity == "min" and cfg.solver.max_iter == 300
+    assert cfg.solver.globalization == "auto" and cfg.solver.method == "hybrid"
     assert cfg.disturbance.kind == "none" and cfg.disturbance.plant.kind == "none"
     assert cfg.game.equilibrium == "generalized" and cfg.game.shared_constraints == []
     resolved = cfg.resolved_yaml()

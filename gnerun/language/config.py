@@ -151,7 +151,7 @@ Game = Annotated[StaticGame | DynamicGame, Field(discriminator="kind")]
 class SolverConfig(Strict):
     kind: Literal["ssn", "jn", "distributed"] = "ssn"
     tol: float = Field(1e-10, gt=0, description="stop when ||Phi(z)||_2 <= tol")
-    max_iter: int = Field(50, ge=0, le=1_000_000)
+    max_iter: int = Field(300, ge=0, le=1_000_000)
     complementarity: Literal["min", "fischer_burmeister"] = "min"
     tie_tol: float = Field(
         1e-12, ge=0, description="|-g_j - lambda_j| <= tie_tol is a tie; the multiplier row is chosen"

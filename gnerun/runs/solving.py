@@ -208,7 +208,7 @@ def solve(cfg: Config, out: str | Path | None = None, *, force: bool = False,
 
 def _solve(cfg: Config, game: CompiledGame, solver: SemismoothNewton, run: RunDirectory | None,
            compile_time: float, on_iterate: Callable[[SSNState, float | None], None] | None) -> SolveResult:
-    from ..solvers.certificate import certificate
+    from ..solvers.certificate import certificate, improving_agents
 
     x = game.x0
     z0 = game.z_start()
@@ -238,9 +238,19 @@ def _solve(cfg: Config, game: CompiledGame, solver: SemismoothNewton, run: RunDi
     state = iterate(solver, solver.init(z0, x), record)
     elapsed = time.perf_counter() - t - sink_time  # the solver alone: the sink's I/O is excluded
     errors = None if z_star is None else [float(np.linalg.norm(s.z - z_star)) for s in history]
+    cert = certificate(game, state.z, x)
+    status, message = str(state.status), state.message
+    if state.status == Status.CONVERGED:  # converged means certified: no agent can improve alone
+        improving = improving_agents(game, cert, state.z[: game.n], x)
+        if improving:
+            status = str(Status.NOT_AN_EQUILIBRIUM)
+            who = ", ".join(f"{name} by {gap:.2e}" for name, gap in improving.items())
+            message = (f"a KKT point (||Phi|| = {state.residual_norm:.2e} after {state.k} iterations) that is not an "
+                       f"equilibrium: alone, {who} (best response found by SLSQP); a nonconvex player's stationary "
+                       "point, not its minimum (try other start values)")
     result = SolveResult(
-        status=str(state.status),
-        message=state.message,
+        status=status,
+        message=message,
         iterations=state.k,
         z=state.z,
         residual_norm=state.residual_norm,
@@ -252,7 +262,7 @@ def _solve(cfg: Config, game: CompiledGame, solver: SemismoothNewton, run: RunDi
         multipliers=game.multipliers_by_agent(state.z[game.n :]),
         z_star=z_star,
         reference_status=str(ref.status),
-        certificate=certificate(game, state.z, x),
+        certificate=cert,
         time_s=elapsed,
         compile_time_s=compile_time,
         x=np.asarray(x, dtype=float),

@@ -5,10 +5,11 @@ gaps do not use the Newton machinery at all: each agent's own problem
 
     min_{a_i} J_i(a_i, a_-i)  s.t. its own constraints g_i(a_i, a_-i) <= 0 (and h_i = 0)
 
-is solved by scipy's SLSQP with the other agents fixed at a_-i, from the candidate and from the
-config's start values, and gap_i = J_i(a) - (best value found) is reported. A gap near zero (or
-slightly negative, at the level of SLSQP's tolerance) says that no agent can improve unilaterally;
-for nonconvex agent problems it is a local statement.
+is solved by scipy's SLSQP with the other agents fixed at a_-i, from the candidate, from the config's
+start values and, where the agent's decisions are bounded, from the corners of their box (the lower and the
+upper bounds; a nonconvex player's better choices often lie there), and gap_i = J_i(a) - (best value found)
+is reported. A gap near zero (or slightly negative, at the level of SLSQP's tolerance) says that no agent can
+improve unilaterally from these starts; for nonconvex agent problems it is a local statement.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from scipy.optimize import minimize
 from ..game.compile import CompiledGame
 
 FEASIBILITY_TOL = 1e-9
+GAP_TOL = 1e-6  # a best-response gap above this (relative to max(1, |J_i|)) means the agent can improve alone
 
 
 def kkt_residuals(game: CompiledGame, z: np.ndarray, x: np.ndarray | None = None) -> dict[str, float]:
@@ -77,7 +79,14 @@ def best_response(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray |
     if eq_rows.size:
         constraints.append({"type": "eq", "fun": lambda ai: parts(ai).c[eq_rows],
                             "jac": lambda ai: parts(ai).dc_da[eq_rows][:, sl]})
-    candidates = starts if starts is not None else [a[sl], game.a_start[sl]]
+    if starts is None:
+        lo, hi = game.a_lower[sl], game.a_upper[sl]
+        starts = [a[sl], game.a_start[sl]]
+        if np.all(np.isfinite(lo)):
+            starts.append(lo.copy())
+        if np.all(np.isfinite(hi)):
+            starts.append(hi.copy())
+    candidates = starts
     best_val, best_x, notes = None, None, []
     for s in candidates:
         with warnings.catch_warnings():
@@ -116,3 +125,12 @@ def certificate(game: CompiledGame, z: np.ndarray, x: np.ndarray | None = None) 
     out["best_response_gap"] = gaps
     out["best_response_note"] = notes
     return out
+
+
+def improving_agents(game: CompiledGame, cert: dict, a: np.ndarray, x: np.ndarray | None = None) -> dict[str, float]:
+    """The agents whose best-response gap in ``cert`` exceeds GAP_TOL max(1, |J_i(a)|): at a KKT point of a game
+    with nonconvex players, each of them can improve on its own, so the point is not an equilibrium."""
+    gaps = cert.get("best_response_gap") or {}
+    values = game.costs(np.asarray(a, dtype=float), x)
+    return {name: gap for (name, gap), value in zip(gaps.items(), values, strict=True)
+            if gap is not None and gap > GAP_TOL * max(1.0, abs(float(value)))}

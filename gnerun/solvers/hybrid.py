@@ -43,6 +43,8 @@ HANDOVER_AT = 1e-2  # try the Newton step from an interior iterate once ||Phi|| 
 HANDOVER_DECREASE = 0.5  # ... and take it when it reduces ||Phi|| at least by this factor
 STALL = 25  # interior steps without a new best ||Phi|| (by 10%) before a restart
 RESTARTS = len(STARTS) - 1
+LM_FAR = 1e-4  # far from a solution, a singular JPhi gets the Levenberg-Marquardt step with mu = LM_FAR ||Phi||
+PIVOTS = 8  # LQ games: Lemke's method from this many covering vectors after the interior phase's restarts
 
 
 @dataclass(slots=True, frozen=True)
@@ -111,9 +113,12 @@ class HybridNewton:
         """The Newton step from ``state``; where JPhi is singular close to a solution, the Levenberg-Marquardt step
         instead (a proximal perturbation of the singular matrix, mu = ||Phi||)."""
         candidate = self.newton.step(state)
-        if candidate.status != Status.SINGULAR_JACOBIAN or state.residual_norm > memory.handover:
+        if candidate.status != Status.SINGULAR_JACOBIAN:
             return candidate
-        z = self.newton.regularized_point(state, state.residual_norm)
+        near = state.residual_norm <= memory.handover
+        if not (near or LM_FAR):
+            return candidate
+        z = self.newton.regularized_point(state, state.residual_norm * (1.0 if near else LM_FAR))
         return candidate if z is None else self.newton.advance(state, z, rcond=candidate.rcond)
 
     def _newton_step(self, state: SSNState, memory: Memory) -> SSNState:
@@ -172,12 +177,35 @@ class HybridNewton:
         return replace(new, search=memory)
 
     def _restart(self, state: SSNState, memory: Memory, status: Status, why: str) -> SSNState:
-        """The interior phase again from z^0 with its next starting point, or the end of the solve."""
+        """The interior phase again from z^0 with its next starting point; for an LQ game, then the pivoting
+        method; or the end of the solve."""
         if memory.attempt < RESTARTS:
             return self._start_interior(replace(state, search=memory), memory.attempt + 1)
+        if memory.attempt < RESTARTS + PIVOTS and self.game.affine and self.newton.condensed:
+            pivoted = self._pivot(state, memory)
+            if pivoted is not None:
+                return pivoted
+            why += f"; Lemke's method ended on a ray from {PIVOTS} covering vectors"
         return replace(state, status=status,
                        message=f"interior-point phase at iteration {state.k}, after {memory.attempt + 1} start(s): "
                                f"{why} (||Phi|| = {state.residual_norm:.2e})")
+
+    def _pivot(self, state: SSNState, memory: Memory) -> SSNState | None:
+        """LQ games: the KKT system is a linear complementarity problem; solve it by Lemke's method from z^0 with
+        the covering vectors of the remaining attempts (all ones, then seeded random ones), the first solution
+        is the next iterate (one iteration). None if every attempt ends on a ray."""
+        from .josephy_newton import kkt_lcp_point
+
+        parts = self.newton._evaluate(memory.origin, state.x)[0]
+        rng = np.random.default_rng(0)
+        for attempt in range(memory.attempt - RESTARTS, PIVOTS):
+            d = None if attempt == 0 else rng.uniform(0.1, 10.0, size=state.z.size * 4)
+            z = kkt_lcp_point(parts, memory.origin, self.game.equality_mask, d)
+            if z is not None:
+                memory = replace(memory, phase="newton", merits=(state.residual_norm,), best=state.residual_norm,
+                                 stalls=0, interior=None, attempt=RESTARTS + PIVOTS)
+                return self._state_at(state, z, memory)
+        return None
 
     def _state_at(self, state: SSNState, z: np.ndarray, memory: Memory, *, k: int | None = None,
                   rcond: float = math.nan) -> SSNState:

@@ -49,21 +49,25 @@ def check_nash_problem(game: CompiledGame) -> None:
 
 
 def solve_affine_vi(M: np.ndarray, q: np.ndarray, G: np.ndarray, h: np.ndarray, equality: np.ndarray,
-                    tol: float = 1e-12):
+                    tol: float = 1e-12, B: np.ndarray | None = None, d: np.ndarray | None = None):
     """Solve the affine VI: M a + q + G^T lam = 0, 0 <= lam_j ⊥ h_j - G_j a >= 0 (lam_j free, G_j a = h_j
-    for equality rows), as one LCP.
+    for equality rows), as one LCP. With ``B``, the stationarity is M a + q + B lam = 0 instead: the affine
+    KKT system of a generalized Nash game, where the multiplier of an agent's row enters that agent's
+    stationarity only (B is dL/dlambda).
 
-    Variables with a lower bound (a row with a single negative coefficient) are shifted, a = l + y with
-    y >= 0, and that row's multiplier is read off the stationarity slack; the other variables are split,
-    a = p - m. Equality rows become two inequalities. Returns (a, lam, LCPResult).
+    Variables with a lower bound (a row with a single negative coefficient, whose multiplier enters the
+    stationarity as G_j^T) are shifted, a = l + y with y >= 0, and that row's multiplier is read off the
+    stationarity slack; the other variables are split, a = p - m. Equality rows become two inequalities.
+    ``d`` is Lemke's covering vector (repeated to the LCP's size; None: all ones). Returns (a, lam, LCPResult).
     """
     n = q.size
     m = h.size
+    B = G.T if B is None else B
     lower = np.full(n, -np.inf)
     lower_row = np.full(n, -1)
     for j in np.flatnonzero(~equality):
         nz = np.flatnonzero(G[j])
-        if nz.size == 1 and G[j, nz[0]] < 0:
+        if nz.size == 1 and G[j, nz[0]] < 0 and np.array_equal(B[:, j], G[j]):
             i = nz[0]
             bound = h[j] / G[j, i]
             if bound > lower[i]:
@@ -81,25 +85,44 @@ def solve_affine_vi(M: np.ndarray, q: np.ndarray, G: np.ndarray, h: np.ndarray, 
     general = [j for j in range(m) if j not in used and not equality[j]]
     eq_rows = np.flatnonzero(equality)
     Gr = np.vstack([G[general], G[eq_rows], -G[eq_rows]]) if m else np.zeros((0, n))
+    Br = np.hstack([B[:, general], B[:, eq_rows], -B[:, eq_rows]]) if m else np.zeros((n, 0))
     hr = np.concatenate([h[general], h[eq_rows], -h[eq_rows]]) if m else np.zeros(0)
     nu, nr = D.shape[1], Gr.shape[0]
     lcp_M = np.zeros((nu + nr, nu + nr))
     lcp_M[:nu, :nu] = D.T @ M @ D
-    lcp_M[:nu, nu:] = D.T @ Gr.T
+    lcp_M[:nu, nu:] = D.T @ Br
     lcp_M[nu:, :nu] = -Gr @ D
     lcp_q = np.concatenate([D.T @ (M @ a0 + q), hr - Gr @ a0])
-    result = lemke(lcp_M, lcp_q, tol=tol)
+    result = lemke(lcp_M, lcp_q, None if d is None else np.resize(d, lcp_q.size), tol=tol)
     u, mu = result.z[:nu], result.z[nu:]
     a = a0 + D @ u
     lam = np.zeros(m)
     ng, ne = len(general), eq_rows.size
     lam[general] = mu[:ng]
     lam[eq_rows] = mu[ng : ng + ne] - mu[ng + ne :]
-    r = M @ a + q + Gr.T @ mu
+    r = M @ a + q + Br @ mu
     for i in S:
         j = lower_row[i]
         lam[j] = max(r[i], 0.0) / -G[j, i]
     return a, lam, result
+
+
+def kkt_lcp_point(parts, z: np.ndarray, equality: np.ndarray, d: np.ndarray | None = None,
+                  tol: float = 1e-12) -> np.ndarray | None:
+    """The solution of the KKT system linearised at z, L + dL/da (a' - a) + dL/dlambda (lambda' - lambda) = 0,
+    0 <= lambda'_j ⊥ -(c_j + dc_j/da (a' - a)) >= 0 (equality rows: = 0), by Lemke's method with covering
+    vector ``d`` (None: all ones); None when Lemke's method ends on a ray. For an LQ game this is the KKT system
+    itself, so the point solves the game: a pivoting method, which finds a point of a continuum of generalized
+    equilibria that the central path of an interior-point method does not lead to."""
+    n = z.size - parts.c.size
+    A, B, C = parts.dL_dz[:, :n], parts.dL_dz[:, n:], parts.dc_da
+    a, lam = z[:n], z[n:]
+    q = parts.L - A @ a - B @ lam
+    h = C @ a - parts.c
+    a_new, lam_new, result = solve_affine_vi(A, q, C, h, equality, tol=tol, B=B, d=d)
+    if not result.solved:
+        return None
+    return np.concatenate([a_new, lam_new])
 
 
 class JosephyNewton(SemismoothNewton):

@@ -1,0 +1,134 @@
+"""The interior-point phase: its Newton direction against the unreduced system, both linear-algebra forms, the
+per-player convexification, the interior start."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from gnerun.game.compile import compile_game
+from gnerun.language.config import load_config
+from gnerun.runs.solving import make_solver
+from gnerun.solvers import interior_point
+from gnerun.solvers.interior_point import InteriorPoint, convexify
+from gnerun.solvers.sparse_ssn import SparseSemismoothNewton
+from gnerun.solvers.ssn import SemismoothNewton
+
+from .conftest import CONFIGS
+
+
+def _interior(newton, z: np.ndarray, w: np.ndarray, eps: float, x=None):
+    ip = InteriorPoint(newton)
+    xv = newton.game.x0 if x is None else x
+    parts = newton._evaluate(z, xv)[0]
+    it = ip.measure(z, w, parts.L, parts.c, eps)
+    return ip, it, parts
+
+
+def _unreduced_direction(game, parts, z, w, eps, I):
+    """Newton's direction for H_eps(a, lambda, w) = (L, c_I + w, c_E, lambda_I o w - eps) = 0, assembled and solved
+    as it stands (numpy), without eliminating anything."""
+    n, m = game.n, game.m
+    E = np.flatnonzero(game.equality_mask)
+    k = I.size
+    size = n + m + k
+    J = np.zeros((size, size))
+    J[:n, : n + m] = parts.dL_dz
+    J[n + I, :n] = parts.dc_da[I]
+    J[n + I, n + m + np.arange(k)] = 1.0
+    J[n + E, :n] = parts.dc_da[E]
+    lam = z[n + I]
+    J[n + m + np.arange(k), n + I] = w
+    J[n + m + np.arange(k), n + m + np.arange(k)] = lam
+    rhs = -np.concatenate([parts.L, np.zeros(m), lam * w - eps])
+    rhs[n + I] = -(parts.c[I] + w)
+    rhs[n + E] = -parts.c[E]
+    d = np.linalg.solve(J, rhs)
+    return d[:n], d[n : n + m], d[n + m :]
+
+
+@pytest.mark.parametrize(("name", "over"), [
+    ("fk_a11.yaml", {"game.equilibrium": "generalized"}),
+    ("harker.yaml", {}),
+    ("variational_gne.yaml", {"solver.kind": "ssn", "solver.formulation": "condensed"}),
+])
+def test_the_direction_solves_the_unreduced_newton_system(name: str, over: dict) -> None:
+    cfg = load_config(CONFIGS / name, over)
+    game = compile_game(cfg)
+    newton = SemismoothNewton(game, cfg.solver)
+    rng = np.random.default_rng(3)
+    ip = InteriorPoint(newton)
+    I = ip.I
+    z = np.concatenate([game.a_start + 0.3 * rng.standard_normal(game.n), np.zeros(game.m)])
+    z[game.n + I] = rng.uniform(0.1, 2.0, I.size)
+    w = rng.uniform(0.1, 2.0, I.size)
+    eps = 0.05
+    _, it, parts = _interior(newton, z, w, eps)
+    lam = z[game.n + I]
+    D = w / lam
+    da, dlam, _ = ip.linear.direction(parts, it, D, -(it.c[I] + eps / lam))(0.0)
+    dw = eps / lam - w - D * dlam[I]
+    ref_a, ref_lam, ref_w = _unreduced_direction(game, parts, z, w, eps, I)
+    np.testing.assert_allclose(da, ref_a, rtol=1e-9, atol=1e-10)
+    np.testing.assert_allclose(dlam, ref_lam, rtol=1e-9, atol=1e-10)
+    np.testing.assert_allclose(dw, ref_w, rtol=1e-9, atol=1e-10)
+
+
+def test_sparse_and_condensed_directions_agree_on_a_dynamic_game() -> None:
+    base = load_config(CONFIGS / "variational_gne.yaml", {"solver.kind": "ssn", "solver.globalization": "hybrid"})
+    game = compile_game(base)
+    dense = make_solver(base.model_copy(update={"solver": base.solver.model_copy(update={"formulation": "condensed"})}),
+                        game).newton
+    sparse = make_solver(base.model_copy(update={"solver": base.solver.model_copy(update={"formulation": "sparse"})}),
+                         game).newton
+    assert type(dense) is SemismoothNewton and isinstance(sparse, SparseSemismoothNewton)
+    rng = np.random.default_rng(5)
+    z = np.concatenate([0.2 * rng.standard_normal(game.n), np.zeros(game.m)])
+    directions = []
+    for newton in (dense, sparse):
+        ip = InteriorPoint(newton)
+        I = ip.I
+        z[game.n + I] = np.linspace(0.2, 1.5, I.size)
+        w = np.linspace(1.5, 0.2, I.size)
+        _, it, parts = _interior(newton, z, w, 1e-2)
+        lam = z[game.n + I]
+        D = w / lam
+        directions.append(ip.linear.direction(parts, it, D, -(it.c[I] + 1e-2 / lam))(0.0)[:2])
+    np.testing.assert_allclose(directions[0][0], directions[1][0], atol=1e-9)
+    np.testing.assert_allclose(directions[0][1], directions[1][1], atol=1e-9)
+
+
+def test_convexify_leaves_convex_players_alone_and_repairs_the_others() -> None:
+    S = np.array([[2.0, 0.5, 0.3, 0.0],
+                  [0.5, 1.0, 0.0, 0.1],
+                  [1.0, 0.0, -3.0, 1.0],
+                  [0.0, 2.0, 1.0, 0.5]])
+    blocks = [slice(0, 2), slice(2, 4)]
+    out = S.copy()
+    convexify(out, blocks)
+    np.testing.assert_array_equal(out[:2], S[:2])  # player 1's block is positive definite: untouched
+    np.testing.assert_array_equal(out[2:, :2], S[2:, :2])  # only the diagonal of player 2's block moves
+    shift = out[2, 2] - S[2, 2]
+    assert shift == out[3, 3] - S[3, 3] > 0
+    sym = 0.5 * (out[2:, 2:] + out[2:, 2:].T)
+    assert np.linalg.eigvalsh(sym).min() > 0
+    # the smallest step of the ladder (1e-8 of the block's scale, times 10) that does it
+    smaller = 0.5 * (S[2:, 2:] + S[2:, 2:].T) + (shift / 10) * np.eye(2)
+    assert np.linalg.eigvalsh(smaller).min() <= 0
+
+
+def test_the_interior_start() -> None:
+    cfg = load_config(CONFIGS / "fk_a12.yaml", {"game.agents.0.variables.x1.start": 10.0})  # at its upper bound
+    game = compile_game(cfg)
+    ip = InteriorPoint(SemismoothNewton(game, cfg.solver))
+    z0 = np.concatenate([game.a_start, np.zeros(game.m)])
+    for attempt, (mu, scaled) in enumerate(interior_point.STARTS):
+        z, w, eps = ip.start(z0, game.x0, attempt)
+        assert np.all(game.a_lower < z[: game.n]) and np.all(z[: game.n] < game.a_upper)
+        assert np.all(w >= interior_point.START_FLOOR)
+        lam = z[game.n + ip.I]
+        np.testing.assert_allclose(lam * w, eps)  # every pair starts on the central path of its eps
+        if not scaled:
+            assert eps == mu
+        else:
+            assert eps >= mu
