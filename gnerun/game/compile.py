@@ -156,6 +156,18 @@ class CompiledGame:
                                      ["a", "lam", "x"], ["L", "c"]))
 
     @functools.cached_property
+    def _constraints(self) -> Evaluator:
+        sym = self._symbolic
+        dc = ca.jacobian(sym.c, sym.a) if self.m else ca.SX(0, self.n)
+        return Evaluator(ca.Function("constraints", [sym.a, sym.x], [ca.densify(sym.c), ca.densify(dc)],
+                                     ["a", "x"], ["c", "dc_da"]))
+
+    def constraint_values(self, a: np.ndarray, x: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """c(a; x) and dc/da alone (what a best response's feasible set needs)."""
+        c, dc = self._constraints(a, self._x(x))
+        return c.reshape(-1), dc.reshape(self.m, self.n)
+
+    @functools.cached_property
     def zero_gradient_rows(self) -> np.ndarray:
         """Rows of c that depend on no decision variable (structurally): at a stage where the decisions cannot
         reach a constraint (a position one step after an input that drives its second derivative), the row is a

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -121,6 +121,55 @@ def reference_solution(game: CompiledGame, cfg: Config, z0: np.ndarray, x: np.nd
     return Reference(last.z, last.status, last.residual_norm, last.k, last.message)
 
 
+CERTIFY_RESTARTS = 3  # restarts from the improving players' best responses before not_an_equilibrium
+
+
+@dataclass
+class Certified:
+    """The end of :func:`certified_solve`."""
+
+    state: SSNState
+    certificate: dict
+    improving: dict[str, float]  # agents that can still improve alone (empty: an equilibrium, or not converged)
+    restarts: int
+    time_s: float  # the solver's time (the certificates excluded)
+
+
+def certified_solve(game: CompiledGame, solver: SemismoothNewton, state: SSNState, x: np.ndarray | None = None,
+                    on_iterate: Callable[[SSNState], None] | None = None,
+                    note: Callable[[str], None] | None = None, restarts: int = CERTIFY_RESTARTS) -> Certified:
+    """Iterate from ``state`` to the end and certify: converged means that no agent can improve alone. At a KKT
+    point where some can (a nonconvex player's saddle or a worse local minimum), those agents move to the best
+    responses the certificate found, the multipliers are reset, and the solver starts again from there (one
+    iteration), up to ``restarts`` times."""
+    from ..solvers.certificate import certificate, improving_agents
+
+    elapsed = 0.0
+    used = 0
+    while True:
+        t = time.perf_counter()
+        state = iterate(solver, state, on_iterate)
+        elapsed += time.perf_counter() - t
+        best: dict[str, np.ndarray] = {}
+        cert = certificate(game, state.z, x, best)
+        improving = improving_agents(game, cert, state.z[: game.n], x) if state.status == Status.CONVERGED else {}
+        if not improving or used >= restarts or not all(name in best for name in improving):
+            return Certified(state, cert, improving, used, elapsed)
+        used += 1
+        z = state.z.copy()
+        for i, name in enumerate(game.agent_names):
+            if name in improving:
+                z[game.agent_slices[i]] = best[name]
+        z[game.n:] = 0.0
+        if note is not None:
+            note(f"iteration {state.k}: a KKT point at which {', '.join(improving)} can improve alone; restart "
+                 f"{used} from their best responses")
+        t = time.perf_counter()
+        start = solver.init(z, x, state.rng)
+        elapsed += time.perf_counter() - t
+        state = replace(start, k=state.k + 1)
+
+
 @dataclass
 class SolveResult:
     """The outcome of :func:`solve` (scipy-style: status, message, success, iterations, z)."""
@@ -208,8 +257,6 @@ def solve(cfg: Config, out: str | Path | None = None, *, force: bool = False,
 
 def _solve(cfg: Config, game: CompiledGame, solver: SemismoothNewton, run: RunDirectory | None,
            compile_time: float, on_iterate: Callable[[SSNState, float | None], None] | None) -> SolveResult:
-    from ..solvers.certificate import certificate, improving_agents
-
     x = game.x0
     z0 = game.z_start()
     ref = reference_solution(game, cfg, z0, x)
@@ -234,20 +281,28 @@ def _solve(cfg: Config, game: CompiledGame, solver: SemismoothNewton, run: RunDi
         if not ref.converged:
             run.log("warning", f"the undisturbed reference solve did not converge ({ref.message}); "
                                "error norms are not available")
-    t = time.perf_counter()
-    state = iterate(solver, solver.init(z0, x), record)
-    elapsed = time.perf_counter() - t - sink_time  # the solver alone: the sink's I/O is excluded
+    def note(text: str) -> None:
+        if run is not None:
+            run.log("info", text)
+
+    outcome = certified_solve(game, solver, solver.init(z0, x), x, record, note)
+    state, cert = outcome.state, outcome.certificate
+    elapsed = outcome.time_s - sink_time  # the solver alone: the sink's I/O and the certificate are excluded
+    if outcome.restarts and state.status == Status.CONVERGED:  # the reference is the equilibrium reached, polished
+        ref = reference_solution(game, cfg, state.z, x)
+        z_star = ref.z if ref.converged else None
     errors = None if z_star is None else [float(np.linalg.norm(s.z - z_star)) for s in history]
-    cert = certificate(game, state.z, x)
     status, message = str(state.status), state.message
-    if state.status == Status.CONVERGED:  # converged means certified: no agent can improve alone
-        improving = improving_agents(game, cert, state.z[: game.n], x)
-        if improving:
-            status = str(Status.NOT_AN_EQUILIBRIUM)
-            who = ", ".join(f"{name} by {gap:.2e}" for name, gap in improving.items())
-            message = (f"a KKT point (||Phi|| = {state.residual_norm:.2e} after {state.k} iterations) that is not an "
-                       f"equilibrium: alone, {who} (best response found by SLSQP); a nonconvex player's stationary "
-                       "point, not its minimum (try other start values)")
+    if outcome.improving:
+        status = str(Status.NOT_AN_EQUILIBRIUM)
+        who = ", ".join(f"{name} by {gap:.2e}" for name, gap in outcome.improving.items())
+        message = (f"a KKT point (||Phi|| = {state.residual_norm:.2e} after {state.k} iterations) that is not an "
+                   f"equilibrium: alone, {who} (best response found by SLSQP), after {outcome.restarts} restart(s) "
+                   "from the players' best responses; a nonconvex player's stationary point, not its minimum "
+                   "(try other start values)")
+    elif outcome.restarts:
+        message += (f" (after {outcome.restarts} restart(s) from the best responses of players who could improve "
+                    "alone at a KKT point)")
     result = SolveResult(
         status=status,
         message=message,

@@ -57,16 +57,21 @@ def best_response(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray |
     rows = game.constraint_rows(agent)
     eq_rows = rows[game.equality_mask[rows]]
     in_rows = rows[~game.equality_mask[rows]]
-    m = game.m
-    zeros = np.zeros(m)
+    last: dict = {}
 
     def full(ai: np.ndarray) -> np.ndarray:
         b = a.copy()
         b[sl] = ai
         return b
 
-    def parts(ai: np.ndarray):
-        return game.kkt_parts(np.concatenate([full(ai), zeros]), x)
+    def values(ai: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The constraint values and their Jacobian at a_i (kept for the next call at the same point: SLSQP asks
+        for the function and the Jacobian separately)."""
+        key = ai.tobytes()
+        if last.get("key") != key:
+            c, dc = game.constraint_values(full(ai), x)
+            last.update(key=key, c=c, dc=dc[:, sl])
+        return last["c"], last["dc"]
 
     def objective(ai: np.ndarray) -> tuple[float, np.ndarray]:
         b = full(ai)
@@ -74,11 +79,11 @@ def best_response(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray |
 
     constraints = []
     if in_rows.size:
-        constraints.append({"type": "ineq", "fun": lambda ai: -parts(ai).c[in_rows],
-                            "jac": lambda ai: -parts(ai).dc_da[in_rows][:, sl]})
+        constraints.append({"type": "ineq", "fun": lambda ai: -values(ai)[0][in_rows],
+                            "jac": lambda ai: -values(ai)[1][in_rows]})
     if eq_rows.size:
-        constraints.append({"type": "eq", "fun": lambda ai: parts(ai).c[eq_rows],
-                            "jac": lambda ai: parts(ai).dc_da[eq_rows][:, sl]})
+        constraints.append({"type": "eq", "fun": lambda ai: values(ai)[0][eq_rows],
+                            "jac": lambda ai: values(ai)[1][eq_rows]})
     if starts is None:
         lo, hi = game.a_lower[sl], game.a_upper[sl]
         starts = [a[sl], game.a_start[sl]]
@@ -92,9 +97,9 @@ def best_response(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray |
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             res = minimize(objective, np.array(s, dtype=float), jac=True, method="SLSQP", constraints=constraints,
-                           options={"ftol": 1e-15, "maxiter": 1000})
+                           options={"ftol": 1e-15, "maxiter": 300})
         ai = np.asarray(res.x, dtype=float)
-        c = parts(ai).c
+        c = values(ai)[0]
         viol = max(float(np.max(c[in_rows], initial=0.0)), float(np.max(np.abs(c[eq_rows]), initial=0.0)))
         val = objective(ai)[0]
         if not math.isfinite(val) or viol > FEASIBILITY_TOL * max(1.0, float(np.max(np.abs(ai), initial=0.0))):
@@ -106,8 +111,10 @@ def best_response(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray |
     return best_val, best_x, note
 
 
-def certificate(game: CompiledGame, z: np.ndarray, x: np.ndarray | None = None) -> dict:
-    """KKT residuals and every agent's best-response gap at z (SPEC §4 ``certificate``)."""
+def certificate(game: CompiledGame, z: np.ndarray, x: np.ndarray | None = None,
+                best: dict[str, np.ndarray] | None = None) -> dict:
+    """KKT residuals and every agent's best-response gap at z (SPEC §4 ``certificate``); ``best``, if given,
+    receives each agent's best response found."""
     n = game.n
     a = np.asarray(z[:n], dtype=float)
     out: dict = kkt_residuals(game, z, x)
@@ -119,9 +126,11 @@ def certificate(game: CompiledGame, z: np.ndarray, x: np.ndarray | None = None) 
     gaps: dict[str, float | None] = {}
     notes: dict[str, str] = {}
     for i, name in enumerate(game.agent_names):
-        best, _, note = best_response(game, i, a, x)
-        gaps[name] = None if best is None else float(values[i] - best)
+        value, decision, note = best_response(game, i, a, x)
+        gaps[name] = None if value is None else float(values[i] - value)
         notes[name] = note
+        if best is not None and decision is not None:
+            best[name] = decision
     out["best_response_gap"] = gaps
     out["best_response_note"] = notes
     return out
