@@ -137,13 +137,14 @@ class Certified:
 
 def certified_solve(game: CompiledGame, solver: SemismoothNewton, state: SSNState, x: np.ndarray | None = None,
                     on_iterate: Callable[[SSNState], None] | None = None,
-                    note: Callable[[str], None] | None = None, restarts: int = CERTIFY_RESTARTS) -> Certified:
+                    note: Callable[[str], None] | None = None, restarts: int | None = None) -> Certified:
     """Iterate from ``state`` to the end and certify: converged means that no agent can improve alone. At a KKT
     point where some can (a nonconvex player's saddle or a worse local minimum), those agents move to the best
     responses the certificate found, the multipliers are reset, and the solver starts again from there (one
-    iteration), up to ``restarts`` times."""
+    iteration), up to ``restarts`` times (default ``CERTIFY_RESTARTS``)."""
     from ..solvers.certificate import certificate, improving_agents
 
+    restarts = CERTIFY_RESTARTS if restarts is None else restarts
     elapsed = 0.0
     used = 0
     while True:
