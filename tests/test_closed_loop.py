@@ -102,7 +102,8 @@ def test_bounded_error_theorem_holds_on_the_logged_data(study2_run) -> None:
         x = np.array([m["x"] for m in states])
         dx = np.linalg.norm(np.diff(x, axis=0), axis=1)
         alpha, theta = _fit_bound(e, dx)
-        assert np.all(e[1:] <= alpha * e[:-1] + theta * dx[: len(e) - 1] + 1e-12 * (1 + 1e-9))
+        # the LP's solution holds to its own tolerance (relative 1e-9), not to the last bit
+        assert np.all(e[1:] <= (alpha * e[:-1] + theta * dx[: len(e) - 1]) * (1 + 1e-9) + 1e-12 * (1 + 1e-9))
         assert alpha < 1.0  # a contraction: the error is bounded
         alphas[K] = alpha
     ks = sorted(alphas)

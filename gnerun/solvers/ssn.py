@@ -126,12 +126,12 @@ class SemismoothNewton:
         self._z_start = game.z_start()
         self._noisy = self.disturbance.kind in ("jacobian_noise", "residual")
         # LQ games: the reduced matrix depends on the active set only, and the step lands on the same
-        # point from any z with that active set: z^+ = G_A w0(x). G_A (or the reason it does not exist)
-        # is kept per active set, so a step is one product.
+        # point from any z with that active set: its LU factors (or the reason there are none) are kept per
+        # active set, so a step is one triangular solve.
         self._lq = self.condensed and self.reduced and game.affine
         self._lq_inline = self._lq and not self._eq_rows.size and not self._line_search and not self._fixed_rows.size
         self._tie_tol = solver.tie_tol
-        self._maps: dict[bytes, tuple[np.ndarray | None, float]] = {}
+        self._maps: dict[bytes, tuple] = {}  # LQ games: the reduced matrix's LU factors per active set
         if self._lq:
             cache = game._affine_cache
             self._W, self._dL, self._dc = cache["W"], cache["dL"], cache["dc"]
@@ -297,7 +297,8 @@ class SemismoothNewton:
             lam = z[n:]
             rhs = np.concatenate([parts.dL_dz[:, n:] @ lam - parts.L, -parts.c[A]])
             y0 = np.concatenate([np.zeros(n), lam[A]])
-            dy = levenberg_marquardt(M, rhs - M @ y0, mu)
+            r = rhs - M @ y0
+            dy = levenberg_marquardt(M, r, mu)
             if dy is None:
                 return None
             z_new = np.zeros_like(z)
@@ -355,14 +356,7 @@ class SemismoothNewton:
         n = game.n
         parts, z = state.parts, state.z
         if self._lq:
-            key = state.active.tobytes()
-            entry = self._maps.get(key)
-            if entry is None:
-                entry = self._lq_map(state.active)
-            G, rcond = entry
-            if G is None:
-                return None, rcond
-            return G @ game.offsets(state.x), float(rcond)
+            return self._lq_point(state.active, state.x)
         A = np.flatnonzero(state.active | self._eq) if self._eq_rows.size else np.flatnonzero(state.active)
         lu, piv, info, rcond = _factor(self._reduced_matrix(parts, A))
         if info != 0 or not rcond >= opts.min_rcond:
@@ -377,17 +371,13 @@ class SemismoothNewton:
 
     def _lq_step(self, state: SSNState) -> SSNState:
         """:meth:`_reduced_point` then :meth:`advance` for an LQ game without equalities or line search, in one
-        function: the same operations (z^+ = G_A w0, then Phi(z^+) = [L; min(-c, lambda)] with
-        [L; c] = W z^+ + w0), without the calls between them."""
-        entry = self._maps.get(state.active.tobytes())
-        if entry is None:
-            entry = self._lq_map(state.active)
-        G, rcond = entry
-        if G is None:
-            return self._singular(state, rcond)
+        function: the same operations (z^+ from the kept factors of the active set, then
+        Phi(z^+) = [L; min(-c, lambda)] with [L; c] = W z^+ + w0), without the calls between them."""
         x = state.x
+        z, rcond = self._lq_point(state.active, x)
+        if z is None:
+            return self._singular(state, rcond)
         w0 = self.game.offsets(x)
-        z = G @ w0
         n = self.game.n
         v = self._W @ z
         v += w0
@@ -412,27 +402,32 @@ class SemismoothNewton:
         M[n:, :n] = parts.dc_da[A]
         return M
 
-    def _lq_map(self, active: np.ndarray) -> tuple[np.ndarray | None, float]:
-        """G_A with z^+ = G_A w0 for an LQ game and the active set ``active`` (g-branch rows and equalities):
-        the reduced system M [a; lambda_A] = -[L(0); c_A(0)] solved for every column of the selection."""
-        game = self.game
-        n = game.n
-        A = np.flatnonzero(active | self._eq)
-        lu, piv, info, rcond = _factor(self._reduced_matrix(KKTParts(None, None, self._dL, self._dc), A))
-        G = None
-        if info == 0 and rcond >= self.options.min_rcond:
-            select = np.zeros((n + A.size, game.size))
-            select[np.arange(n), np.arange(n)] = -1.0
-            select[n + np.arange(A.size), n + A] = -1.0
-            sol, _ = lapack.dgetrs(lu, piv, select)
-            G = np.zeros((game.size, game.size))
-            G[:n] = sol[:n]
-            G[n + A] = sol[n:]
-        if len(self._maps) >= 256:
-            self._maps.clear()
-        entry = (G, float(rcond))
-        self._maps[active.tobytes()] = entry
-        return entry
+    def _lq_point(self, active: np.ndarray, x: np.ndarray) -> tuple[np.ndarray | None, float]:
+        """z^+ for an LQ game from any z with active set ``active`` (g-branch rows and equalities): the reduced
+        system M [a; lambda_A] = -[L(0); c_A(0)], whose LU factors are kept per active set (M depends on the active
+        set only), solved for w0(x). ``None`` when M is singular."""
+        key = active.tobytes()
+        entry = self._maps.get(key)
+        if entry is None:
+            A = np.flatnonzero(active | self._eq)
+            lu, piv, info, rcond = _factor(self._reduced_matrix(KKTParts(None, None, self._dL, self._dc), A))
+            ok = info == 0 and rcond >= self.options.min_rcond
+            if len(self._maps) >= 256:
+                self._maps.clear()
+            entry = self._maps[key] = (lu if ok else None, piv, A, float(rcond))
+        lu, piv, A, rcond = entry
+        if lu is None:
+            return None, rcond
+        n = self.game.n
+        w0 = self.game.offsets(x)
+        rhs = np.empty(n + A.size)
+        np.negative(w0[:n], out=rhs[:n])
+        np.negative(w0[n + A], out=rhs[n:])
+        sol, _ = lapack.dgetrs(lu, piv, rhs)
+        z = np.zeros(self.game.size)
+        z[:n] = sol[:n]
+        z[n + A] = sol[n:]
+        return z, rcond
 
     def advance(self, state: SSNState, z: np.ndarray, *, rcond: float = math.nan) -> SSNState:
         """The iterate after ``state``: z evaluated once (Phi, the parts for the next step), checked for
