@@ -1,5 +1,7 @@
 """`python -m benchmarks`: gnerun's speed against baselines run in the same process.
 
+(`python -m benchmarks robustness` runs the robustness suite instead: benchmarks/robustness.py.)
+
 Prints a markdown table and writes JSON to benchmarks/results/. Every number is a median over repeats;
 every ratio is baseline time / gnerun time, both measured here, in this run.
 
@@ -381,4 +383,8 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
+    if sys.argv[1:2] == ["robustness"]:
+        from .robustness import main as robustness
+
+        sys.exit(robustness(sys.argv[2:]))
     sys.exit(main())
