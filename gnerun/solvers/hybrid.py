@@ -7,9 +7,12 @@ overshoot. This method keeps the local method's steps and adds what it lacks, af
 first, judged by a nonmonotone watchdog; a more robust method when it fails; restarts when that stalls):
 
 1. **Newton phase.** The semismooth Newton step (min map or Fischer-Burmeister, with the configured perturbation)
-   is accepted when ||Phi|| falls ``SUFFICIENT`` below a nonmonotone reference, the largest of its last
-   ``MEMORY`` accepted values. A singular JPhi, a non-finite Phi, a refused step, or ``WATCHDOG`` accepted steps
-   without a new best value end the phase. On the paper's games this takes exactly the paper's steps.
+   is taken unless it multiplies ||Phi|| by more than ``BLOWUP`` over a nonmonotone reference (the largest of its
+   last ``MEMORY`` values), as PATH's watchdog does: the local method's own path may climb before it converges.
+   ``WATCHDOG`` steps without a new best value (``SUFFICIENT`` below the best), a non-finite Phi or a refused
+   step end the phase. Where JPhi is singular, the Levenberg-Marquardt step is taken instead (a proximal
+   perturbation of the singular matrix, mu = ``LM_FAR`` ||Phi||). On the paper's games this takes exactly the
+   paper's steps.
 2. **Interior phase** (:mod:`gnerun.solvers.interior_point`), from the start: interior-point steps, well defined
    at singular and degenerate points, that also reach a point of a non-isolated solution set (plain GNEs whose
    shared constraints several players carry). If ||Phi|| makes no new best for ``STALL`` steps, or a step cannot
@@ -20,6 +23,10 @@ first, judged by a nonmonotone watchdog; a more robust method when it fails; res
    which converges to a point of the set under an error bound); when it reduces ||Phi|| at least
    ``HANDOVER_DECREASE``-fold, the Newton phase resumes (and with it Q-quadratic convergence at a regular
    solution), keeping the interior iterate to return to.
+4. **Pivoting** (LQ games only). When every interior start has failed, the KKT system, a linear complementarity
+   problem, is solved by Lemke's method from z^0 (covering vectors: all ones, then seeded random ones). The
+   central path of the interior phase gives the copies of a shared constraint equal multipliers, so it misses
+   plain GNEs that have no variational counterpart (FK A.8); complementary pivoting does not.
 
 One call of ``step`` is one iteration: one accepted step (a Newton step tried and refused costs an extra
 evaluation inside it). The iterate z = (a, lambda) and ||Phi|| are the semismooth Newton method's in every phase,
@@ -37,8 +44,9 @@ from .interior_point import STARTS, InteriorIterate, InteriorPoint
 from .ssn import FAILURES, SemismoothNewton, SSNState, Status, _norm
 
 MEMORY = 4  # nonmonotone reference: the largest ||Phi|| of this many last accepted Newton iterates
-WATCHDOG = 8  # accepted Newton steps without a new best ||Phi|| before the interior phase takes over
-SUFFICIENT = 0.1  # a Newton step must reduce the reference by this fraction at least
+WATCHDOG = 4  # Newton steps without a new best ||Phi|| (SUFFICIENT below it) before the interior phase takes over
+BLOWUP = 1e3  # a Newton step that multiplies the nonmonotone reference by more than this is refused at once
+SUFFICIENT = 0.1  # progress: ||Phi|| at least this fraction below the best so far
 HANDOVER_AT = 1e-2  # try the Newton step from an interior iterate once ||Phi|| <= this x min(||Phi(z^0)||, 1)
 HANDOVER_DECREASE = 0.5  # ... and take it when it reduces ||Phi|| at least by this factor
 STALL = 25  # interior steps without a new best ||Phi|| (by 10%) before a restart
@@ -124,7 +132,7 @@ class HybridNewton:
     def _newton_step(self, state: SSNState, memory: Memory) -> SSNState:
         candidate = self._candidate(state, memory)
         merit = candidate.residual_norm
-        if candidate.status == Status.RUNNING and merit <= (1.0 - SUFFICIENT) * max(memory.merits[-MEMORY:]):
+        if candidate.status == Status.RUNNING and merit <= BLOWUP * max(memory.merits[-MEMORY:]):
             best, stalls = memory.best, memory.stalls + 1
             if merit < (1.0 - SUFFICIENT) * best:
                 best, stalls = merit, 0
