@@ -19,6 +19,7 @@ import typer
 
 from . import __version__
 from .errors import InputError, Unavailable, one_line
+from .threads import single_threaded_blas
 
 app = typer.Typer(
     add_completion=False,
@@ -432,6 +433,7 @@ class _progress:
 
 def main() -> None:
     """Entry point of the `gnerun` console script."""
+    single_threaded_blas()
     try:
         app(standalone_mode=True)
     except KeyboardInterrupt:

@@ -18,12 +18,14 @@ from ..language.config import Config, sparse_obstacles
 from ..log.mcap_log import json_ready
 from ..solvers.hybrid import globalized
 from ..solvers.ssn import SemismoothNewton, SSNState, Status
+from ..threads import single_threaded_blas
 from .rundir import RunDirectory, recording
 
 
 def make_solver(cfg: Config, game: CompiledGame, *, disturbed: bool = True) -> SemismoothNewton:
     """The solver the config asks for (``solver.kind``, ``solver.globalization``), with its disturbance model
-    (unless not ``disturbed``)."""
+    (unless not ``disturbed``). Asks for one BLAS thread (:mod:`gnerun.threads`)."""
+    single_threaded_blas()
     disturbance = cfg.disturbance if disturbed else None
     if cfg.solver.kind == "distributed":
         from ..solvers.proximal_response import ProximalResponse
