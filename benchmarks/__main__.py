@@ -237,6 +237,84 @@ def cli_help_time(repeats: int = 5) -> float:
     return statistics.median(samples)
 
 
+def fresh_solve(cfg, game: CompiledGame, repeats: int) -> tuple[float, object]:
+    """Median time of a whole solve by a fresh solver (nothing kept from an earlier solve), and its final state."""
+    samples, state = [], None
+    for _ in range(repeats + 1):
+        solver = make_solver(cfg, game)
+        t0 = time.perf_counter()
+        state = solver.init()
+        while not solver.terminate(state)[0]:
+            state = solver.step(state)
+        samples.append(time.perf_counter() - t0)
+    return statistics.median(samples[1:]), state
+
+
+def robust_rows(row, reps: int, quick: bool) -> None:
+    """The globalized default where the local method converges too (its cost per solve, target <= 2x), the bounded
+    LQ family against nashopt (target: at least as fast as its fastest successful method), and the time per
+    iteration on ALGAMES's merge and intersection (target <= 5 ms)."""
+    from .problems import fk, lq, trajectory
+
+    def with_method(cfg, method: str):
+        return cfg.model_copy(update={"solver": cfg.solver.model_copy(update={"globalization": method})})
+
+    cases = [("paper game T = 10", load_config(ROOT / "configs" / "paper_study1.yaml")),
+             ("nonlinear_gne", load_config(ROOT / "configs" / "nonlinear_gne.yaml"))]
+    cases += [(f"FK {p.name} from {p.start}", load_config(text=p.config_yaml)) for p in fk.problems()]
+    worst = 0.0
+    for name, cfg in cases:
+        game = compile_game(cfg)
+        t_local, s_local = fresh_solve(with_method(cfg, "none"), game, max(3, reps // 3))
+        if s_local.status != Status.CONVERGED:
+            continue
+        t_default, s_default = fresh_solve(with_method(cfg, "auto"), game, max(3, reps // 3))
+        per = (t_default / max(s_default.k, 1)) / (t_local / max(s_local.k, 1))
+        worst = max(worst, t_default / t_local)
+        row(f"globalized (default) vs local, where both converge: {name}", t_default, "local", t_local,
+            target="ratio >= 0.5", met=t_default <= 2 * t_local,
+            note=f"{s_default.k} vs {s_local.k} iterations; the default's iteration costs {per:.2f}x the local one")
+    row("globalized vs local: the largest whole-solve time ratio (default / local)", None, target="<= 2",
+        met=worst <= 2, note=f"{worst:.2f}")
+    peers_there = peers.available()
+    for T in (5, 20) if quick else lq.HORIZONS:
+        for eq in lq.EQUILIBRIA:
+            cfg = load_config(text=lq.lq_yaml(T, eq))
+            game = compile_game(cfg)
+            t_g, s = fresh_solve(cfg, game, max(3, reps // 3))
+            note = f"{s.k} iterations, {s.status}; a fresh solver per solve"
+            if not peers_there:
+                row(f"bounded LQ T = {T}, {eq}: whole solve", t_g, note=note + "; nashopt not installed")
+                continue
+            results = [r for r in _stdout_to_stderr(lambda T=T, eq=eq: peers.lq_family_peers(
+                T, eq, max(3, reps // 4), siconos=False)) if r.success and r.time_s]
+            fastest = min(results, key=lambda r: r.time_s, default=None)
+            if fastest is None:
+                row(f"bounded LQ T = {T}, {eq}: whole solve", t_g, note=note + "; no nashopt method succeeded")
+                continue
+            row(f"bounded LQ T = {T}, {eq}: whole solve vs nashopt's fastest ({fastest.method})", t_g,
+                f"nashopt {fastest.method}", fastest.time_s, target="ratio >= 1", met=fastest.time_s >= t_g,
+                note=note)
+    for label, problems in (("ALGAMES merge", trajectory.merge_problems(3 if quick else 10)),
+                            ("ALGAMES intersection", trajectory.intersection_problems(2 if quick else 5))):
+        cfg = load_config(text=problems[0].config_yaml)
+        game = compile_game(cfg)
+        solver = make_solver(cfg, game)
+        solver.init()
+        per, its = [], []
+        for p in problems:
+            x0 = np.asarray(load_config(text=p.config_yaml).game.x0)
+            t0 = time.perf_counter()
+            state = solver.init(None, x0)
+            while not solver.terminate(state)[0]:
+                state = solver.step(state)
+            per.append((time.perf_counter() - t0) / max(state.k, 1))
+            its.append(state.k)
+        row(f"{label} ({game.size} unknowns, {formulation(cfg, game)}): one iteration", statistics.median(per),
+            target="<= 5 ms", met=statistics.median(per) <= 5e-3,
+            note=f"median over {len(problems)} random initial states; iterations {min(its)}-{max(its)}")
+
+
 def us(v: float) -> str:
     return f"{v * 1e6:,.1f} µs" if v < 1e-3 else f"{v * 1e3:,.2f} ms" if v < 1 else f"{v:,.2f} s"
 
@@ -350,6 +428,10 @@ def main(argv: list[str] | None = None) -> int:
             row(f"family N = {N}: t(T = 200) / t(T = 50)", None, target="<= 5", met=max(r, rc) <= 5,
                 note=f"{r:.1f} (fresh solver: {rc:.1f})")
             rows[-1]["ratio"] = r
+
+    # 5. robust solving: the globalized default against the local method, the LQ family against its peers, the
+    # trajectory games' cost per iteration
+    robust_rows(row, reps, args.quick)
 
     # 3. peers: nashopt (optional extra `bench`) on a game both can state, last (importing it loads JAX)
     if peers.available():
