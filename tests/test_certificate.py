@@ -284,3 +284,34 @@ def test_certificate_of_the_solved_paper_game() -> None:
     off = certificate(game, z, res.x)
     assert off["best_response_gap"]["agent2"] > 1e-3
     assert off["kkt_residual"] > 1e-3
+
+
+def test_a_local_maximum_of_a_player_is_found_from_the_corners_of_its_box() -> None:
+    # FK A.2: at this point players 2-4 sit at a stationary point of their (nonconvex) costs, a local maximum in
+    # their own decision; the best response from the candidate stays there, the one from the lower bound does not.
+    # The independent check of benchmarks/problems/fk.py (numpy costs, its own SLSQP) gives the same gap.
+    from benchmarks.problems import fk
+
+    problem = next(p for p in fk.problems() if p.name == "A.2" and p.start == "x0 = 1")
+    game = compile_game(load_config(text=problem.config_yaml))
+    a = np.array([0.3, 0.1938, 0.1938, 0.1938, 0.0685, 0.01, 0.01, 0.01, 0.01, 0.01])
+    gaps = certificate(game, np.concatenate([a, np.zeros(game.m)]))["best_response_gap"]
+    independent = problem.best_response_gaps(a)
+    for name in ("p2", "p3", "p4"):
+        assert gaps[name] == pytest.approx(independent[name], rel=1e-6) and gaps[name] > 1e-3
+
+
+def test_best_responses_gain_nothing_from_violating_a_priced_constraint() -> None:
+    # FK A.10c at its equilibrium: SLSQP's best responses may break a consumer's budget by ~1e-8; at the candidate's
+    # multipliers (~100) that looked like a gain of ~1e-6 before violations were charged
+    from benchmarks.problems import fk
+    from gnerun.runs.solving import iterate, make_solver
+
+    problem = next(p for p in fk.problems() if p.name == "A.10c")
+    cfg = load_config(text=problem.config_yaml)
+    game = compile_game(cfg)
+    solver = make_solver(cfg, game)
+    state = iterate(solver, solver.init())
+    assert state.status == "converged"
+    gaps = certificate(game, state.z)["best_response_gap"]
+    assert max(gaps.values()) <= 1e-9

@@ -50,8 +50,13 @@ def kkt_residuals(game: CompiledGame, z: np.ndarray, x: np.ndarray | None = None
 
 
 def best_response(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | None = None,
-                  starts: list[np.ndarray] | None = None) -> tuple[float | None, np.ndarray | None, str]:
-    """Agent ``agent``'s best response to a_-i: (value, its decision, a note)."""
+                  starts: list[np.ndarray] | None = None,
+                  prices: np.ndarray | None = None) -> tuple[float | None, np.ndarray | None, str]:
+    """Agent ``agent``'s best response to a_-i: (value, its decision, a note).
+
+    SLSQP's answers may violate the constraints within ``FEASIBILITY_TOL``; with ``prices`` (the candidate's
+    multipliers of the agent's rows, in ``constraint_rows`` order) such a point is charged for its violations at
+    those prices, so that violating a constraint by 1e-9 at a multiplier of 100 does not count as a gain of 1e-7."""
     a = np.asarray(a, dtype=float)
     sl = game.agent_slices[agent]
     rows = game.constraint_rows(agent)
@@ -102,6 +107,9 @@ def best_response(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray |
         c = values(ai)[0]
         viol = max(float(np.max(c[in_rows], initial=0.0)), float(np.max(np.abs(c[eq_rows]), initial=0.0)))
         val = objective(ai)[0]
+        if prices is not None:
+            over = np.where(game.equality_mask[rows], np.abs(c[rows]), np.maximum(c[rows], 0.0))
+            val += float(np.abs(prices) @ over)
         if not math.isfinite(val) or viol > FEASIBILITY_TOL * max(1.0, float(np.max(np.abs(ai), initial=0.0))):
             notes.append(f"SLSQP from a start ended infeasible ({res.message})")
             continue
@@ -126,7 +134,7 @@ def certificate(game: CompiledGame, z: np.ndarray, x: np.ndarray | None = None,
     gaps: dict[str, float | None] = {}
     notes: dict[str, str] = {}
     for i, name in enumerate(game.agent_names):
-        value, decision, note = best_response(game, i, a, x)
+        value, decision, note = best_response(game, i, a, x, prices=z[n + game.constraint_rows(i)])
         gaps[name] = None if value is None else float(values[i] - value)
         notes[name] = note
         if best is not None and decision is not None:

@@ -1,0 +1,260 @@
+"""The globalized semismooth Newton method (the default): each mechanism on a game that needs it, and the status
+contract across every globalization."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from benchmarks.problems import fk, lq
+from gnerun.game.compile import compile_game
+from gnerun.language.config import load_config
+from gnerun.runs.solving import iterate, make_solver, solve
+from gnerun.solvers import hybrid
+from gnerun.solvers.certificate import kkt_residuals
+from gnerun.solvers.ssn import FAILURES, SemismoothNewton, Status
+
+from .conftest import CONFIGS
+
+# A player whose cost is linear in its own variable, starting at its active bound with a zero multiplier: the
+# min-map row picks the multiplier branch and the Newton matrix has a zero row and column (NUMERICS §5).
+LINEAR_AT_BOUND = """
+name: linear-at-bound
+game:
+  kind: static
+  agents:
+    - name: p1
+      variables: {x1: {lower: 0, upper: 2, start: 0}}
+      cost: "-x1"
+    - name: p2
+      variables: {x2: {lower: -1, upper: 1, start: 0}}
+      cost: "(x2 - 0.25*x1)**2"
+"""
+
+
+def _fk(name: str, start: str):
+    return next(p for p in fk.problems() if p.name == name and p.start == start)
+
+
+def _solved(problem, **over):
+    cfg = load_config(text=problem.config_yaml, overrides=over)
+    game = compile_game(cfg)
+    solver = make_solver(cfg, game)
+    return game, solver, iterate(solver, solver.init())
+
+
+def test_a_degenerate_start_is_singular_for_the_local_method_and_solved_by_the_default() -> None:
+    local = solve(load_config(text=LINEAR_AT_BOUND, overrides={"solver.globalization": "none"}))
+    assert local.status == "singular_jacobian" and local.iterations == 0
+    res = solve(load_config(text=LINEAR_AT_BOUND))
+    assert res.status == "converged", res.message
+    # p1 takes its upper bound, p2 answers x2 = x1/4
+    assert res.solution == {"p1": {"x1": pytest.approx(2.0, abs=1e-10)}, "p2": {"x2": pytest.approx(0.5, abs=1e-10)}}
+    assert max(res.certificate["best_response_gap"].values()) <= 1e-9
+
+
+def test_a_continuum_of_equilibria_ends_at_one_certified_point() -> None:
+    # FK A.11 as a plain GNE: both players carry x1 + x2 <= 1 with their own multipliers; every point of the segment
+    # x1 + x2 = 1, x1 in [1/2, 1], is an equilibrium (player 1 wants 1, player 2 wants 1/2)
+    res = solve(load_config(CONFIGS / "fk_a11.yaml", {"game.equilibrium": "generalized"}))
+    assert res.status == "converged", res.message
+    x1, x2 = res.solution["p1"]["x1"], res.solution["p2"]["x2"]
+    assert x1 + x2 == pytest.approx(1.0, abs=1e-9) and 0.5 - 1e-9 <= x1 <= 1.0 + 1e-9
+    assert res.certificate["kkt_residual"] <= 1e-9
+    assert max(res.certificate["best_response_gap"].values()) <= 1e-9
+
+
+@pytest.mark.parametrize("T", [5, 20])
+def test_the_bounded_lq_family_is_solved_in_both_equilibria(T: int) -> None:
+    for problem in (p for p in lq.lq_problems() if f"T={T} " in p.name):
+        game, _, state = _solved(problem)
+        assert state.status == Status.CONVERGED, (problem.name, state.message)
+        gaps = problem.best_response_gaps(state.z[: game.n])  # independent: each agent's QP by DAQP
+        assert max(gaps.values()) <= 1e-8, (problem.name, gaps)
+        if problem.reference is not None:
+            np.testing.assert_allclose(state.z[: game.n], problem.reference, atol=1e-8)
+
+
+def test_a_stalled_interior_phase_restarts_from_its_next_starting_point() -> None:
+    # FK A.6 from x = 10 (decisions at their upper bounds, a pseudogradient of size 1e4): the interior starts with
+    # small multipliers stall; the start scaled by the pseudogradient converges
+    game, solver, state = _solved(_fk("A.6", "x0 = 10"))
+    assert state.status == Status.CONVERGED, state.message
+    assert state.search.attempt >= 1
+    np.testing.assert_allclose(state.z[: game.n], _fk("A.6", "x0 = 10").reference, atol=1e-6)
+
+
+def test_without_restarts_the_same_start_stalls(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(hybrid, "RESTARTS", 0)
+    monkeypatch.setattr(hybrid, "PIVOTS", 0)
+    _, _, state = _solved(_fk("A.6", "x0 = 10"))
+    assert state.status in FAILURES and state.status != Status.CONVERGED
+
+
+@pytest.mark.parametrize("start", ["x0 = 0", "x0 = 1", "x0 = 10"])
+def test_an_lq_game_the_central_path_misses_is_solved_by_pivoting(start: str) -> None:
+    # FK A.8: no variational equilibrium exists, and the interior phase's central path (equal multipliers for the
+    # copies of a shared row) leads to infeasibility; Lemke's method on the KKT system finds a GNE
+    problem = _fk("A.8", start)
+    game, _, state = _solved(problem)
+    assert state.status == Status.CONVERGED, state.message
+    gaps = problem.best_response_gaps(state.z[: game.n])
+    assert max(gaps.values()) <= 1e-8, gaps
+    x1, x2, x3 = state.z[:3]
+    assert x1 + x2 == pytest.approx(1.0, abs=1e-9) and x3 == pytest.approx(1.5 * x1, abs=1e-9)
+
+
+def test_without_pivoting_that_game_is_not_solved(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(hybrid, "PIVOTS", 0)
+    _, _, state = _solved(_fk("A.8", "x0 = 0"))
+    assert state.status != Status.CONVERGED
+
+
+def test_the_default_takes_the_papers_steps_on_the_papers_game() -> None:
+    """Study 1: the watchdog accepts every step of the local method, so the iterates are the paper's, bit for bit."""
+    cfg = load_config(CONFIGS / "paper_study1.yaml", {"solver.globalization": "auto"})
+    game = compile_game(cfg)
+    default, local = make_solver(cfg, game), SemismoothNewton(game, cfg.solver)
+    a, b = default.init(), local.init()
+    while not local.terminate(b)[0]:
+        a, b = default.step(a), local.step(b)
+        assert np.array_equal(a.z, b.z)
+    assert default.terminate(a) == (True, Status.CONVERGED) and a.k == 3
+
+
+def test_a_kkt_point_that_is_not_an_equilibrium_has_its_own_status() -> None:
+    # player 1 maximises x1^2 - x1 x2 / 2 on [-1, 1]: x1 = 0 is a KKT point (a stationary point with zero
+    # multipliers), its best response is the bound opposite in sign to x2 = x1 / 2, so the game has no equilibrium
+    # at all: the restarts from best responses cannot find one either
+    text = """
+name: saddle
+game:
+  kind: static
+  agents:
+    - name: p1
+      variables: {x1: {lower: -1, upper: 1, start: 0}}
+      cost: "-x1**2 + 0.5*x1*x2"
+    - name: p2
+      variables: {x2: {lower: -1, upper: 1, start: 0}}
+      cost: "(x2 - 0.5*x1)**2"
+"""
+    res = solve(load_config(text=text))
+    assert res.residual_norm <= 1e-10  # the solver did converge ...
+    assert res.status == "not_an_equilibrium"  # ... to a point that is not an equilibrium
+    assert "p1" in res.message and res.certificate["best_response_gap"]["p1"] == pytest.approx(1.0, abs=1e-6)
+    assert not res.success
+
+
+# A double integrator with explicit Euler steps: the position at tau + 1 does not depend on the input at tau, so
+# "p <= 1" at tau = 0 is a condition on the plant state alone (SPEC §3b).
+EULER = """
+name: euler-wall
+game:
+  kind: dynamic
+  horizon: 6
+  states: [p, v]
+  dynamics: {p: "p + 0.5*v", v: "v + 0.5*u"}
+  x0: [0.0, 1.0]
+  agents:
+    - name: robot
+      inputs: {u: {lower: -2, upper: 2}}
+      stage_cost: "(p - 2)**2 + 0.1*u**2"
+      constraints: ["p <= 1"]
+"""
+
+
+@pytest.mark.parametrize("globalization", ["none", "auto"])
+def test_a_row_no_decision_reaches_is_checked_not_a_singular_newton_row(globalization: str) -> None:
+    cfg = load_config(text=EULER, overrides={"solver.globalization": globalization})
+    game = compile_game(cfg)
+    fixed = np.flatnonzero(game.zero_gradient_rows)
+    assert [game.constraints[j].label for j in fixed] == ["p <= 1 [tau=0]"]
+    res = solve(cfg)
+    assert res.status == "converged", res.message
+    p = res.x[0] + 0.5 * res.x[1]  # p(1), fixed by the state
+    assert p <= 1.0
+    assert res.certificate["kkt_residual"] <= 1e-9
+    assert res.multipliers["robot"][int(fixed[0])] == 0.0
+
+
+def test_a_violated_row_no_decision_reaches_is_reported_by_its_label() -> None:
+    res = solve(load_config(text=EULER, overrides={"game.x0": [0.8, 1.0]}))  # p(1) = 1.3 > 1 whatever u does
+    assert res.status == "infeasible_stage_constraint"
+    assert "p <= 1 [tau=0]" in res.message and "robot" in res.message and "0.3" in res.message
+
+
+def test_without_that_rule_the_row_makes_the_newton_matrix_singular(monkeypatch: pytest.MonkeyPatch) -> None:
+    # the same game with the rule switched off: the zero row of JPhi is singular as soon as the row is g-branch
+    from gnerun.game import compile as compile_module
+
+    cfg = load_config(text=EULER, overrides={"solver.globalization": "none", "game.x0": [0.8, 1.0]})
+    game = compile_game(cfg)
+    monkeypatch.setattr(compile_module.CompiledGame, "zero_gradient_rows",
+                        property(lambda self: np.zeros(self.m, dtype=bool)))
+    solver = make_solver(cfg, game)
+    state = iterate(solver, solver.init())
+    assert state.status == Status.SINGULAR_JACOBIAN
+
+
+GLOBALIZATIONS = ["none", "line_search", "hybrid", "interior_point"]
+KNOWN = [("harker.yaml", {"x1": 5.0, "x2": 9.0}), ("fk_a11.yaml", {"x1": 0.75, "x2": 0.25}),
+         ("fk_a12.yaml", {"x1": 16 / 3, "x2": 16 / 3})]
+
+
+@pytest.mark.parametrize("globalization", GLOBALIZATIONS)
+@pytest.mark.parametrize(("name", "known"), KNOWN)
+def test_every_globalization_reaches_the_known_solution(name: str, known: dict, globalization: str) -> None:
+    res = solve(load_config(CONFIGS / name, {"solver.globalization": globalization, "solver.kind": "ssn"}))
+    assert res.status == "converged", res.message
+    values = {v: x for agent in res.solution.values() for v, x in agent.items()}
+    assert values == pytest.approx(known, abs=1e-8)
+    assert res.residual_norm <= load_config(CONFIGS / name).solver.tol
+
+
+@pytest.mark.parametrize("globalization", GLOBALIZATIONS)
+def test_every_globalization_keeps_the_status_contract(globalization: str) -> None:
+    """Converged means ||Phi|| <= tol and an independent KKT check agrees; every other end is a failure status
+    with a message, or max_iter; nothing raises."""
+    problems = [_fk("A.2", "x0 = 0.01"), _fk("A.6", "x0 = 10"), _fk("A.17", "x0 = 0")]
+    for problem in problems:
+        cfg = load_config(text=problem.config_yaml, overrides={"solver.globalization": globalization,
+                                                                "solver.max_iter": 120})
+        game = compile_game(cfg)
+        solver = make_solver(cfg, game)
+        state = iterate(solver, solver.init())
+        if state.status == Status.CONVERGED:
+            assert state.residual_norm <= cfg.solver.tol
+            assert kkt_residuals(game, state.z)["kkt_residual"] <= 10 * cfg.solver.tol
+        else:
+            assert state.status in FAILURES | {Status.MAX_ITER}
+            assert state.message
+
+
+def test_merges_from_random_states_converge_and_are_equilibria() -> None:
+    from benchmarks.problems import trajectory
+
+    problems = trajectory.merge_problems(4, seed=7)
+    cfg = load_config(text=problems[0].config_yaml)
+    game = compile_game(cfg)
+    solver = make_solver(cfg, game)
+    for problem in problems:
+        x0 = np.asarray(load_config(text=problem.config_yaml).game.x0)
+        state = iterate(solver, solver.init(None, x0))
+        assert state.status == Status.CONVERGED, state.message
+        gaps = problem.best_response_gaps(state.z[: game.n])
+        assert max(gaps.values()) <= 1e-5, gaps
+
+
+def test_a_kkt_point_that_is_not_an_equilibrium_is_left_from_the_best_responses(monkeypatch) -> None:
+    """FK A.2 from x = 1: the method reaches a KKT point at which players 2 to 4 (nonconvex in their own
+    variables) can improve alone; from their best responses it reaches an equilibrium."""
+    from gnerun.runs import solving
+
+    problem = _fk("A.2", "x0 = 1")
+    res = solve(load_config(text=problem.config_yaml))
+    assert res.status == "converged" and "restart" in res.message, res.message
+    assert max(problem.best_response_gaps(res.a).values()) <= 1e-9
+    monkeypatch.setattr(solving, "CERTIFY_RESTARTS", 0)
+    res = solve(load_config(text=problem.config_yaml))
+    assert res.status == "not_an_equilibrium"
+    assert max(problem.best_response_gaps(res.a).values()) > 1e-4
