@@ -6,8 +6,9 @@ gaps do not use the Newton machinery at all: each agent's own problem
     min_{a_i} J_i(a_i, a_-i)  s.t. its own constraints g_i(a_i, a_-i) <= 0 (and h_i = 0)
 
 is solved by scipy's SLSQP with the other agents fixed at a_-i, from the candidate, from the config's
-start values and, where the agent's decisions are bounded, from the corners of their box (the lower and the
-upper bounds; a nonconvex player's better choices often lie there), and gap_i = J_i(a) - (best value found)
+start values, where the agent's decisions are bounded from the corners of their box (the lower and the upper
+bounds; a nonconvex player's better choices often lie there), and from a seeded perturbation of the candidate
+(another basin), and gap_i = J_i(a) - (best value found)
 is reported. A gap near zero (or slightly negative, at the level of SLSQP's tolerance) says that no agent can
 improve unilaterally from these starts; for nonconvex agent problems it is a local statement.
 """
@@ -23,6 +24,7 @@ from scipy.optimize import minimize
 from ..game.compile import CompiledGame
 
 FEASIBILITY_TOL = 1e-9
+PERTURBATIONS = (0.1, 1.0)  # relative sizes of the perturbed starts of a best response
 GAP_TOL = 1e-6  # a best-response gap above this (relative to max(1, |J_i|)) means the agent can improve alone
 
 
@@ -96,6 +98,11 @@ def best_response(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray |
             starts.append(lo.copy())
         if np.all(np.isfinite(hi)):
             starts.append(hi.copy())
+        # and seeded perturbations of the candidate, inside the bounds: other basins for a nonconvex player
+        rng = np.random.default_rng(agent)
+        for scale in PERTURBATIONS:
+            shaken = a[sl] + scale * np.maximum(1.0, np.abs(a[sl])) * rng.standard_normal(sl.stop - sl.start)
+            starts.append(np.clip(shaken, lo, hi))
     candidates = starts
     best_val, best_x, notes = None, None, []
     for s in candidates:

@@ -24,12 +24,14 @@ What makes it work on the field's games, measured on the benchmark suite (``pyth
   with nonlinear dynamics send the inputs far away.
 - **Primal and dual variables take their own step lengths** to the boundary (``BOUNDARY`` of the way), so that a
   multiplier heading for zero does not hold up the decisions.
-- **Multipliers start small**, at ``START_MU / w``: a multiplier of 1 on a constraint of a game whose costs are of
-  order 1e-2 starts the method far from the central path.
+- **Multipliers start small**, at mu / w with mu = 1e-3 (``STARTS``): a multiplier of 1 on a constraint of a game
+  whose costs are of order 1e-2 starts the method far from the central path. Where that stalls, the globalized
+  method restarts with mu = 1e-4, then with mu scaled by the size of the pseudogradient (which says how large the
+  multipliers must become: decisions starting at their bounds with gradients of 1e4, FK A.6 from 10).
 - **No merit function**: every step is taken at its full length to the boundary. A potential-reduction line
   search (Dreves et al.) and residual-based backtracking were both measured and lost robustness on nonconvex
-  games; instead, the globalized method (:mod:`gnerun.solvers.hybrid`) watches for stalls and restarts with
-  another ``START_MU``.
+  games (the potential reduction solved 1 of 6 ALGAMES merges); instead, the globalized method
+  (:mod:`gnerun.solvers.hybrid`) watches for stalls and restarts.
 
 The linear algebra has the two forms of the semismooth Newton step: condensed (the inequality multipliers
 eliminated, one dense factorisation of n unknowns and the equality multipliers; constraint rows with a single
