@@ -244,3 +244,16 @@ def test_parse_override_rejects(text: str) -> None:
 def test_other_config_versions_are_refused() -> None:
     problems = _problems("version: 2\n" + STATIC)
     assert problems[0].startswith("cfg.yaml:1:10: version:")
+
+
+def test_the_replaced_line_search_key_says_what_replaced_it() -> None:
+    [problem] = _problems(STATIC.replace("  tol: 1.0e-10\n", "  tol: 1.0e-10\n  line_search: true\n"))
+    assert "solver.line_search" in problem and "globalization: line_search" in problem
+    assert problem.startswith("cfg.yaml:") and problem.split(":")[1].isdigit()
+
+
+def test_josephy_newton_takes_no_globalization_of_semismooth_newton() -> None:
+    [problem] = _problems(STATIC.replace("  tol: 1.0e-10\n", "  tol: 1.0e-10\n  kind: jn\n  globalization: hybrid\n"))
+    assert "solver.globalization" in problem and "Josephy-Newton" in problem
+    assert load_config("cfg.yaml", text=STATIC.replace("  tol: 1.0e-10\n", "  tol: 1.0e-10\n  kind: jn\n")).solver.method \
+        == "none"
