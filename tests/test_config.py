@@ -255,5 +255,5 @@ def test_the_replaced_line_search_key_says_what_replaced_it() -> None:
 def test_josephy_newton_takes_no_globalization_of_semismooth_newton() -> None:
     [problem] = _problems(STATIC.replace("  tol: 1.0e-10\n", "  tol: 1.0e-10\n  kind: jn\n  globalization: hybrid\n"))
     assert "solver.globalization" in problem and "Josephy-Newton" in problem
-    assert load_config("cfg.yaml", text=STATIC.replace("  tol: 1.0e-10\n", "  tol: 1.0e-10\n  kind: jn\n")).solver.method \
-        == "none"
+    jn = load_config("cfg.yaml", text=STATIC.replace("  tol: 1.0e-10\n", "  tol: 1.0e-10\n  kind: jn\n"))
+    assert jn.solver.method == "none"
