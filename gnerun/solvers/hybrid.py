@@ -118,8 +118,8 @@ class HybridNewton:
         return HANDOVER_AT * min(merit0, 1.0) if math.isfinite(merit0) else HANDOVER_AT
 
     def _candidate(self, state: SSNState, memory: Memory) -> SSNState:
-        """The Newton step from ``state``; where JPhi is singular close to a solution, the Levenberg-Marquardt step
-        instead (a proximal perturbation of the singular matrix, mu = ||Phi||)."""
+        """The Newton step from ``state``; where JPhi is singular, the Levenberg-Marquardt step instead (a
+        proximal perturbation of the singular matrix: mu = ||Phi|| close to a solution, LM_FAR ||Phi|| far)."""
         candidate = self.newton.step(state)
         if candidate.status != Status.SINGULAR_JACOBIAN:
             return candidate
@@ -159,11 +159,26 @@ class HybridNewton:
         start = replace(start, search=memory)
         return start if k is not None else self._interior_step(start, memory)
 
+    def _handover(self, state: SSNState) -> SSNState | None:
+        """The Newton step from an interior iterate (Levenberg-Marquardt where JPhi is singular), if it reduces
+        ||Phi|| HANDOVER_DECREASE-fold: judged on the residual alone, so a refused step costs no derivatives."""
+        newton = self.newton
+        z, rcond = newton.newton_point(state)
+        if z is None:
+            z = newton.regularized_point(state, state.residual_norm)
+        if z is None:
+            return None
+        phi, _ = newton.phi(*newton.kkt_residual(z, state.x), z)
+        if not _norm(phi) <= HANDOVER_DECREASE * state.residual_norm:
+            return None
+        candidate = newton.advance(state, z, rcond=rcond)
+        return candidate if candidate.status == Status.RUNNING else None
+
     def _interior_step(self, state: SSNState, memory: Memory) -> SSNState:
         if state.residual_norm <= memory.handover:
-            candidate = self._candidate(state, memory)
-            merit = candidate.residual_norm
-            if candidate.status == Status.RUNNING and merit <= HANDOVER_DECREASE * state.residual_norm:
+            candidate = self._handover(state)
+            if candidate is not None:
+                merit = candidate.residual_norm
                 return replace(candidate, search=replace(memory, phase="newton", merits=(state.residual_norm, merit),
                                                          best=merit, stalls=0))
             memory = replace(memory, handover=0.1 * state.residual_norm)
