@@ -247,6 +247,7 @@ def fresh_solve(cfg, game: CompiledGame, repeats: int) -> tuple[float, object]:
         while not solver.terminate(state)[0]:
             state = solver.step(state)
         samples.append(time.perf_counter() - t0)
+        state = solver.finish(state)
     return statistics.median(samples[1:]), state
 
 

@@ -45,6 +45,7 @@ from ..language.config import DisturbanceConfig, SolverConfig
 from .line_search import backtrack
 
 _FB_TIE = 1.0 - 1.0 / math.sqrt(2.0)
+MAP_AFTER = 3  # LQ games: an active set's map G_A is built on its third use (one triangular solve per use before)
 
 
 class Status(StrEnum):
@@ -405,7 +406,8 @@ class SemismoothNewton:
     def _lq_point(self, active: np.ndarray, x: np.ndarray) -> tuple[np.ndarray | None, float]:
         """z^+ for an LQ game from any z with active set ``active`` (g-branch rows and equalities): the reduced
         system M [a; lambda_A] = -[L(0); c_A(0)], whose LU factors are kept per active set (M depends on the active
-        set only), solved for w0(x). ``None`` when M is singular."""
+        set only), solved for w0(x); from the set's ``MAP_AFTER``-th use on, the map G_A with z^+ = G_A w0 for every
+        x (built once from the factors). ``None`` when M is singular."""
         key = active.tobytes()
         entry = self._maps.get(key)
         if entry is None:
@@ -414,12 +416,26 @@ class SemismoothNewton:
             ok = info == 0 and rcond >= self.options.min_rcond
             if len(self._maps) >= 256:
                 self._maps.clear()
-            entry = self._maps[key] = (lu if ok else None, piv, A, float(rcond))
-        lu, piv, A, rcond = entry
+            entry = self._maps[key] = [lu if ok else None, piv, A, float(rcond), 0, None]
+        lu, piv, A, rcond, uses, G = entry
         if lu is None:
             return None, rcond
-        n = self.game.n
         w0 = self.game.offsets(x)
+        if G is not None:
+            return G @ w0, rcond
+        n = self.game.n
+        if uses + 1 >= MAP_AFTER:
+            # an active set that comes back (a closed loop, repeated solves): the map z^+ = G_A w0, one product per step
+            select = np.zeros((n + A.size, self.game.size))
+            select[np.arange(n), np.arange(n)] = -1.0
+            select[n + np.arange(A.size), n + A] = -1.0
+            sol, _ = lapack.dgetrs(lu, piv, select)
+            G = np.zeros((self.game.size, self.game.size))
+            G[:n] = sol[:n]
+            G[n + A] = sol[n:]
+            entry[5] = G
+            return G @ w0, rcond
+        entry[4] = uses + 1
         rhs = np.empty(n + A.size)
         np.negative(w0[:n], out=rhs[:n])
         np.negative(w0[n + A], out=rhs[n:])
