@@ -292,19 +292,19 @@ def convexify(S: np.ndarray, blocks: list[slice]) -> None:
     for sl in blocks:
         block = S[sl, sl]
         sym = 0.5 * (block + block.T)
-        try:
-            np.linalg.cholesky(sym)
+        if _positive_definite(sym):
             continue
-        except np.linalg.LinAlgError:
-            pass
         scale = max(1.0, float(np.max(np.abs(np.diag(sym)), initial=0.0)))
         delta = 1e-8 * scale
         eye = np.eye(sym.shape[0])
-        while delta < 1e12 * scale:
-            try:
-                np.linalg.cholesky(sym + delta * eye)
-                break
-            except np.linalg.LinAlgError:
-                delta *= 10.0
+        while delta < 1e12 * scale and not _positive_definite(sym + delta * eye):
+            delta *= 10.0
         idx = np.arange(sl.start, sl.stop)
         S[idx, idx] += delta
+
+
+def _positive_definite(sym: np.ndarray) -> bool:
+    """Whether the Cholesky factorisation of the symmetric ``sym`` succeeds (LAPACK's, which reports failure
+    without the cost of an exception)."""
+    _, info = lapack.dpotrf(sym, lower=1, clean=0, overwrite_a=0)
+    return info == 0
