@@ -141,7 +141,11 @@ game:
     res = solve(load_config(text=text))
     assert res.residual_norm <= 1e-10  # the solver did converge ...
     assert res.status == "not_an_equilibrium"  # ... to a point that is not an equilibrium
-    assert "p1" in res.message and res.certificate["best_response_gap"]["p1"] == pytest.approx(1.0, abs=1e-6)
+    # p1's gap at the point reached, by hand: its best response to x2 is a bound, cost -1 - |x2| / 2
+    x1, x2 = res.a
+    gap = (-x1**2 + 0.5 * x1 * x2) - (-1.0 - 0.5 * abs(x2))
+    assert gap >= 0.25  # wherever the restarts end, p1 is far from its best response
+    assert "p1" in res.message and res.certificate["best_response_gap"]["p1"] == pytest.approx(gap, abs=1e-6)
     assert not res.success
 
 
@@ -258,3 +262,43 @@ def test_a_kkt_point_that_is_not_an_equilibrium_is_left_from_the_best_responses(
     res = solve(load_config(text=problem.config_yaml))
     assert res.status == "not_an_equilibrium"
     assert max(problem.best_response_gaps(res.a).values()) > 1e-4
+
+
+def test_a_certificate_restart_begins_in_the_interior_phase_with_the_warm_barrier(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    # the saddle game above has no equilibrium, so certified_solve restarts from p1's best response; each restart
+    # must be a warm interior start (lambda_i w_i = WARM on every inequality row), not a cold init
+    from gnerun.runs import solving
+    from gnerun.solvers import interior_point
+
+    cfg = load_config(text="""
+name: saddle
+game:
+  kind: static
+  agents:
+    - name: p1
+      variables: {x1: {lower: -1, upper: 1, start: 0}}
+      cost: "-x1**2 + 0.5*x1*x2"
+    - name: p2
+      variables: {x2: {lower: -1, upper: 1, start: 0}}
+      cost: "(x2 - 0.5*x1)**2"
+""")
+    game = compile_game(cfg)
+    solver = make_solver(cfg, game)
+    starts = []
+    original = solver.restart
+
+    def spy(z0, x=None, rng=None):
+        state = original(z0, x, rng)
+        starts.append(state)
+        return state
+
+    monkeypatch.setattr(solver, "restart", spy)
+    out = solving.certified_solve(game, solver, solver.init())
+    assert out.restarts == len(starts) >= 1
+    for state in starts:
+        it = state.search.interior
+        assert state.search.phase == "interior" and it is not None
+        lam = it.z[game.n + solver.interior.I]
+        assert np.all(lam * it.w >= interior_point.WARM * (1 - 1e-12))
+        assert np.any(np.isclose(lam * it.w, interior_point.WARM))

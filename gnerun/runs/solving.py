@@ -168,7 +168,7 @@ def certified_solve(game: CompiledGame, solver: SemismoothNewton, state: SSNStat
             note(f"iteration {state.k}: a KKT point at which {', '.join(improving)} can improve alone; restart "
                  f"{used} from their best responses")
         t = time.perf_counter()
-        start = solver.init(z, x, state.rng)
+        start = (solver.restart if hasattr(solver, "restart") else solver.init)(z, x, state.rng)
         elapsed += time.perf_counter() - t
         state = replace(start, k=state.k + 1)
 

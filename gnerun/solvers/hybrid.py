@@ -95,6 +95,18 @@ class HybridNewton:
             return self._start_interior(replace(state, search=memory), 0, k=0)
         return replace(state, search=memory)
 
+    def restart(self, z0: np.ndarray, x: np.ndarray | None = None,
+                rng: np.random.Generator | None = None) -> SSNState:
+        """``init`` for a start near an equilibrium (a KKT point at which some agents moved to their best
+        responses, as :func:`~gnerun.runs.solving.certified_solve` restarts): the interior phase at once, with
+        the small barrier of a warm start (``interior_point.WARM``); a Newton step from there, with its zero
+        multipliers, is rarely accepted. Measured on the 50 of 100 random ALGAMES merges whose first KKT point
+        was not an equilibrium: a fifth fewer iterations than ``init``, every restart certified."""
+        state = self.init(z0, x, rng)
+        if state.status in FAILURES or not self.handover:
+            return state
+        return self._start_interior(state, 0, k=0, warm=True)
+
     def terminate(self, state: SSNState) -> tuple[bool, Status]:
         return self.newton.terminate(state)
 
@@ -147,11 +159,13 @@ class HybridNewton:
                          handover=0.1 * min(memory.handover, state.residual_norm))
         return self._interior_step(self._state_at(state, it.z, memory, k=state.k), memory)
 
-    def _start_interior(self, state: SSNState, attempt: int, *, k: int | None = None) -> SSNState:
-        """The interior phase from z^0 (``attempt``: which of the interior method's starting points), taking one
-        step unless ``k`` is given (then the start itself is the iterate k)."""
+    def _start_interior(self, state: SSNState, attempt: int, *, k: int | None = None,
+                        warm: bool = False) -> SSNState:
+        """The interior phase from z^0 (``attempt``: which of the interior method's starting points; ``warm``:
+        the warm start's instead of the first), taking one step unless ``k`` is given (then the start itself is
+        the iterate k)."""
         memory: Memory = state.search
-        z, w, eps = self.interior.start(memory.origin, state.x, attempt)
+        z, w, eps = self.interior.start(memory.origin, state.x, attempt, warm)
         memory = replace(memory, phase="interior", best=math.inf, stalls=0, attempt=attempt,
                          handover=memory.handover0)
         start = self._state_at(state, z, memory, k=state.k if k is None else k)

@@ -55,6 +55,7 @@ KAPPA = 10.0  # ... once every residual of H_eps is below KAPPA eps
 # lambda_i w_i starts at mu, times the size of the pseudogradient when scaled (it says how large the multipliers
 # must become); one start after another: the globalized method restarts with the next when the phase stalls
 STARTS = ((1e-3, False), (1e-4, False), (1e-2, True))
+WARM = 1e-5  # lambda_i w_i at a warm start: a point near an equilibrium (see HybridNewton.restart)
 START_FLOOR = 1.0  # slacks start at least this far inside
 BOUND_PUSH = 1e-2  # decisions start at least this far (relative) inside their bounds
 REGULARIZATION = 1e-10  # the first multiple of the identity tried where the Newton matrix is singular
@@ -87,9 +88,11 @@ class InteriorPoint:
         self.fixed = np.flatnonzero(fixed)
         self.linear = DenseBarrier(self) if newton.condensed else SparseBarrier(newton.system, self)
 
-    def start(self, z: np.ndarray, x: np.ndarray, attempt: int = 0) -> tuple[np.ndarray, np.ndarray, float]:
+    def start(self, z: np.ndarray, x: np.ndarray, attempt: int = 0,
+              warm: bool = False) -> tuple[np.ndarray, np.ndarray, float]:
         """An interior start (z, w, eps) from z: decisions moved inside their bounds, slacks at least
-        ``START_FLOOR``, multipliers at least mu / w (``STARTS[attempt]``), the rows no decision reaches at zero."""
+        ``START_FLOOR``, multipliers at least mu / w (``STARTS[attempt]``, or ``WARM`` for a warm start), the
+        rows no decision reaches at zero."""
         z = z.copy()
         n, I = self.n, self.I
         lo, hi = self.newton.game.a_lower, self.newton.game.a_upper
@@ -100,7 +103,7 @@ class InteriorPoint:
         F, c = self.newton.kkt_residual(bare, x)  # the pseudogradient: how large the multipliers must become
         w = np.maximum(-c[I], START_FLOOR)
         w[~np.isfinite(w)] = START_FLOOR
-        mu, scaled = STARTS[attempt % len(STARTS)]
+        mu, scaled = (WARM, False) if warm else STARTS[attempt % len(STARTS)]
         if scaled:
             size = float(np.max(np.abs(F), initial=0.0))
             mu *= max(1.0, size) if math.isfinite(size) else 1.0
