@@ -251,3 +251,20 @@ def test_vehicle_game_runs_K1_to_5_without_a_solver_failure() -> None:
         assert r.x[-1, 0] > 6 and r.x[-1, 4] > 6
     assert max_e[1] > 1.0  # small K: a visible tracking error
     assert max_e[1] > max_e[2] > max_e[3] >= max_e[5] * 0.99
+
+
+def test_a_process_that_ignores_ctrl_c_keeps_ignoring_it_in_a_closed_loop() -> None:
+    # a sweep's workers ignore SIGINT (the sweep stops them); the closed loop must not re-arm it there, or a worker
+    # races the sweep to write an interrupted point's summary
+    import signal
+
+    from gnerun.runs.closed_loop import Interrupt
+
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        with Interrupt().installed():
+            assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    with Interrupt().installed():  # an ordinary process: Ctrl-C becomes a request
+        assert signal.getsignal(signal.SIGINT) not in (signal.SIG_IGN, previous)

@@ -157,7 +157,9 @@ class Interrupt:
     """Ctrl-C (SIGINT) as a request: the closed loop finishes the sampling time in progress, then ends.
 
     A second Ctrl-C interrupts at once. Outside the main thread (where signals cannot be handled) this does
-    nothing and Ctrl-C raises KeyboardInterrupt as usual.
+    nothing and Ctrl-C raises KeyboardInterrupt as usual; in a process that ignores Ctrl-C (a sweep's worker,
+    which the sweep stops itself) it does nothing either, so the worker does not race the sweep to write a
+    summary of an interrupted point.
     """
 
     def __init__(self) -> None:
@@ -165,7 +167,8 @@ class Interrupt:
 
     @contextlib.contextmanager
     def installed(self) -> Iterator[Interrupt]:
-        if threading.current_thread() is not threading.main_thread():
+        if threading.current_thread() is not threading.main_thread() \
+                or signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
             yield self
             return
 
