@@ -122,11 +122,8 @@ def test_the_default_takes_the_papers_steps_on_the_papers_game() -> None:
     assert default.terminate(a) == (True, Status.CONVERGED) and a.k == 3
 
 
-def test_a_kkt_point_that_is_not_an_equilibrium_has_its_own_status() -> None:
-    # player 1 maximises x1^2 - x1 x2 / 2 on [-1, 1]: x1 = 0 is a KKT point (a stationary point with zero
-    # multipliers), its best response is the bound opposite in sign to x2 = x1 / 2, so the game has no equilibrium
-    # at all: the restarts from best responses cannot find one either
-    text = """
+# player 1 maximises x1^2 - x1 x2 / 2 on [-1, 1]: a game without an equilibrium
+SADDLE = """
 name: saddle
 game:
   kind: static
@@ -138,7 +135,13 @@ game:
       variables: {x2: {lower: -1, upper: 1, start: 0}}
       cost: "(x2 - 0.5*x1)**2"
 """
-    res = solve(load_config(text=text))
+
+
+def test_a_kkt_point_that_is_not_an_equilibrium_has_its_own_status() -> None:
+    # player 1 maximises x1^2 - x1 x2 / 2 on [-1, 1]: x1 = 0 is a KKT point (a stationary point with zero
+    # multipliers), its best response is the bound opposite in sign to x2 = x1 / 2, so the game has no equilibrium
+    # at all: the restarts from best responses cannot find one either
+    res = solve(load_config(text=SADDLE))
     assert res.residual_norm <= 1e-10  # the solver did converge ...
     assert res.status == "not_an_equilibrium"  # ... to a point that is not an equilibrium
     # p1's gap at the point reached, by hand: its best response to x2 is a bound, cost -1 - |x2| / 2
@@ -266,23 +269,12 @@ def test_a_kkt_point_that_is_not_an_equilibrium_is_left_from_the_best_responses(
 
 def test_a_certificate_restart_begins_in_the_interior_phase_with_the_warm_barrier(
         monkeypatch: pytest.MonkeyPatch) -> None:
-    # the saddle game above has no equilibrium, so certified_solve restarts from p1's best response; each restart
+    # SADDLE has no equilibrium, so certified_solve restarts from p1's best response; each restart
     # must be a warm interior start (lambda_i w_i = WARM on every inequality row), not a cold init
     from gnerun.runs import solving
     from gnerun.solvers import interior_point
 
-    cfg = load_config(text="""
-name: saddle
-game:
-  kind: static
-  agents:
-    - name: p1
-      variables: {x1: {lower: -1, upper: 1, start: 0}}
-      cost: "-x1**2 + 0.5*x1*x2"
-    - name: p2
-      variables: {x2: {lower: -1, upper: 1, start: 0}}
-      cost: "(x2 - 0.5*x1)**2"
-""")
+    cfg = load_config(text=SADDLE)
     game = compile_game(cfg)
     solver = make_solver(cfg, game)
     starts = []

@@ -103,6 +103,19 @@ class SSNState:
         return 0 if self.active_prev is None else int(np.count_nonzero(self.active != self.active_prev))
 
 
+@dataclass(slots=True)
+class _ActiveSet:
+    """LQ games: what is kept per active set A: the reduced matrix's LU factors (None when it is singular), the
+    rows A, the reciprocal condition number, how often the set was used, and its map G_A once built."""
+
+    lu: np.ndarray | None
+    piv: np.ndarray
+    A: np.ndarray
+    rcond: float
+    uses: int = 0
+    G: np.ndarray | None = None
+
+
 class SemismoothNewton:
     """The semismooth Newton method for a compiled game (see the module docstring)."""
 
@@ -132,7 +145,7 @@ class SemismoothNewton:
         self._lq = self.condensed and self.reduced and game.affine
         self._lq_inline = self._lq and not self._eq_rows.size and not self._line_search and not self._fixed_rows.size
         self._tie_tol = solver.tie_tol
-        self._maps: dict[bytes, tuple] = {}  # LQ games: the reduced matrix's LU factors per active set
+        self._maps: dict[bytes, _ActiveSet] = {}  # LQ games: the reduced matrix's LU factors per active set
         if self._lq:
             cache = game._affine_cache
             self._W, self._dL, self._dc = cache["W"], cache["dL"], cache["dc"]
@@ -416,34 +429,32 @@ class SemismoothNewton:
             ok = info == 0 and rcond >= self.options.min_rcond
             if len(self._maps) >= 256:
                 self._maps.clear()
-            entry = self._maps[key] = [lu if ok else None, piv, A, float(rcond), 0, None]
-        lu, piv, A, rcond, uses, G = entry
-        if lu is None:
-            return None, rcond
+            entry = self._maps[key] = _ActiveSet(lu if ok else None, piv, A, float(rcond))
+        if entry.lu is None:
+            return None, entry.rcond
         w0 = self.game.offsets(x)
-        if G is not None:
-            return G @ w0, rcond
-        n = self.game.n
-        if uses + 1 >= MAP_AFTER:
+        if entry.G is not None:
+            return entry.G @ w0, entry.rcond
+        n, A = self.game.n, entry.A
+        entry.uses += 1
+        if entry.uses >= MAP_AFTER:
             # an active set that comes back (a closed loop, repeated solves): the map z^+ = G_A w0, one product per step
             select = np.zeros((n + A.size, self.game.size))
             select[np.arange(n), np.arange(n)] = -1.0
             select[n + np.arange(A.size), n + A] = -1.0
-            sol, _ = lapack.dgetrs(lu, piv, select)
-            G = np.zeros((self.game.size, self.game.size))
-            G[:n] = sol[:n]
-            G[n + A] = sol[n:]
-            entry[5] = G
-            return G @ w0, rcond
-        entry[4] = uses + 1
+            sol, _ = lapack.dgetrs(entry.lu, entry.piv, select)
+            entry.G = np.zeros((self.game.size, self.game.size))
+            entry.G[:n] = sol[:n]
+            entry.G[n + A] = sol[n:]
+            return entry.G @ w0, entry.rcond
         rhs = np.empty(n + A.size)
         np.negative(w0[:n], out=rhs[:n])
         np.negative(w0[n + A], out=rhs[n:])
-        sol, _ = lapack.dgetrs(lu, piv, rhs)
+        sol, _ = lapack.dgetrs(entry.lu, entry.piv, rhs)
         z = np.zeros(self.game.size)
         z[:n] = sol[:n]
         z[n + A] = sol[n:]
-        return z, rcond
+        return z, entry.rcond
 
     def advance(self, state: SSNState, z: np.ndarray, *, rcond: float = math.nan) -> SSNState:
         """The iterate after ``state``: z evaluated once (Phi, the parts for the next step), checked for
