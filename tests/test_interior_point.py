@@ -53,7 +53,18 @@ def _unreduced_direction(game, parts, z, w, eps, I):
     ("variational_gne.yaml", {"solver.kind": "ssn", "solver.formulation": "condensed"}),
 ])
 def test_the_direction_solves_the_unreduced_newton_system(name: str, over: dict) -> None:
-    cfg = load_config(CONFIGS / name, over)
+    _check_direction(load_config(CONFIGS / name, over))
+
+
+@pytest.mark.parametrize("equilibrium", ["variational", "generalized"])
+def test_the_direction_of_a_bounded_lq_game_solves_the_unreduced_system(equilibrium: str) -> None:
+    """Bounds enter the matrix on its diagonal, shared rows (one copy per player, or one) as a product."""
+    from benchmarks.problems import lq
+
+    _check_direction(load_config(text=lq.lq_yaml(4, equilibrium)))
+
+
+def _check_direction(cfg) -> None:
     game = compile_game(cfg)
     newton = SemismoothNewton(game, cfg.solver)
     rng = np.random.default_rng(3)

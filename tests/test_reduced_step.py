@@ -85,3 +85,87 @@ def test_lq_step_cache_follows_the_state() -> None:
         while not fresh.terminate(ref)[0]:
             ref = fresh.step(ref)
         np.testing.assert_allclose(state.z, ref.z, atol=1e-12)
+
+
+def _lq_family(T: int, equilibrium: str):
+    from benchmarks.problems import lq
+
+    cfg = load_config(text=lq.lq_yaml(T, equilibrium), overrides={"solver.globalization": "none"})
+    return cfg, compile_game(cfg)
+
+
+@pytest.mark.parametrize("equilibrium", ["variational", "generalized"])
+def test_the_schur_complement_step_equals_the_reduced_system_step(equilibrium: str) -> None:
+    """Where P = dL/da is invertible an LQ step solves the Schur complement S_AA = C_A P^-1 E_A instead of the
+    reduced system: the same point, from the method's own iterates and from random active sets."""
+    cfg, game = _lq_family(5, equilibrium)
+    schur = make_solver(cfg, game)
+    plain = make_solver(cfg, game)
+    plain._dual_cache = None  # the reduced system itself
+    assert schur._dual is not None and plain._dual is None
+    rng = np.random.default_rng(1)
+    actives = [schur.init().active]
+    for _ in range(40):
+        actives.append(rng.random(game.m) < 0.15)
+    checked = 0
+    for active in actives:
+        got, rcond = schur._lq_point(active, game.x0)
+        ref, _ = plain._lq_point(active, game.x0)
+        if ref is None:
+            assert got is None
+            continue
+        assert got is not None, rcond
+        np.testing.assert_allclose(got, ref, rtol=1e-9, atol=1e-9)
+        checked += 1
+    assert checked >= 5
+
+
+def test_more_active_rows_than_decisions_is_singular_without_a_factorisation() -> None:
+    cfg, game = _lq_family(5, "variational")
+    solver = make_solver(cfg, game)
+    active = np.zeros(game.m, dtype=bool)
+    active[: game.n + 1] = True
+    z, rcond = solver._lq_point(active, game.x0)
+    assert z is None and rcond == 0.0
+    state = solver.init()
+    state.active = active
+    J = solver.jacobian(state.parts, state.z, active)
+    assert np.linalg.matrix_rank(J) < J.shape[0]  # the claim: JPhi itself is singular there
+
+
+def test_the_levenberg_marquardt_step_of_an_lq_game_minimises_its_objective() -> None:
+    """In the multipliers alone: lambda_A minimises ||c_A(a(lambda))||^2 + mu ||lambda_A - lambda_A^k||^2 with
+    a(lambda) the decisions at which L = 0 and the other multipliers zero; checked against scipy's least squares on
+    that objective, evaluated by the compiled game."""
+    from scipy.optimize import least_squares
+
+    cfg, game = _lq_family(5, "generalized")
+    solver = make_solver(cfg, game)
+    n = game.n
+    state = solver.step(solver.init())  # the unconstrained equilibrium: many violated rows, a singular step
+    A = np.flatnonzero(state.active)
+    assert A.size > n
+    mu = 0.3
+    z = solver.regularized_point(state, mu)
+    assert z is not None
+    L, c = game.kkt_residual(z, game.x0)
+    assert np.abs(L).max() < 1e-9
+    assert np.all(np.delete(z[n:], A) == 0.0)
+
+    dL = game._affine_cache["dL"]
+
+    def decisions(lam_A: np.ndarray) -> np.ndarray:
+        lam = np.zeros(game.m)
+        lam[A] = lam_A
+        L0, _ = game.kkt_residual(np.concatenate([np.zeros(n), lam]), game.x0)
+        return np.linalg.solve(dL[:, :n], -L0)
+
+    def residual(lam_A: np.ndarray) -> np.ndarray:
+        lam = np.zeros(game.m)
+        lam[A] = lam_A
+        _, c = game.kkt_residual(np.concatenate([decisions(lam_A), lam]), game.x0)
+        return np.concatenate([c[A], np.sqrt(mu) * (lam_A - state.z[n + A])])
+
+    ref = least_squares(residual, state.z[n + A], xtol=1e-15, ftol=1e-15, gtol=1e-15).x
+    np.testing.assert_allclose(z[n + A], ref, atol=1e-7)
+    np.testing.assert_allclose(z[:n], decisions(ref), atol=1e-7)

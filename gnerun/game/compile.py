@@ -252,9 +252,16 @@ class CompiledGame:
         return np.array([c.equality for c in self.constraints], dtype=bool)
 
     def constraint_pattern(self) -> tuple[np.ndarray, np.ndarray]:
-        """The structural nonzeros of dc/da as (rows, columns)."""
+        """The structural nonzeros of dc/da as (rows, columns) (read-only arrays, built once)."""
+        return self._constraint_pattern
+
+    @functools.cached_property
+    def _constraint_pattern(self) -> tuple[np.ndarray, np.ndarray]:
         rows, cols = self._sparsity[1].get_triplet()
-        return np.asarray(rows, dtype=int), np.asarray(cols, dtype=int)
+        pattern = np.asarray(rows, dtype=int), np.asarray(cols, dtype=int)
+        for arr in pattern:
+            arr.flags.writeable = False
+        return pattern
 
     def coupled_rows(self) -> list[int]:
         """Rows of c owned by one agent that involve another agent's decisions (what makes a GNE)."""

@@ -52,6 +52,7 @@ HANDOVER_DECREASE = 0.5  # ... and take it when it reduces ||Phi|| at least by t
 STALL = 25  # interior steps without a new best ||Phi|| (by 10%) before a restart
 RESTARTS = len(STARTS) - 1
 LM_FAR = 1e-4  # far from a solution, a singular JPhi gets the Levenberg-Marquardt step with mu = LM_FAR ||Phi||
+FLAT = 1e-2  # a Levenberg-Marquardt step that reduces ||Phi|| by less than this fraction ends the Newton phase
 PIVOTS = 8  # LQ games: Lemke's method from this many covering vectors after the interior phase's restarts
 
 
@@ -129,22 +130,26 @@ class HybridNewton:
             return -1.0
         return HANDOVER_AT * min(merit0, 1.0) if math.isfinite(merit0) else HANDOVER_AT
 
-    def _candidate(self, state: SSNState, memory: Memory) -> SSNState:
+    def _candidate(self, state: SSNState, memory: Memory) -> tuple[SSNState, bool]:
         """The Newton step from ``state``; where JPhi is singular, the Levenberg-Marquardt step instead (a
-        proximal perturbation of the singular matrix: mu = ||Phi|| close to a solution, LM_FAR ||Phi|| far)."""
+        proximal perturbation of the singular matrix: mu = ||Phi|| close to a solution, LM_FAR ||Phi|| far).
+        The flag says which was taken (True: Levenberg-Marquardt)."""
         candidate = self.newton.step(state)
         if candidate.status != Status.SINGULAR_JACOBIAN:
-            return candidate
+            return candidate, False
         near = state.residual_norm <= memory.handover
         if not (near or LM_FAR):
-            return candidate
+            return candidate, False
         z = self.newton.regularized_point(state, state.residual_norm * (1.0 if near else LM_FAR))
-        return candidate if z is None else self.newton.advance(state, z, rcond=candidate.rcond)
+        return (candidate, False) if z is None else (self.newton.advance(state, z, rcond=candidate.rcond), True)
 
     def _newton_step(self, state: SSNState, memory: Memory) -> SSNState:
-        candidate = self._candidate(state, memory)
+        candidate, regularized = self._candidate(state, memory)
         merit = candidate.residual_norm
-        if candidate.status == Status.RUNNING and merit <= BLOWUP * max(memory.merits[-MEMORY:]):
+        # a Levenberg-Marquardt step descends on ||Phi||^2: one that barely moves it has met a stationary point
+        # of the merit that is no solution, and further ones stay there
+        flat = regularized and not merit < (1.0 - FLAT) * state.residual_norm
+        if candidate.status == Status.RUNNING and not flat and merit <= BLOWUP * max(memory.merits[-MEMORY:]):
             best, stalls = memory.best, memory.stalls + 1
             if merit < (1.0 - SUFFICIENT) * best:
                 best, stalls = merit, 0

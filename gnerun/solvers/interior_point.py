@@ -173,6 +173,9 @@ class DenseBarrier:
         self.ip = ip
         self.scale = 1.0
         self._pattern: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._by_column: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._key: tuple[np.ndarray, np.ndarray] | None = None  # the derivative arrays _cached was sliced from
+        self._cached: tuple[np.ndarray, ...] = ()
 
     def _split(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Inequality rows whose gradient has a single structural nonzero (their positions in I, and their
@@ -187,33 +190,73 @@ class DenseBarrier:
             self._pattern = (np.flatnonzero(single), column[I[single]], np.flatnonzero(~single))
         return self._pattern
 
+    def _columns(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The single-nonzero rows ordered by their column, where each column's run starts, and the columns: the
+        column update as one sum per column (a lower and an upper bound share theirs)."""
+        if self._by_column is None:
+            _, columns, _ = self._split()
+            order = np.argsort(columns, kind="stable")
+            targets, starts = np.unique(columns[order], return_index=True)
+            self._by_column = (order, starts, targets)
+        return self._by_column
+
+    def _blocks(self, parts) -> tuple[np.ndarray, ...]:
+        """The pieces of the derivatives the matrix is built from, sliced once per pair of derivative arrays (an
+        LQ game's are the same arrays at every iterate): dL/da, dL/dlambda_I, its columns of the general rows
+        and dc/da's rows there, its columns of the single-nonzero rows (ordered by column) and their nonzeros,
+        dL/dlambda_E, dc_E/da and dc_I/da. Where each single-nonzero row enters its own column's Lagrangian only,
+        the fifth is None and the sixth holds the diagonal entries B_jj g_j."""
+        dL, dc = parts.dL_dz, parts.dc_da
+        if self._key is not None and self._key[0] is dL and self._key[1] is dc:
+            return self._cached
+        ip = self.ip
+        n, I, E = ip.n, ip.I, ip.E
+        single, columns, general = self._split()
+        order, _, _ = self._columns()
+        B = dL[:, n:]
+        rows_s = I[single[order]]
+        cols_s = columns[order]
+        B_single = B[:, rows_s]
+        on_column = B_single[cols_s, np.arange(cols_s.size)]
+        if np.count_nonzero(B_single) == np.count_nonzero(on_column):
+            # each such row enters its own column's Lagrangian only (a bound, a player's constraint on its own
+            # decision): the update is diagonal, its entries B_jj g_j / D_j summed per column
+            B_single = None
+        g = dc[rows_s, cols_s]
+        self._cached = (dL[:, :n], B[:, I], B[:, I[general]], dc[I[general]], B_single,
+                        g if B_single is not None else on_column * g, B[:, E], dc[E], dc[I])
+        self._key = (dL, dc)
+        return self._cached
+
     def direction(self, parts, it: InteriorIterate, D: np.ndarray, rhs_I: np.ndarray):
         ip = self.ip
         n, I, E = ip.n, ip.I, ip.E
-        A = parts.dL_dz[:, :n]
-        B = parts.dL_dz[:, n:]
-        C = parts.dc_da
-        single, columns, general = self._split()
-        CI = C[I]
-        BI = B[:, I] / D
+        A, BI, B_general, C_general, B_single, c_single, BE, CE, CI = self._blocks(parts)
+        single, _, general = self._split()
         S = A.copy()
         if general.size:
-            S += BI[:, general] @ CI[general]
+            S += (B_general / D[general]) @ C_general
         if single.size:  # B_j D_j^-1 C_j with C_j = g_j e_col: a column update (one nonzero per row of C)
-            gains = BI[:, single] * CI[single, columns]
-            np.add.at(S.T, columns, gains.T)
+            order, starts, targets = self._columns()
+            if B_single is None:  # c_single holds B_jj g_j
+                S[targets, targets] += np.add.reduceat(c_single / D[single[order]], starts)
+            else:
+                S[:, targets] += np.add.reduceat(B_single * (c_single / D[single[order]]), starts, axis=1)
         convexify(S, ip.newton.game.agent_slices)
-        rhs_a = -it.L + BI @ rhs_I
+        rhs_a = BI @ (rhs_I / D)
+        rhs_a -= it.L
         k = E.size
         M = np.empty((n + k, n + k))
         M[:n, :n] = S
         if k:
-            M[:n, n:] = B[:, E]
-            M[n:, :n] = C[E]
+            M[:n, n:] = BE
+            M[n:, :n] = CE
             M[n:, n:] = 0.0
-        rhs = np.concatenate([rhs_a, -it.c[E]])
+            rhs = np.concatenate([rhs_a, -it.c[E]])
+        else:
+            rhs = rhs_a
         diag = np.diag(S).copy()
-        self.scale = max(1.0, float(np.max(np.abs(diag), initial=0.0)))
+        self.scale = max(1.0, float(np.abs(diag).max(initial=0.0)))
         idx = np.arange(n)
 
         def solve(delta: float):

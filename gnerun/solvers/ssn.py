@@ -38,13 +38,14 @@ from dataclasses import dataclass, replace
 from enum import StrEnum
 
 import numpy as np
-from scipy.linalg import cho_factor, cho_solve, lapack
+from scipy.linalg import lapack
 
 from ..game.compile import CompiledGame, KKTParts
 from ..language.config import DisturbanceConfig, SolverConfig
 from .line_search import backtrack
 
 _FB_TIE = 1.0 - 1.0 / math.sqrt(2.0)
+DUAL_MIN_RCOND = 1e-8  # LQ games: P = dL/da better conditioned than this is eliminated (the Schur complement)
 MAP_AFTER = 3  # LQ games: an active set's map G_A is built on its third use (one triangular solve per use before)
 
 
@@ -114,6 +115,32 @@ class _ActiveSet:
     rcond: float
     uses: int = 0
     G: np.ndarray | None = None
+    S: np.ndarray | None = None  # the Schur complement S_AA (when P is invertible: see SemismoothNewton._dual)
+
+
+@dataclass(slots=True, frozen=True)
+class _Dual:
+    """LQ games whose pseudo-gradient Jacobian P = dL/da is invertible: L = P a + E lambda + l0, c = C a + c0,
+    so a = -P^{-1}(E lambda + l0) and the reduced system of an active set A is its Schur complement
+    S_AA lambda_A = c0_A - C_A P^{-1} l0 with S_AA = C_A P^{-1} E_A, |A| x |A| instead of (n + |A|)^2: the same
+    step, a smaller matrix. ``PinvE`` = P^{-1} E, computed once per solver."""
+
+    lu: np.ndarray
+    piv: np.ndarray
+    PinvE: np.ndarray
+    C: np.ndarray  # dc/da
+    single: np.ndarray  # rows of C with one nonzero ...
+    where: np.ndarray  # ... its column ...
+    coef: np.ndarray  # ... and its value
+
+
+def _single_nonzeros(M: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Which rows of M have exactly one nonzero, where it is and its value (0 for the other rows)."""
+    nonzero = M != 0.0
+    single = np.count_nonzero(nonzero, axis=1) == 1
+    where = nonzero.argmax(axis=1)
+    coef = np.where(single, M[np.arange(M.shape[0]), where], 0.0)
+    return single, where, coef
 
 
 class SemismoothNewton:
@@ -146,6 +173,7 @@ class SemismoothNewton:
         self._lq_inline = self._lq and not self._eq_rows.size and not self._line_search and not self._fixed_rows.size
         self._tie_tol = solver.tie_tol
         self._maps: dict[bytes, _ActiveSet] = {}  # LQ games: the reduced matrix's LU factors per active set
+        self._dual_cache: _Dual | None | bool = False  # LQ games: the Schur complement's data (False: not yet built)
         if self._lq:
             cache = game._affine_cache
             self._W, self._dL, self._dc = cache["W"], cache["dL"], cache["dc"]
@@ -305,6 +333,16 @@ class SemismoothNewton:
         an error bound). Unperturbed; ``None`` if even the regularised system cannot be solved."""
         game, parts, z = self.game, state.parts, state.z
         n = game.n
+        if self._lq and self._dual is not None:
+            # in the multipliers alone (a = a(lambda) keeps L = 0): min ||c_A(lambda)||^2 + mu ||lambda_A - lambda_A^k||^2
+            entry = self._active_set(state.active)
+            A, dual = entry.A, self._dual
+            w0 = game.offsets(state.x)
+            y, _ = lapack.dgetrs(dual.lu, dual.piv, w0[:n])
+            lam_A = z[n + A]
+            r = w0[n + A] - dual.C[A] @ y - entry.S @ lam_A
+            d = levenberg_marquardt(entry.S, r, mu)
+            return None if d is None else self._dual_point(A, lam_A + d, y)
         if self.reduced:
             A = np.flatnonzero(state.active | self._eq) if self._eq_rows.size else np.flatnonzero(state.active)
             M = self._reduced_matrix(parts, A)
@@ -416,45 +454,113 @@ class SemismoothNewton:
         M[n:, :n] = parts.dc_da[A]
         return M
 
-    def _lq_point(self, active: np.ndarray, x: np.ndarray) -> tuple[np.ndarray | None, float]:
-        """z^+ for an LQ game from any z with active set ``active`` (g-branch rows and equalities): the reduced
-        system M [a; lambda_A] = -[L(0); c_A(0)], whose LU factors are kept per active set (M depends on the active
-        set only), solved for w0(x); from the set's ``MAP_AFTER``-th use on, the map G_A with z^+ = G_A w0 for every
-        x (built once from the factors). ``None`` when M is singular."""
+    @property
+    def _dual(self) -> _Dual | None:
+        """P's LU factors and P^{-1} E for an LQ game (built on first use), or None when P is singular or
+        ill-conditioned (then the reduced system itself is factorised)."""
+        if self._dual_cache is False:
+            self._dual_cache = self._build_dual()
+        return self._dual_cache
+
+    def _build_dual(self) -> _Dual | None:
+        n = self.game.n
+        P = np.array(self._dL[:, :n], order="F")
+        lu, piv, info, rcond = _factor(P)
+        if info != 0 or not rcond >= DUAL_MIN_RCOND:
+            return None
+        # P^{-1} E from P^{-1}: a column of E with one nonzero (a bound, a constraint on one decision) is a
+        # scaled column of P^{-1}; only the others cost a product
+        Pinv, _ = lapack.dgetri(lu, piv)
+        E = self._dL[:, n:]
+        cache = self.game._affine_cache
+        if "single" not in cache:  # the structure of the game's constant matrices: found once per game
+            C = np.ascontiguousarray(self._dc)
+            cache["single"] = (_single_nonzeros(E.T), C, _single_nonzeros(C))
+        (single, where, coef), C, rows = cache["single"]
+        PinvE = np.empty(E.shape)
+        PinvE[:, single] = Pinv[:, where[single]] * coef[single]
+        general = ~single
+        PinvE[:, general] = Pinv @ E[:, general]
+        return _Dual(lu, piv, PinvE, C, *rows)
+
+    def _active_set(self, active: np.ndarray) -> _ActiveSet:
+        """What is kept for the active set ``active`` (built on its first use)."""
         key = active.tobytes()
         entry = self._maps.get(key)
-        if entry is None:
-            A = np.flatnonzero(active | self._eq)
+        if entry is not None:
+            return entry
+        A = np.flatnonzero(active | self._eq)
+        dual = self._dual
+        S = None
+        if A.size > self.game.n:
+            # more active rows than decisions: their gradients are dependent, the system singular (nothing to
+            # factorise); the Schur complement is kept for the Levenberg-Marquardt step
+            if dual is not None:
+                S = dual.C[A] @ dual.PinvE[:, A]
+            lu, piv, info, rcond = None, np.zeros(0, dtype=np.int32), 0, 0.0
+        elif dual is not None:
+            # S_AA = C_A P^{-1} E_A; a row of C_A with one nonzero (a bound) picks a scaled row of P^{-1} E_A
+            PA = dual.PinvE[:, A]
+            single = dual.single[A]
+            S = np.empty((A.size, A.size), order="F")  # LAPACK's order: factorised without a copy
+            S[single] = PA[dual.where[A[single]]] * dual.coef[A[single], None]
+            general = ~single
+            if general.any():
+                S[general] = dual.C[A[general]] @ PA
+            lu, piv, info, rcond = _factor(S)
+        else:
             lu, piv, info, rcond = _factor(self._reduced_matrix(KKTParts(None, None, self._dL, self._dc), A))
-            ok = info == 0 and rcond >= self.options.min_rcond
-            if len(self._maps) >= 256:
-                self._maps.clear()
-            entry = self._maps[key] = _ActiveSet(lu if ok else None, piv, A, float(rcond))
+        ok = info == 0 and rcond >= self.options.min_rcond
+        if len(self._maps) >= 256:
+            self._maps.clear()
+        entry = self._maps[key] = _ActiveSet(lu if ok else None, piv, A, float(rcond), S=S)
+        return entry
+
+    def _dual_point(self, A: np.ndarray, lam_A: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """z = (a, lambda) with lambda_A = ``lam_A``, the other multipliers zero and a = -y - P^{-1} E_A lambda_A
+        (y = P^{-1} l0); columnwise for 2-D arguments."""
+        n = self.game.n
+        z = np.zeros((self.game.size,) + lam_A.shape[1:])
+        a = z[:n]
+        np.negative(y, out=a)
+        a -= self._dual.PinvE[:, A] @ lam_A
+        z[n + A] = lam_A
+        return z
+
+    def _lq_point(self, active: np.ndarray, x: np.ndarray) -> tuple[np.ndarray | None, float]:
+        """z^+ for an LQ game from any z with active set ``active`` (g-branch rows and equalities): the reduced
+        system M [a; lambda_A] = -[L(0); c_A(0)], whose factors are kept per active set (M depends on the active
+        set only), solved for w0(x); from the set's ``MAP_AFTER``-th use on, the map G_A with z^+ = G_A w0 for every
+        x (built once from the factors). Where P is invertible, the system solved is M's Schur complement
+        (:class:`_Dual`). ``None`` when M is singular."""
+        entry = self._active_set(active)
         if entry.lu is None:
             return None, entry.rcond
         w0 = self.game.offsets(x)
         if entry.G is not None:
             return entry.G @ w0, entry.rcond
-        n, A = self.game.n, entry.A
         entry.uses += 1
         if entry.uses >= MAP_AFTER:
             # an active set that comes back (a closed loop, repeated solves): the map z^+ = G_A w0, one product per step
-            select = np.zeros((n + A.size, self.game.size))
-            select[np.arange(n), np.arange(n)] = -1.0
-            select[n + np.arange(A.size), n + A] = -1.0
-            sol, _ = lapack.dgetrs(entry.lu, entry.piv, select)
-            entry.G = np.zeros((self.game.size, self.game.size))
-            entry.G[:n] = sol[:n]
-            entry.G[n + A] = sol[n:]
+            entry.G = self._lq_solve(entry, np.eye(self.game.size))
             return entry.G @ w0, entry.rcond
-        rhs = np.empty(n + A.size)
-        np.negative(w0[:n], out=rhs[:n])
-        np.negative(w0[n + A], out=rhs[n:])
+        return self._lq_solve(entry, w0), entry.rcond
+
+    def _lq_solve(self, entry: _ActiveSet, w0: np.ndarray) -> np.ndarray:
+        """z^+ for the offsets w0 = [l0; c0] (a vector, or one per column) by the kept factors of ``entry``."""
+        n, A = self.game.n, entry.A
+        dual = self._dual
+        if dual is not None:
+            y, _ = lapack.dgetrs(dual.lu, dual.piv, w0[:n])
+            rhs = w0[n + A] - dual.C[A] @ y
+            lam_A = lapack.dgetrs(entry.lu, entry.piv, rhs)[0] if A.size else rhs
+            return self._dual_point(A, lam_A, y)
+        rhs = np.concatenate([-w0[:n], -w0[n + A]])
         sol, _ = lapack.dgetrs(entry.lu, entry.piv, rhs)
-        z = np.zeros(self.game.size)
+        z = np.zeros((self.game.size,) + w0.shape[1:])
         z[:n] = sol[:n]
         z[n + A] = sol[n:]
-        return z, entry.rcond
+        return z
 
     def advance(self, state: SSNState, z: np.ndarray, *, rcond: float = math.nan) -> SSNState:
         """The iterate after ``state``: z evaluated once (Phi, the parts for the next step), checked for
@@ -530,25 +636,26 @@ def describe_row(game: CompiledGame, row: int) -> str:
 
 def _factor(M: np.ndarray) -> tuple[np.ndarray, np.ndarray, int, float]:
     """LU factors of M, LAPACK's info, and the reciprocal 1-norm condition number (0 when singular)."""
+    if not M.size:
+        return M, np.zeros(0, dtype=np.int32), 0, 1.0
     lu, piv, info = lapack.dgetrf(M)
     rcond = 0.0
-    if info == 0 and M.size:
+    if info == 0:
         rcond, _ = lapack.dgecon(lu, float(np.abs(M).sum(axis=0).max()), norm="1")
-    elif info == 0:
-        rcond = 1.0
     return lu, piv, info, float(rcond)
 
 
 def levenberg_marquardt(M: np.ndarray, r: np.ndarray, mu: float) -> np.ndarray | None:
     """d with (M'M + mu I) d = M'r (the minimiser of ||M d - r||^2 + mu ||d||^2), or None."""
+    if not M.shape[1]:
+        return np.zeros(0)
     N = M.T @ M
-    N[np.diag_indices_from(N)] += mu
-    try:
-        factor = cho_factor(N, check_finite=False)
-    except np.linalg.LinAlgError:
+    N.flat[:: N.shape[0] + 1] += mu
+    chol, info = lapack.dpotrf(N, lower=0, clean=0, overwrite_a=1)
+    if info != 0:
         return None
-    d = cho_solve(factor, M.T @ r, check_finite=False)
-    return d if np.all(np.isfinite(d)) else None
+    d, info = lapack.dpotrs(chol, M.T @ r, lower=0)
+    return d if info == 0 and np.all(np.isfinite(d)) else None
 
 
 def _norm(v: np.ndarray) -> float:
