@@ -334,7 +334,8 @@ class SemismoothNewton:
         game, parts, z = self.game, state.parts, state.z
         n = game.n
         if self._lq and self._dual is not None:
-            # in the multipliers alone (a = a(lambda) keeps L = 0): min ||c_A(lambda)||^2 + mu ||lambda_A - lambda_A^k||^2
+            # in the multipliers alone (a = a(lambda) keeps L = 0):
+            # min ||c_A(lambda)||^2 + mu ||lambda_A - lambda_A^k||^2
             entry = self._active_set(state.active)
             A, dual = entry.A, self._dual
             w0 = game.offsets(state.x)
