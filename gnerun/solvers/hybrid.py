@@ -52,7 +52,7 @@ HANDOVER_DECREASE = 0.5  # ... and take it when it reduces ||Phi|| at least by t
 STALL = 25  # interior steps without a new best ||Phi|| (by 10%) before a restart
 RESTARTS = len(STARTS) - 1
 LM_FAR = 1e-4  # far from a solution, a singular JPhi gets the Levenberg-Marquardt step with mu = LM_FAR ||Phi||
-FLAT = 1e-2  # a Levenberg-Marquardt step that reduces ||Phi|| by less than this fraction ends the Newton phase
+FLAT = 1e-2  # a Levenberg-Marquardt step that changes ||Phi|| by less than this fraction ends the Newton phase
 PIVOTS = 8  # LQ games: Lemke's method from this many covering vectors after the interior phase's restarts
 
 
@@ -146,9 +146,9 @@ class HybridNewton:
     def _newton_step(self, state: SSNState, memory: Memory) -> SSNState:
         candidate, regularized = self._candidate(state, memory)
         merit = candidate.residual_norm
-        # a Levenberg-Marquardt step descends on ||Phi||^2: one that barely moves it has met a stationary point
-        # of the merit that is no solution, and further ones stay there
-        flat = regularized and not merit < (1.0 - FLAT) * state.residual_norm
+        # a Levenberg-Marquardt step that barely changes ||Phi|| (neither a decrease nor a climb the watchdog may
+        # allow) has met a stationary point of the merit that is no solution, and further ones stay there
+        flat = regularized and abs(merit - state.residual_norm) < FLAT * state.residual_norm
         if candidate.status == Status.RUNNING and not flat and merit <= BLOWUP * max(memory.merits[-MEMORY:]):
             best, stalls = memory.best, memory.stalls + 1
             if merit < (1.0 - SUFFICIENT) * best:
