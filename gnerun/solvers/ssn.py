@@ -45,6 +45,7 @@ from ..language.config import DisturbanceConfig, SolverConfig
 from .line_search import backtrack
 
 _FB_TIE = 1.0 - 1.0 / math.sqrt(2.0)
+DUAL_FROM = 32  # LQ games with at least this many decisions solve the Schur complement (below, its set-up costs more)
 DUAL_MIN_RCOND = 1e-8  # LQ games: P = dL/da better conditioned than this is eliminated (the Schur complement)
 MAP_AFTER = 3  # LQ games: an active set's map G_A is built on its third use (one triangular solve per use before)
 
@@ -458,13 +459,17 @@ class SemismoothNewton:
     @property
     def _dual(self) -> _Dual | None:
         """P's LU factors and P^{-1} E for an LQ game (built on first use), or None when P is singular or
-        ill-conditioned (then the reduced system itself is factorised)."""
+        ill-conditioned, or the game has fewer than ``DUAL_FROM`` decisions (then the reduced system itself is
+        factorised). Measured on fresh solves: 0.8-0.95 times as fast at n = 2-20 (FK library, the LQ family at
+        T = 5), 1.1-1.4 times as fast from n = 33 (the LQ family at T = 10 and 20)."""
         if self._dual_cache is False:
             self._dual_cache = self._build_dual()
         return self._dual_cache
 
     def _build_dual(self) -> _Dual | None:
         n = self.game.n
+        if n < DUAL_FROM:
+            return None
         P = np.array(self._dL[:, :n], order="F")
         lu, piv, info, rcond = _factor(P)
         if info != 0 or not rcond >= DUAL_MIN_RCOND:
