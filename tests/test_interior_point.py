@@ -143,3 +143,31 @@ def test_the_interior_start() -> None:
             assert eps == mu
         else:
             assert eps >= mu
+
+
+def test_a_matrix_with_an_infinite_entry_ends_the_phase_instead_of_shifting_forever() -> None:
+    """A Cournot game whose firm 2 has no bounds: at the interior start its cost's derivatives overflow; the
+    regularisation loop must give up (a status), not multiply an infinite shift forever."""
+    from gnerun.runs.solving import solve
+
+    firms = []
+    for i in range(1, 4):
+        bounds = "{}" if i == 2 else "{lower: 1, upper: 150, start: 10}"
+        cost = f"{2 * i}*q{i} + 0.5*q{i}**((1 + 1.{i})/1.{i}) - q{i}*5000**(1/1.1)*(q1 + q2 + q3)**(-1/1.1)"
+        firms.append(f'    - {{name: firm{i}, variables: {{q{i}: {bounds}}}, cost: "{cost}"}}')
+    text = "game:\n  kind: static\n  agents:\n" + "\n".join(firms) + "\nsolver: {kind: jn, max_iter: 30}\n"
+    import signal
+
+    def expire(signum, frame):
+        raise TimeoutError("the solve did not return within 30 s")
+
+    previous = signal.signal(signal.SIGALRM, expire)
+    signal.alarm(30)
+    try:
+        with np.errstate(all="ignore"):
+            res = solve(load_config(text=text), out=None)
+    finally:
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, previous)
+    assert res.status != "converged" or res.residual_norm <= 1e-10
+    assert res.message

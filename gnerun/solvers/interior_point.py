@@ -139,6 +139,8 @@ class InteriorPoint:
                 if np.all(np.isfinite(da)) and np.all(np.isfinite(dlam)):
                     break
             delta = REGULARIZATION * self.linear.scale if delta == 0.0 else 100.0 * delta
+            if not math.isfinite(delta):  # a matrix with an infinite entry: no shift helps
+                return None, "the interior-point Newton matrix is not finite (an expression overflows here)"
             if delta > 1e10 * self.linear.scale:
                 return None, "the interior-point Newton matrix is singular even when regularised"
         dw = eps / lam - w - D * dlam[I]
