@@ -97,8 +97,12 @@ def _fmt(v: float | None, spec: str = ".3e") -> str:
     return format(v, spec)
 
 
+ExpandOpt = Annotated[bool, typer.Option("--expand", help="Print the config as it runs: families, templates, "
+                                                         "sums and definitions written out, every default filled in.")]
+
+
 @app.command()
-def validate(config: ConfigArg, set_: SetOpt = None, quiet: QuietOpt = False) -> None:
+def validate(config: ConfigArg, set_: SetOpt = None, quiet: QuietOpt = False, expand: ExpandOpt = False) -> None:
     """Check a config (or a sweep spec and every point of it) without running it; print every problem found."""
     from .errors import ConfigError
 
@@ -127,6 +131,9 @@ def validate(config: ConfigArg, set_: SetOpt = None, quiet: QuietOpt = False) ->
 
         game = compile_game(cfg)
         make_solver(cfg, game)  # refuses what the configured method cannot solve
+    if expand:
+        typer.echo(cfg.resolved_yaml(), nl=False)
+        return
     if not quiet:
         typer.echo(f"{config}: ok ({cfg.game.kind} game '{cfg.name}': {len(game.agent_names)} agents, "
                    f"{game.n} decisions, {game.m} multipliers)")

@@ -41,6 +41,11 @@ CASES = [
     ("min(x, y) + max(x, y, z)", lambda x, y, z: min(x, y) + max(x, y, z)),
     ("min(x, y, z)**2 - max(x, -y)", lambda x, y, z: min(x, y, z) ** 2 - max(x, -y)),
     ("abs(x)^0.5 * -y", lambda x, y, z: abs(x) ** 0.5 * -y),
+    ("log2(abs(x)) + log10(abs(y) + 1) - atan(z)", lambda x, y, z: math.log2(abs(x)) + math.log10(abs(y) + 1)
+     - math.atan(z)),
+    ("asin(x/4)*acos(y/4) + sinh(z/2) - cosh(x/3)", lambda x, y, z: math.asin(x / 4) * math.acos(y / 4)
+     + math.sinh(z / 2) - math.cosh(x / 3)),
+    ("atan2(y, x) + hypot(x, z) + pi*z", lambda x, y, z: math.atan2(y, x) + math.hypot(x, z) + math.pi * z),
 ]
 
 
@@ -210,3 +215,15 @@ def test_constant_arithmetic_is_ieee(text: str, expected: float) -> None:
     f = ca.Function("f", [x], [ca.SX(evaluate(parse_expression(f"x + ({text})"), {"x": x}, casadi_functions()))])
     got = float(f(1.0))
     assert (math.isnan(got) and math.isnan(expected)) or got == expected + 1
+
+
+def test_pi_is_a_constant_and_not_a_name_to_declare() -> None:
+    from gnerun.errors import ConfigError
+    from gnerun.language.config import load_config
+
+    assert evaluate(parse_expression("2*pi"), {}) == 2 * math.pi
+    with pytest.raises(ExpressionError, match="exactly two arguments"):
+        parse_expression("atan2(x)")
+    text = 'game: {kind: static, agents: [{name: p, variables: {pi: {}}, cost: "pi**2"}]}'
+    with pytest.raises(ConfigError, match="'pi' is the name of a constant"):
+        load_config(text=text)

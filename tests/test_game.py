@@ -91,6 +91,8 @@ def _random_point(name: str, game: CompiledGame, rng: np.random.Generator) -> tu
     """A random primal point in the expressions' domain, and a random state."""
     if name.startswith("cournot"):
         a = rng.uniform(20.0, 60.0, game.n)  # q**(-1/eta) and q**((1 + b)/b) need q > 0
+    elif name.startswith("fk_a09"):
+        a = rng.uniform(0.1, 2.0, game.n)  # powers: the rates' logarithms need 1 + SINR > 0
     else:
         a = game.a_start + 0.5 * rng.standard_normal(game.n)
     x = game.x0 + 0.2 * rng.standard_normal(game.nx)

@@ -28,7 +28,9 @@ from pydantic import (
 )
 
 from ..errors import ConfigError, InputError
+from .expand import Expander, expands
 from .expr import (
+    CONSTANTS,
     FUNCTIONS,
     ExpressionError,
     check_names,
@@ -320,17 +322,21 @@ def _apply_override(data: dict, key: str, value: Any, smap: SourceMap, shown: st
 
 
 def load_config(
-    path: str | Path | None = None,
+    path: str | Path | dict | None = None,
     overrides: dict[str, Any] | list[str] | None = None,
     *,
     text: str | None = None,
 ) -> Config:
-    """Load and validate a config file (or ``text``), applying ``overrides``.
+    """Load and validate a config file (or ``text``, or a dict: the YAML document as Python data), applying
+    ``overrides``; families, templates, sums and definitions (SPEC §3b) are expanded before validation.
 
     ``overrides`` maps dotted field paths to values (``{"solver.tol": 1e-12}``), or is a list of
     ``"a.b=value"`` strings as given to ``--set``. Raises :class:`ConfigError` with every problem.
     """
-    if text is not None:
+    if isinstance(path, dict):
+        data, smap = _plain(path, ()), SourceMap("config dict")
+        path = None
+    elif text is not None:
         data, smap = parse_yaml(text, str(path) if path is not None else "<string>")
     elif path is not None:
         data, smap = read_yaml(path)
@@ -351,6 +357,8 @@ def load_config(
         _apply_override(data, key, value, smap, shown)
     if "name" not in data and path is not None:
         data["name"] = Path(str(path)).stem
+    if expands(data):
+        data, smap = Expander(smap).expand(data)
     try:
         cfg = Config.model_validate(data)
     except ValidationError as e:
@@ -360,6 +368,27 @@ def load_config(
         raise ConfigError(problems)
     cfg._source = str(path) if path is not None else None
     return cfg
+
+
+def _plain(value: Any, path: tuple) -> Any:
+    """A copy of a config given as Python data, as YAML would have built it (tuples as lists, numpy scalars as
+    numbers); anything else is refused with its place."""
+    if isinstance(value, dict):
+        out = {}
+        for k, v in value.items():
+            if not isinstance(k, str | int | float | bool) and k is not None:
+                raise ConfigError([f"config dict, at {show_path(path)}: key {k!r} is not a string or a number"])
+            out[k] = _plain(v, path + (k,))
+        return out
+    if isinstance(value, list | tuple):
+        return [_plain(v, path + (i,)) for i, v in enumerate(value)]
+    if value is None or isinstance(value, str | bool | int | float):
+        return value
+    item = getattr(value, "item", None)  # numpy scalars
+    if callable(item) and getattr(value, "shape", None) == ():
+        return _plain(item(), path)
+    raise ConfigError([f"config dict, at {show_path(path)}: {type(value).__name__} is not a config value (use "
+                       "numbers, strings, lists and dicts)"])
 
 
 # keys of earlier versions of the config format, and what replaced them
@@ -498,6 +527,8 @@ def check_semantics(cfg: Config, smap: SourceMap) -> list[str]:
                    key=key)
         elif name in FUNCTIONS:
             report(path, f"{what} {name!r} is the name of a function", key=key)
+        elif name in CONSTANTS:
+            report(path, f"{what} {name!r} is the name of a constant", key=key)
         elif name in seen:
             report(path, f"{what} {name!r} is already declared as {seen[name]}", key=key)
         else:

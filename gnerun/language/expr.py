@@ -12,7 +12,8 @@ or sympify of raw strings). The grammar (SPEC §3):
     atom       := NUMBER | NAME | NAME "(" expr ("," expr)* ")" | "(" expr ")"
 
 so that ``-x**2 == -(x**2)`` and ``2**3**2 == 2**9`` as in Python and in mathematics.
-Functions: sqrt exp log sin cos tan tanh abs (one argument), min max (two or more).
+Functions: sqrt exp log log2 log10 sin cos tan asin acos atan sinh cosh tanh abs (one argument), atan2 hypot
+(two), min max (two or more); the constant pi.
 
 Every error is an :class:`ExpressionError` carrying the expression and a 1-based column.
 Inputs longer than :data:`MAX_LENGTH` characters or nested deeper than :data:`MAX_DEPTH` are refused
@@ -30,9 +31,12 @@ from typing import Any
 MAX_LENGTH = 20_000
 MAX_DEPTH = 100
 
-UNARY_FUNCTIONS = ("sqrt", "exp", "log", "sin", "cos", "tan", "tanh", "abs")
+UNARY_FUNCTIONS = ("sqrt", "exp", "log", "log2", "log10", "sin", "cos", "tan", "asin", "acos", "atan", "sinh",
+                   "cosh", "tanh", "abs")
+BINARY_FUNCTIONS = ("atan2", "hypot")
 VARIADIC_FUNCTIONS = ("min", "max")
-FUNCTIONS = UNARY_FUNCTIONS + VARIADIC_FUNCTIONS
+FUNCTIONS = UNARY_FUNCTIONS + BINARY_FUNCTIONS + VARIADIC_FUNCTIONS
+CONSTANTS = {"pi": math.pi}  # names every expression knows
 RELATIONS = ("<=", ">=", "==")
 
 
@@ -318,6 +322,8 @@ class _Parser:
         self.expect(")")
         if fn in UNARY_FUNCTIONS and len(args) != 1:
             raise self.error(f"{fn}() takes exactly one argument, got {len(args)}", name)
+        if fn in BINARY_FUNCTIONS and len(args) != 2:
+            raise self.error(f"{fn}() takes exactly two arguments, got {len(args)}", name)
         if fn in VARIADIC_FUNCTIONS and len(args) < 2:
             raise self.error(f"{fn}() takes two or more arguments, got {len(args)}", name)
         return Call(fn, tuple(args), name.column)
@@ -398,6 +404,15 @@ def numpy_functions() -> dict[str, Callable]:
         "tan": np.tan,
         "tanh": np.tanh,
         "abs": np.abs,
+        "log2": np.log2,
+        "log10": np.log10,
+        "asin": np.arcsin,
+        "acos": np.arccos,
+        "atan": np.arctan,
+        "sinh": np.sinh,
+        "cosh": np.cosh,
+        "atan2": np.arctan2,
+        "hypot": np.hypot,
         "min": _variadic(np.minimum),
         "max": _variadic(np.maximum),
     }
@@ -417,6 +432,15 @@ def casadi_functions() -> dict[str, Callable]:
         "tan": ca.tan,
         "tanh": ca.tanh,
         "abs": ca.fabs,
+        "log2": lambda v: ca.log(v) / math.log(2.0),
+        "log10": ca.log10,
+        "asin": ca.asin,
+        "acos": ca.acos,
+        "atan": ca.atan,
+        "sinh": ca.sinh,
+        "cosh": ca.cosh,
+        "atan2": ca.atan2,
+        "hypot": lambda u, v: ca.sqrt(u * u + v * v),
         "min": _variadic(ca.fmin),
         "max": _variadic(ca.fmax),
     }
@@ -442,7 +466,9 @@ def evaluate(node: Node | Expression, env: Mapping[str, Any], functions: Mapping
             try:
                 values.append(env[n.id])
             except KeyError:
-                raise KeyError(n.id) from None
+                if n.id not in CONSTANTS:
+                    raise KeyError(n.id) from None
+                values.append(CONSTANTS[n.id])
         elif not visited:
             stack.append((n, True))
             if isinstance(n, Unary):
@@ -494,7 +520,7 @@ _BINARY: dict[str, Callable[[Any, Any], Any]] = {
 
 def check_names(parsed: Expression | Constraint, allowed: Iterable[str], what: str = "name") -> None:
     """Raise :class:`ExpressionError` at the first name that is not in ``allowed``."""
-    allowed = set(allowed)
+    allowed = set(allowed) | set(CONSTANTS)
     tree_roots = [parsed.tree] if isinstance(parsed, Expression) else [parsed.lhs, parsed.rhs]
     unknown: list[tuple[int, str]] = []
     for root in tree_roots:

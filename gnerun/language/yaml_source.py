@@ -43,6 +43,7 @@ class SourceMap:
     values: dict[PathKey, Position] = field(default_factory=dict)
     keys: dict[PathKey, Position] = field(default_factory=dict)
     overridden: dict[PathKey, str] = field(default_factory=dict)  # path -> the --set text
+    notes: dict[PathKey, str] = field(default_factory=dict)  # path -> e.g. "for i = 2" (a family's copy)
 
     def locate(self, path: PathKey, *, key: bool = False) -> str:
         """``file:line:column`` of the value (or key) at ``path``, or of its nearest written ancestor."""
@@ -50,13 +51,22 @@ class SourceMap:
         for n in range(len(p), 0, -1):
             if p[:n] in self.overridden:
                 return f"--set {self.overridden[p[:n]]}"
+        if not self.values and not self.keys:  # data without a text (a config given as a dict)
+            return f"{self.file}, at {dotted(p)}"
         if key and p in self.keys:
             pos = self.keys[p]
-            return f"{self.file}:{pos.line}:{pos.column}"
+            return f"{self.file}:{pos.line}:{pos.column}{self._note(p)}"
         while p and p not in self.values:
             p = p[:-1]
         pos = self.values.get(p, Position(1, 1))
-        return f"{self.file}:{pos.line}:{pos.column}"
+        return f"{self.file}:{pos.line}:{pos.column}{self._note(tuple(path))}"
+
+    def _note(self, path: PathKey) -> str:
+        """`` (for i = 2, j = 3)`` when ``path`` lies in a copy of a family (the index values that made it)."""
+        for n in range(len(path), 0, -1):
+            if path[:n] in self.notes:
+                return f" ({self.notes[path[:n]]})"
+        return ""
 
     def locate_in_text(self, path: PathKey, column: int) -> str:
         """Position of character ``column`` (1-based) of the string value at ``path``."""
@@ -65,7 +75,7 @@ class SourceMap:
         if pos is None or any(p[:n] in self.overridden for n in range(len(p), 0, -1)):
             return self.locate(p)
         if not pos.single_line:
-            return f"{self.file}:{pos.line}:{pos.column}"
+            return f"{self.file}:{pos.line}:{pos.column}{self._note(p)}"
         return f"{self.file}:{pos.line}:{pos.column + column - 1 + (1 if pos.quoted else 0)}"
 
 
