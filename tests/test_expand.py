@@ -270,3 +270,102 @@ def test_validate_expand_prints_the_game_written_out(tmp_path) -> None:
     printed = load_config(text=out.stdout)
     assert printed == load_config(path)
     assert "for:" not in out.stdout and "{" not in out.stdout.split("game:")[1].split("solver:")[0]
+
+
+# the stage index and constraints at some stages -----------------------------------------------------------
+
+STAGED = """
+game:
+  kind: dynamic
+  horizon: 5
+  states: [x1]
+  dynamics: {x1: "u1"}
+  x0: [0]
+  agents:
+    - name: a
+      inputs: [u1]
+      stage_cost: "(x1 - 0.5*tau)**2"
+      constraints:
+        - {expr: "u1 <= 1", stages: 2..T}
+        - {expr: "u1 >= 0.25", stages: [0]}
+solver: {globalization: none}
+"""
+
+
+def test_tau_and_stages_give_the_closed_form_plan() -> None:
+    """x(tau + 1) = u(tau) and the cost (x(tau + 1) - tau/2)^2: the plan is u(tau) = tau/2, except where a stage's
+    own constraint binds (u(0) >= 1/4, u(tau) <= 1 from tau = 2 on)."""
+    cfg = load_config(text=STAGED)
+    game = compile_game(cfg)
+    assert [c.label for c in game.constraints] == [
+        "u1 >= 0.25 [tau=0]", "u1 <= 1 [tau=2]", "u1 <= 1 [tau=3]", "u1 <= 1 [tau=4]", "u1 <= 1 [tau=5]"]
+    for over in ({}, {"solver.formulation": "sparse"}, {"solver.kind": "distributed"}, {"solver.kind": "jn"}):
+        res = solve(load_config(text=STAGED, overrides=over), out=None)
+        assert res.status == "converged", (over, res.message)
+        np.testing.assert_allclose(res.z[: game.n], [0.25, 0.5, 1.0, 1.0, 1.0, 1.0], atol=1e-10)
+
+
+@pytest.mark.parametrize(("change", "expected"), [
+    (("stages: [0]", "stages: [0, 6]"), r":14:\d+: .*stage 6 is outside 0..T = 0..5"),
+    (('dynamics: {x1: "u1"}', 'dynamics: {x1: "u1 + tau"}'), r"unknown name 'tau'"),
+    (("states: [x1]", "states: [x1, tau]"), r"'tau' is the name of the stage index"),
+    (("stages: 2..T", "stages: 2..T+5"), r"stage 6 is outside"),
+])
+def test_stage_mistakes_are_located(change: tuple[str, str], expected: str) -> None:
+    import re
+
+    with pytest.raises(ConfigError) as err:
+        load_config(text=STAGED.replace(*change))
+    assert re.search(expected, "\n".join(err.value.problems)), err.value.problems
+
+
+# continuous-time dynamics ----------------------------------------------------------------------------------
+
+ODE = """
+game:
+  kind: dynamic
+  horizon: 3
+  parameters: {N: 2, a: [0.5, 1.5]}
+  states: [{for: {i: 1..N}, names: ["x{i}"]}]
+  dynamics:
+    ode: [{for: {i: 1..N}, "x{i}": "-a[i]*x{i} + u{i}"}]
+    integrator: METHOD
+    dt: DT
+  x0: [1, -2]
+  agents:
+    - for: {i: 1..N}
+      name: "agent{i}"
+      inputs: ["u{i}"]
+      stage_cost: "x{i}**2 + u{i}**2"
+"""
+
+
+def test_euler_is_the_hand_written_step() -> None:
+    written = """
+game:
+  kind: dynamic
+  horizon: 3
+  states: [x1, x2]
+  dynamics: {x1: "x1 + 0.1*(1.0*(-0.5*x1 + u1))", x2: "x2 + 0.1*(1.0*(-1.5*x2 + u2))"}
+  x0: [1, -2]
+  agents:
+    - {name: agent1, inputs: [u1], stage_cost: "x1**2 + u1**2"}
+    - {name: agent2, inputs: [u2], stage_cost: "x2**2 + u2**2"}
+"""
+    a = compile_game(load_config(text=ODE.replace("METHOD", "euler").replace("DT", "0.1")))
+    b = compile_game(load_config(text=written))
+    _same_functions(a, b, np.random.default_rng(3), tol=1e-15)
+
+
+def test_each_integrator_has_its_order() -> None:
+    """The one-step error of dx/dt = -a x + u (u constant) against the exact step
+    e^(-a dt) x + (1 - e^(-a dt)) u / a shrinks as dt^(p + 1) for a method of order p."""
+    x, u = np.array([1.0, -2.0]), np.array([0.3, -0.7])
+    a = np.array([0.5, 1.5])
+    for method, order in (("euler", 1), ("rk2", 2), ("rk3", 3), ("rk4", 4)):
+        errors = []
+        for dt in (0.2, 0.1):
+            game = compile_game(load_config(text=ODE.replace("METHOD", method).replace("DT", str(dt))))
+            exact = np.exp(-a * dt) * x + (1 - np.exp(-a * dt)) * u / a
+            errors.append(np.abs(game.step_dynamics(x, u) - exact).max())
+        assert np.log2(errors[0] / errors[1]) == pytest.approx(order + 1, abs=0.25), (method, errors)

@@ -31,7 +31,15 @@ import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 
-from ..language.config import Config, DynamicGame, LinearDynamics, StaticGame
+from ..language.config import (
+    Config,
+    ContinuousDynamics,
+    DynamicGame,
+    LinearDynamics,
+    StaticGame,
+    constraint_stages,
+    constraint_text,
+)
 from ..language.expr import casadi_functions, evaluate, parse_constraint, parse_expression
 
 
@@ -450,10 +458,14 @@ def _bound_rows(var: ca.SX, name: str, lower: float | None, upper: float | None,
     return rows
 
 
-def _constraint_rows(texts: list[str], env: dict, fns: dict, owner: int | None, stage: int | None) -> list[_Row]:
+def _constraint_rows(texts: list, env: dict, fns: dict, owner: int | None, stage: int | None) -> list[_Row]:
     rows = []
     suffix = f" [tau={stage}]" if stage is not None else ""
-    for text in texts:
+    for spec in texts:
+        stages = constraint_stages(spec)
+        if stages is not None and stage not in stages:
+            continue
+        text = constraint_text(spec)
         con = parse_constraint(text)
         rows.append(_Row(ca.SX(con.residual(env, fns)), ConstraintInfo(text + suffix, owner, con.is_equality, stage)))
     return rows
@@ -570,15 +582,22 @@ def _expressions(g: StaticGame | DynamicGame, lay: _Layout, a: ca.SX, x: ca.SX, 
         return _Expressions(costs, own, common, None)
 
     inputs = [(i, j, u) for i, vars_ in enumerate(names) for j, u in enumerate(vars_)]
-    dyn = None if isinstance(g.dynamics, LinearDynamics) else {s: parse_expression(g.dynamics[s]) for s in g.states}
+    continuous = isinstance(g.dynamics, ContinuousDynamics)
+    equations = g.dynamics.ode if continuous else g.dynamics
+    dyn = None if isinstance(g.dynamics, LinearDynamics) else {s: parse_expression(equations[s]) for s in g.states}
 
-    def f(xi: ca.SX, u: ca.SX) -> ca.SX:
-        if isinstance(g.dynamics, LinearDynamics):
-            return ca.mtimes(ca.DM(g.dynamics.A), xi) + ca.mtimes(ca.DM(g.dynamics.B), u)
+    def rhs(xi: ca.SX, u: ca.SX) -> ca.SX:
         env_f = dict(params)
         env_f.update({s: xi[k] for k, s in enumerate(g.states)})
         env_f.update({name: u[k] for k, (_, _, name) in enumerate(inputs)})
         return ca.vertcat(*[ca.SX(evaluate(dyn[s], env_f, fns)) for s in g.states])
+
+    def f(xi: ca.SX, u: ca.SX) -> ca.SX:
+        if isinstance(g.dynamics, LinearDynamics):
+            return ca.mtimes(ca.DM(g.dynamics.A), xi) + ca.mtimes(ca.DM(g.dynamics.B), u)
+        if continuous:
+            return runge_kutta(rhs, xi, u, g.dynamics.dt, g.dynamics.integrator)
+        return rhs(xi, u)
 
     xs, us = ca.SX.sym("xs", lay.nx), ca.SX.sym("us", len(inputs))
     dynamics = ca.Function("f", [xs, us], [ca.densify(f(xs, us))])
@@ -596,6 +615,7 @@ def _expressions(g: StaticGame | DynamicGame, lay: _Layout, a: ca.SX, x: ca.SX, 
             defects.append(f(xi, u) - nxt)
             xi = nxt
         env = dict(params)
+        env["tau"] = float(tau)
         env.update({s: xi[k] for k, s in enumerate(g.states)})
         env.update({name: u[k] for k, (_, _, name) in enumerate(inputs)})
         for i in agents:
@@ -606,6 +626,25 @@ def _expressions(g: StaticGame | DynamicGame, lay: _Layout, a: ca.SX, x: ca.SX, 
     for i in agents:
         costs[i] = ca.SX(total[i] + evaluate(terminal_cost[i], env_T, fns))
     return _Expressions(costs, own, common, dynamics, defects)
+
+
+# explicit Runge-Kutta methods as Butcher tableaux (A strictly lower triangular, weights b): forward Euler, Heun's
+# second-order method, Kutta's third-order method, the classical fourth-order method
+BUTCHER = {
+    "euler": ([], [1.0]),
+    "rk2": ([[1.0]], [0.5, 0.5]),
+    "rk3": ([[0.5], [-1.0, 2.0]], [1.0 / 6.0, 2.0 / 3.0, 1.0 / 6.0]),
+    "rk4": ([[0.5], [0.0, 0.5], [0.0, 0.0, 1.0]], [1.0 / 6.0, 1.0 / 3.0, 1.0 / 3.0, 1.0 / 6.0]),
+}
+
+
+def runge_kutta(rhs, x, u, dt: float, method: str):
+    """One step of length dt of dx/dt = rhs(x, u) with u held constant, by the explicit method ``method``."""
+    A, b = BUTCHER[method]
+    k = [rhs(x, u)]
+    for row in A:
+        k.append(rhs(x + dt * sum((a * kj for a, kj in zip(row, k, strict=False) if a), 0), u))
+    return x + dt * sum((w * kj for w, kj in zip(b, k, strict=True) if w), 0)
 
 
 def _assemble(*, kind: str, a: ca.SX, x: ca.SX, costs: list[ca.SX], own_rows: list[list[_Row]],

@@ -100,12 +100,32 @@ class StaticAgent(Strict):
     constraints: list[Expr] = Field(default_factory=list)
 
 
+class StagedConstraint(Strict):
+    """A constraint of a dynamic game imposed at some stages only (``stages``: tau values in 0..T)."""
+
+    expr: Expr
+    stages: list[int] = Field(min_length=1)
+
+
+StageConstraint = Expr | StagedConstraint
+
+
+def constraint_text(c: StageConstraint) -> str:
+    """The expression of a constraint, staged or not."""
+    return c.expr if isinstance(c, StagedConstraint) else c
+
+
+def constraint_stages(c: StageConstraint) -> list[int] | None:
+    """The stages a constraint is imposed at (None: every stage)."""
+    return c.stages if isinstance(c, StagedConstraint) else None
+
+
 class DynamicAgent(Strict):
     name: str
     inputs: Variables
     stage_cost: Expr
     terminal_cost: Expr = "0"
-    constraints: list[Expr] = Field(default_factory=list)
+    constraints: list[StageConstraint] = Field(default_factory=list)
 
 
 class LinearDynamics(Strict):
@@ -115,14 +135,26 @@ class LinearDynamics(Strict):
     B: list[list[float]]
 
 
+class ContinuousDynamics(Strict):
+    """dx/dt = f(x, u) (``ode``: one expression per state), integrated over one sampling time ``dt`` by an
+    explicit Runge-Kutta method with the input held constant: x(t+1) is the integrator's step from x(t)."""
+
+    ode: dict[str, Expr]
+    integrator: Literal["euler", "rk2", "rk3", "rk4"] = "rk4"
+    dt: float = Field(gt=0, allow_inf_nan=False)
+
+
 def _dynamics_tag(v: Any) -> str:
     if isinstance(v, LinearDynamics) or (isinstance(v, dict) and ("A" in v or "B" in v)):
         return "linear"
+    if isinstance(v, ContinuousDynamics) or (isinstance(v, dict) and "ode" in v):
+        return "continuous"
     return "expressions"
 
 
 Dynamics = Annotated[
-    Annotated[LinearDynamics, Tag("linear")] | Annotated[dict[str, Expr], Tag("expressions")],
+    Annotated[LinearDynamics, Tag("linear")] | Annotated[ContinuousDynamics, Tag("continuous")]
+    | Annotated[dict[str, Expr], Tag("expressions")],
     Discriminator(_dynamics_tag),
 ]
 
@@ -143,7 +175,7 @@ class DynamicGame(Strict):
     x0: list[float]
     parameters: dict[str, float] = Field(default_factory=dict)
     agents: list[DynamicAgent] = Field(min_length=1)
-    shared_constraints: list[Expr] = Field(default_factory=list)
+    shared_constraints: list[StageConstraint] = Field(default_factory=list)
     equilibrium: Literal["generalized", "variational"] = "generalized"
 
 
@@ -529,6 +561,8 @@ def check_semantics(cfg: Config, smap: SourceMap) -> list[str]:
             report(path, f"{what} {name!r} is the name of a function", key=key)
         elif name in CONSTANTS:
             report(path, f"{what} {name!r} is the name of a constant", key=key)
+        elif name == "tau" and not isinstance(g, StaticGame):
+            report(path, f"{what} 'tau' is the name of the stage index", key=key)
         elif name in seen:
             report(path, f"{what} {name!r} is already declared as {seen[name]}", key=key)
         else:
@@ -564,7 +598,12 @@ def check_semantics(cfg: Config, smap: SourceMap) -> list[str]:
             elif lo > hi:
                 report(path, f"lower bound {lo} exceeds upper bound {hi}")
 
-    def check(text: str, path: PathKey, names: set[str], constraint: bool) -> None:
+    def check(text: StageConstraint, path: PathKey, names: set[str], constraint: bool) -> None:
+        if isinstance(text, StagedConstraint):
+            bad = [t for t in text.stages if not 0 <= t <= g.horizon]
+            if bad:
+                report(path + ("stages",), f"stage {bad[0]} is outside 0..T = 0..{g.horizon}")
+            text, path = text.expr, path + ("expr",)
         try:
             parsed = parse_constraint(text) if constraint else parse_expression(text)
             check_names(parsed, names)
@@ -581,7 +620,7 @@ def check_semantics(cfg: Config, smap: SourceMap) -> list[str]:
                 check(c, ("game", "agents", i, "constraints", j), scope, True)
     else:
         states = set(g.states)
-        scope = states | decisions | params
+        scope = states | decisions | params | {"tau"}  # tau: the stage index, 0..T
         for i, agent in enumerate(g.agents):
             check(agent.stage_cost, ("game", "agents", i, "stage_cost"), scope, False)
             check(agent.terminal_cost, ("game", "agents", i, "terminal_cost"), states | params, False)
@@ -602,15 +641,16 @@ def check_semantics(cfg: Config, smap: SourceMap) -> list[str]:
             if not all(math.isfinite(v) for row in A + B for v in row):
                 report(("game", "dynamics"), "A and B must be finite")
         else:
+            equations, where = (g.dynamics.ode, ("game", "dynamics", "ode")) if isinstance(
+                g.dynamics, ContinuousDynamics) else (g.dynamics, ("game", "dynamics"))
             for s in g.states:
-                if s not in g.dynamics:
-                    report(("game", "dynamics"), f"no equation for state {s!r}")
-            for s, text in g.dynamics.items():
+                if s not in equations:
+                    report(where, f"no equation for state {s!r}")
+            for s, text in equations.items():
                 if s not in states:
-                    report(("game", "dynamics", s), f"{s!r} is not a declared state (states: {', '.join(g.states)})",
-                           key=True)
-                else:
-                    check(text, ("game", "dynamics", s), scope, False)
+                    report(where + (s,), f"{s!r} is not a declared state (states: {', '.join(g.states)})", key=True)
+                else:  # the dynamics are the same at every stage (no tau)
+                    check(text, where + (s,), scope - {"tau"}, False)
     for j, c in enumerate(g.shared_constraints):
         check(c, ("game", "shared_constraints", j), scope, True)
 

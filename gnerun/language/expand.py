@@ -40,7 +40,7 @@ _EXPRESSIONS = (
     ("agents", "*", "stage_cost"), ("agents", "*", "terminal_cost"), ("agents", "*", "cost"),
     ("agents", "*", "constraints", "*"), ("agents", "*", "constraints", "*", "expr"),
     ("shared_constraints", "*"), ("shared_constraints", "*", "expr"),
-    ("dynamics", "*"), ("definitions", "*"),
+    ("dynamics", "*"), ("dynamics", "ode", "*"), ("definitions", "*"),
 )
 
 
@@ -78,8 +78,8 @@ def expands(data: Any) -> bool:
 
 def _uses(value: Any) -> bool:
     if isinstance(value, dict):
-        return any(k == "for" or k == "definitions" or (isinstance(k, str) and "{" in k) or _uses(v)
-                   for k, v in value.items())
+        return any(k in ("for", "definitions") or (k == "stages" and isinstance(v, str))
+                   or (isinstance(k, str) and "{" in k) or _uses(v) for k, v in value.items())
     if isinstance(value, list):
         return any(_uses(v) for v in value)
     if isinstance(value, str):
@@ -239,6 +239,15 @@ class Expander:
                 if nk in out:
                     raise _Problem(src + (k,), f"key {nk!r} appears twice after expansion", scope.indices)
                 self._copy_position(src + (k,), dst + (nk,), key=True, scope=scope)
+                if nk == "stages" and isinstance(v, str):  # a range of stages: the list of tau values
+                    lo, hi = self._range(v, src + (k,), scope)
+                    self._count(max(0, hi - lo + 1), src + (k,), scope)
+                    out[nk] = list(range(lo, hi + 1))
+                    self._copy_position(src + (k,), dst + (nk,), scope=scope)
+                    continue
+                if nk == "ode" and logical == ("dynamics",) and isinstance(v, list | dict):
+                    out[nk] = self._merged(v, src + (k,), dst + (nk,), scope, logical + (k,), "dynamics")
+                    continue
                 if nk in ("variables", "inputs") and isinstance(v, list) and any(
                         isinstance(x, dict) and set(x) - {"for", "names"} for x in v):
                     out[nk] = self._merged(v, src + (k,), dst + (nk,), scope, logical + (k,), nk)
