@@ -369,3 +369,13 @@ def test_each_integrator_has_its_order() -> None:
             exact = np.exp(-a * dt) * x + (1 - np.exp(-a * dt)) * u / a
             errors.append(np.abs(game.step_dynamics(x, u) - exact).max())
         assert np.log2(errors[0] / errors[1]) == pytest.approx(order + 1, abs=0.25), (method, errors)
+
+
+def test_an_input_may_start_from_a_plan_over_the_stages() -> None:
+    text = STAGED.replace("inputs: [u1]", "inputs: {u1: {start: [0.1, 0.2, 0.3, 0.4, 0.5, 0.6]}}")
+    game = compile_game(load_config(text=text))
+    np.testing.assert_array_equal(game.a_start, [0.1, 0.2, 0.3, 0.4, 0.5, 0.6])
+    two = STAGED.replace("inputs: [u1]", "inputs: {u1: {start: [1, 2, 3, 4, 5, 6]}, v1: {start: 7}}")
+    np.testing.assert_array_equal(compile_game(load_config(text=two)).a_start, [1, 7, 2, 7, 3, 7, 4, 7, 5, 7, 6, 7])
+    with pytest.raises(ConfigError, match=r"has 2 entries for the 6 stages 0..T"):
+        load_config(text=STAGED.replace("inputs: [u1]", "inputs: {u1: {start: [1, 2]}}"))

@@ -515,7 +515,8 @@ def _layout(g: StaticGame | DynamicGame) -> _Layout:
     T = g.horizon
     names = [list(a.inputs) for a in g.agents]
     sizes = [len(v) * (T + 1) for v in names]
-    starts = [s for a in g.agents for s in [var.start for var in a.inputs.values()] * (T + 1)]
+    starts = [var.start[tau] if isinstance(var.start, list) else var.start  # time-major within an agent
+              for a in g.agents for tau in range(T + 1) for var in a.inputs.values()]
     lo, hi = [], []
     for a in g.agents:
         l_a, h_a = _bounds(list(a.inputs.values()))

@@ -22,10 +22,12 @@ from pydantic import (
     ConfigDict,
     Discriminator,
     Field,
+    PlainValidator,
     PrivateAttr,
     Tag,
     ValidationError,
 )
+from pydantic_core import PydanticCustomError
 
 from ..errors import ConfigError, InputError
 from .expand import Expander, expands
@@ -73,12 +75,27 @@ def _bound(side: str, unbounded: float) -> Any:
     return AfterValidator(check)
 
 
+def _finite_number(x: Any) -> float:
+    if isinstance(x, bool) or not isinstance(x, int | float):
+        raise PydanticCustomError("float_type", "Input should be a valid number")
+    if not math.isfinite(x):
+        raise PydanticCustomError("finite_number", "Input should be a finite number")
+    return float(x)
+
+
+def _start_value(v: Any) -> float | list[float]:
+    """A start value: a finite number, or (an input of a dynamic game) a list of them, one per stage."""
+    if isinstance(v, list):
+        return [_finite_number(x) for x in v]
+    return _finite_number(v)
+
+
 class Variable(Strict):
     """A decision variable: bounds (constraints of its owner) and a start value; ±.inf is no bound."""
 
     lower: Annotated[float | None, Field(allow_inf_nan=True), _bound("lower", -math.inf)] = None
     upper: Annotated[float | None, Field(allow_inf_nan=True), _bound("upper", math.inf)] = None
-    start: float = 0.0
+    start: Annotated[float | list[float], PlainValidator(lambda v: _start_value(v))] = 0.0  # inputs: may be a list
 
 
 def _names_to_variables(v: Any) -> Any:
@@ -593,7 +610,12 @@ def check_semantics(cfg: Config, smap: SourceMap) -> list[str]:
             declare(vname, path, "variable" if static else "input", key=True)
             lo = var.lower if var.lower is not None else -math.inf
             hi = var.upper if var.upper is not None else math.inf
-            if math.isnan(lo) or math.isnan(hi) or not math.isfinite(var.start):
+            starts = var.start if isinstance(var.start, list) else [var.start]
+            if isinstance(var.start, list) and static:
+                report(path + ("start",), "a variable's start is one number (lists over stages are for inputs)")
+            elif isinstance(var.start, list) and len(var.start) != g.horizon + 1:
+                report(path + ("start",), f"has {len(var.start)} entries for the {g.horizon + 1} stages 0..T")
+            if math.isnan(lo) or math.isnan(hi) or not all(math.isfinite(v) for v in starts):
                 report(path, "bounds and start must be numbers (start finite)")
             elif lo > hi:
                 report(path, f"lower bound {lo} exceeds upper bound {hi}")
