@@ -379,3 +379,81 @@ def test_an_input_may_start_from_a_plan_over_the_stages() -> None:
     np.testing.assert_array_equal(compile_game(load_config(text=two)).a_start, [1, 7, 2, 7, 3, 7, 4, 7, 5, 7, 6, 7])
     with pytest.raises(ConfigError, match=r"has 2 entries for the 6 stages 0..T"):
         load_config(text=STAGED.replace("inputs: [u1]", "inputs: {u1: {start: [1, 2]}}"))
+
+
+# constraints shared by some agents only --------------------------------------------------------------------
+
+SUBSET = """
+game:
+  kind: static
+  agents:
+    - {name: p1, variables: {x1: {start: 0}}, cost: "(x1 - 1)**2"}
+    - {name: p2, variables: {x2: {start: 0}}, cost: "(x2 - 1)**2"}
+    - {name: p3, variables: {x3: {start: 0}}, cost: "(x3 - 5)**2"}
+  shared_constraints:
+    - {expr: "x1 + x2 + x3 <= 6", agents: [p1, p2]}
+  equilibrium: EQ
+"""
+
+
+def test_a_variational_constraint_of_two_agents_leaves_the_third_alone() -> None:
+    """p3 does not carry x1 + x2 + x3 <= 6: it takes its target x3 = 5, and p1, p2 share what is left with one
+    multiplier, x1 = x2 = 1/2 (lambda = 1). Had the multiplier entered p3's Lagrangian too, x3 would be 4.5."""
+    cfg = load_config(text=SUBSET.replace("EQ", "variational"))
+    game = compile_game(cfg)
+    assert [c.carriers for c in game.constraints] == [(0, 1)]
+    res = solve(cfg, out=None)
+    assert res.status == "converged"
+    np.testing.assert_allclose(res.z, [0.5, 0.5, 5.0, 1.0], atol=1e-10)
+    assert [list(game.constraint_rows(i)) for i in range(3)] == [[0], [0], []]
+
+
+def test_a_generalized_constraint_of_two_agents_is_their_own_constraint_each() -> None:
+    written = """
+game:
+  kind: static
+  agents:
+    - {name: p1, variables: {x1: {start: 0}}, cost: "(x1 - 1)**2", constraints: ["x1 + x2 + x3 <= 6"]}
+    - {name: p2, variables: {x2: {start: 0}}, cost: "(x2 - 1)**2", constraints: ["x1 + x2 + x3 <= 6"]}
+    - {name: p3, variables: {x3: {start: 0}}, cost: "(x3 - 5)**2"}
+  equilibrium: generalized
+"""
+    a = compile_game(load_config(text=SUBSET.replace("EQ", "generalized")))
+    b = compile_game(load_config(text=written))
+    _same_functions(a, b, np.random.default_rng(4), tol=0.0)
+
+
+def test_subset_constraints_in_every_formulation_and_family() -> None:
+    text = """
+game:
+  kind: dynamic
+  horizon: 4
+  parameters: {N: 3}
+  states: [{for: {i: 1..N}, names: ["x{i}"]}]
+  dynamics: [{for: {i: 1..N}, "x{i}": "0.5*x{i} + u{i}"}]
+  x0: [1, 1, 1]
+  agents:
+    - for: {i: 1..N}
+      name: "car{i}"
+      inputs: ["u{i}"]
+      stage_cost: "(x{i} - 2)**2 + 0.1*u{i}**2"
+  shared_constraints:
+    - for: {i: 1..N, j: i+1..N}
+      expr: "x{i} + x{j} <= 3"
+      agents: ["car{i}", "car{j}"]
+  equilibrium: variational
+"""
+    cfg = load_config(text=text)
+    assert cfg.game.shared_constraints[2].agents == ["car2", "car3"]
+    solutions = []
+    for over in ({"solver.formulation": "condensed"}, {"solver.formulation": "sparse"}, {"solver.kind": "jn"}):
+        res = solve(load_config(text=text, overrides=over), out=None)
+        assert res.status == "converged", (over, res.message)
+        solutions.append(res.z)
+    np.testing.assert_allclose(solutions[0], solutions[1], atol=1e-9)
+    np.testing.assert_allclose(solutions[0], solutions[2], atol=1e-9)
+
+
+def test_a_subset_naming_no_agent_is_refused() -> None:
+    with pytest.raises(ConfigError, match=r"'p4' is not an agent"):
+        load_config(text=SUBSET.replace("EQ", "variational").replace("[p1, p2]", "[p1, p4]"))

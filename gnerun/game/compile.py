@@ -37,6 +37,7 @@ from ..language.config import (
     DynamicGame,
     LinearDynamics,
     StaticGame,
+    constraint_agents,
     constraint_stages,
     constraint_text,
 )
@@ -78,6 +79,7 @@ class ConstraintInfo:
     owner: int | None  # agent index; None for a shared constraint with a common multiplier
     equality: bool
     stage: int | None = None
+    carriers: tuple[int, ...] | None = None  # a common multiplier's row: the agents that carry it (None: all)
 
 
 class KKTParts(NamedTuple):
@@ -458,16 +460,24 @@ def _bound_rows(var: ca.SX, name: str, lower: float | None, upper: float | None,
     return rows
 
 
-def _constraint_rows(texts: list, env: dict, fns: dict, owner: int | None, stage: int | None) -> list[_Row]:
+def _constraint_rows(texts: list, env: dict, fns: dict, owner: int | None, stage: int | None,
+                     agent_names: list[str] | None = None) -> list[_Row]:
+    """The rows of ``texts`` at ``stage`` for ``owner`` (an agent index: the shared constraints it carries; None:
+    the common rows of a variational game, each with the agents that carry it)."""
     rows = []
     suffix = f" [tau={stage}]" if stage is not None else ""
     for spec in texts:
         stages = constraint_stages(spec)
         if stages is not None and stage not in stages:
             continue
+        carriers = constraint_agents(spec) if not isinstance(spec, str) and hasattr(spec, "agents") else None
+        if carriers is not None and owner is not None and agent_names[owner] not in carriers:
+            continue
         text = constraint_text(spec)
         con = parse_constraint(text)
-        rows.append(_Row(ca.SX(con.residual(env, fns)), ConstraintInfo(text + suffix, owner, con.is_equality, stage)))
+        who = None if carriers is None or owner is not None else tuple(agent_names.index(a) for a in carriers)
+        info = ConstraintInfo(text + suffix, owner, con.is_equality, stage, who)
+        rows.append(_Row(ca.SX(con.residual(env, fns)), info))
     return rows
 
 
@@ -557,6 +567,7 @@ def _expressions(g: StaticGame | DynamicGame, lay: _Layout, a: ca.SX, x: ca.SX, 
     params = dict(g.parameters)
     slices, names = lay.agent_slices, lay.variable_names
     own_shared = g.equilibrium == "generalized" or shared_as_own
+    names_of_agents = [ag.name for ag in g.agents]
     costs: dict[int, ca.SX] = {}
     own: dict[int, list[_Row]] = {i: [] for i in agents}
     common: list[_Row] = []
@@ -569,9 +580,9 @@ def _expressions(g: StaticGame | DynamicGame, lay: _Layout, a: ca.SX, x: ca.SX, 
                 own[i] += _bound_rows(env[vname], vname, var.lower, var.upper, i, stage)
             own[i] += _constraint_rows(agent.constraints, env, fns, i, stage)
             if own_shared:
-                own[i] += _constraint_rows(g.shared_constraints, env, fns, i, stage)
+                own[i] += _constraint_rows(g.shared_constraints, env, fns, i, stage, names_of_agents)
         if not own_shared:
-            common.extend(_constraint_rows(g.shared_constraints, env, fns, None, stage))
+            common.extend(_constraint_rows(g.shared_constraints, env, fns, None, stage, names_of_agents))
 
     if isinstance(g, StaticGame):
         env: dict = dict(params)
@@ -629,6 +640,13 @@ def _expressions(g: StaticGame | DynamicGame, lay: _Layout, a: ca.SX, x: ca.SX, 
     return _Expressions(costs, own, common, dynamics, defects)
 
 
+def shared_rows_carried(common: list, start: int, agent: int) -> np.ndarray:
+    """Indices (from ``start``) of the common rows of a variational game that ``agent`` carries: every row whose
+    constraint names no agents, and those that name it."""
+    return np.array([start + r for r, row in enumerate(common)
+                     if row.info.carriers is None or agent in row.info.carriers], dtype=int)
+
+
 # explicit Runge-Kutta methods as Butcher tableaux (A strictly lower triangular, weights b): forward Euler, Heun's
 # second-order method, Kutta's third-order method, the classical fourth-order method
 BUTCHER = {
@@ -661,14 +679,15 @@ def _assemble(*, kind: str, a: ca.SX, x: ca.SX, costs: list[ca.SX], own_rows: li
     lam = ca.SX.sym("lam", m)
     c = ca.vertcat(*[r.expr for r in rows]) if rows else ca.SX(0, 1)
 
+    carried = [shared_rows_carried(shared_common, shared_slice.start, i) for i in range(N)]
     grads = []
     for i in range(N):
         Li = costs[i]
         ms = multiplier_slices[i]
         if ms.stop > ms.start:
             Li = Li + ca.dot(lam[ms], c[ms])
-        if shared_slice.stop > shared_slice.start:
-            Li = Li + ca.dot(lam[shared_slice], c[shared_slice])
+        if carried[i].size:
+            Li = Li + ca.dot(lam[carried[i].tolist()], c[carried[i].tolist()])
         grads.append(ca.gradient(Li, a[agent_slices[i]]))
     L = ca.vertcat(*grads)
     J = ca.vertcat(*costs)
@@ -676,8 +695,8 @@ def _assemble(*, kind: str, a: ca.SX, x: ca.SX, costs: list[ca.SX], own_rows: li
     costs_fn = ca.Function("costs", [a, x], [ca.densify(J)], ["a", "x"], ["J"])
 
     # agent i's own problem: its own rows, plus the common shared rows (they constrain everyone)
-    agent_rows = [np.r_[np.arange(ms.start, ms.stop), np.arange(shared_slice.start, shared_slice.stop)].astype(int)
-                  for ms in multiplier_slices]
+    agent_rows = [np.r_[np.arange(ms.start, ms.stop), carried[i]].astype(int)
+                  for i, ms in enumerate(multiplier_slices)]
     return CompiledGame(
         kind=kind,
         agent_names=agent_names,

@@ -29,7 +29,7 @@ import scipy.sparse as sp
 from scipy.sparse import linalg as spla
 
 from ..language.config import Config, DynamicGame
-from .compile import CompiledGame, Evaluator, _expressions, _layout
+from .compile import CompiledGame, Evaluator, _expressions, _layout, shared_rows_carried
 
 
 class SparseParts(NamedTuple):
@@ -130,8 +130,9 @@ def compile_sparse(cfg: Config, game: CompiledGame) -> SparseKKT:
         Li = ex.costs[i]
         if ms.stop > ms.start:
             Li = Li + ca.dot(lam[ms], c[ms])
-        if shared.stop > shared.start:
-            Li = Li + ca.dot(lam[shared], c[shared])
+        common = shared_rows_carried(rows[shared], shared.start, i)
+        if common.size:
+            Li = Li + ca.dot(lam[common.tolist()], c[common.tolist()])
         gx_only.append(ca.gradient(Li, X))  # grad_xi of J_i + lambda^T c (no costates)
         Pi = P[i * S:(i + 1) * S]
         Li = Li + ca.dot(Pi, d)

@@ -124,17 +124,32 @@ class StagedConstraint(Strict):
     stages: list[int] = Field(min_length=1)
 
 
+class SharedConstraint(Strict):
+    """A shared constraint with options: carried by the named ``agents`` only (default: every agent), and in a
+    dynamic game imposed at some ``stages`` only (default: every stage)."""
+
+    expr: Expr
+    stages: list[int] | None = Field(default=None, min_length=1)
+    agents: list[str] | None = Field(default=None, min_length=1)
+
+
 StageConstraint = Expr | StagedConstraint
+SharedSpec = Expr | SharedConstraint
 
 
-def constraint_text(c: StageConstraint) -> str:
-    """The expression of a constraint, staged or not."""
-    return c.expr if isinstance(c, StagedConstraint) else c
+def constraint_text(c: StageConstraint | SharedSpec) -> str:
+    """The expression of a constraint, with options or not."""
+    return c if isinstance(c, str) else c.expr
 
 
-def constraint_stages(c: StageConstraint) -> list[int] | None:
+def constraint_stages(c: StageConstraint | SharedSpec) -> list[int] | None:
     """The stages a constraint is imposed at (None: every stage)."""
-    return c.stages if isinstance(c, StagedConstraint) else None
+    return None if isinstance(c, str) else c.stages
+
+
+def constraint_agents(c: SharedSpec) -> list[str] | None:
+    """The agents that carry a shared constraint (None: every agent)."""
+    return c.agents if isinstance(c, SharedConstraint) else None
 
 
 class DynamicAgent(Strict):
@@ -180,7 +195,7 @@ class StaticGame(Strict):
     kind: Literal["static"]
     parameters: dict[str, float] = Field(default_factory=dict)
     agents: list[StaticAgent] = Field(min_length=1)
-    shared_constraints: list[Expr] = Field(default_factory=list)
+    shared_constraints: list[SharedSpec] = Field(default_factory=list)
     equilibrium: Literal["generalized", "variational"] = "generalized"
 
 
@@ -192,7 +207,7 @@ class DynamicGame(Strict):
     x0: list[float]
     parameters: dict[str, float] = Field(default_factory=dict)
     agents: list[DynamicAgent] = Field(min_length=1)
-    shared_constraints: list[StageConstraint] = Field(default_factory=list)
+    shared_constraints: list[SharedSpec] = Field(default_factory=list)
     equilibrium: Literal["generalized", "variational"] = "generalized"
 
 
@@ -620,11 +635,21 @@ def check_semantics(cfg: Config, smap: SourceMap) -> list[str]:
             elif lo > hi:
                 report(path, f"lower bound {lo} exceeds upper bound {hi}")
 
-    def check(text: StageConstraint, path: PathKey, names: set[str], constraint: bool) -> None:
-        if isinstance(text, StagedConstraint):
-            bad = [t for t in text.stages if not 0 <= t <= g.horizon]
-            if bad:
-                report(path + ("stages",), f"stage {bad[0]} is outside 0..T = 0..{g.horizon}")
+    def check(text: StageConstraint | SharedSpec, path: PathKey, names: set[str], constraint: bool) -> None:
+        if not isinstance(text, str):
+            if text.stages is not None and static:
+                report(path + ("stages",), "a static game has no stages")
+            elif text.stages is not None:
+                bad = [t for t in text.stages if not 0 <= t <= g.horizon]
+                if bad:
+                    report(path + ("stages",), f"stage {bad[0]} is outside 0..T = 0..{g.horizon}")
+            for name in getattr(text, "agents", None) or []:
+                if name not in agent_names:
+                    report(path + ("agents",), f"{name!r} is not an agent (agents: "
+                                               f"{', '.join(a.name for a in g.agents)})")
+            carriers = getattr(text, "agents", None) or []
+            if len(set(carriers)) != len(carriers):
+                report(path + ("agents",), "names an agent twice")
             text, path = text.expr, path + ("expr",)
         try:
             parsed = parse_constraint(text) if constraint else parse_expression(text)
