@@ -38,7 +38,8 @@ game:
 """
 
 
-def _same_functions(a, b, rng: np.random.Generator, points: int = 5, tol: float = 1e-13, labels: bool = True) -> None:
+def _same_functions(a, b, rng: np.random.Generator, points: int = 5, tol: float = 1e-13, labels: bool = True,
+                    x: np.ndarray | None = None) -> None:
     """Two compiled games evaluate to the same L, c and derivatives (to rounding) at random points."""
     assert (a.n, a.m) == (b.n, b.m)
     assert a.agent_names == b.agent_names
@@ -49,7 +50,8 @@ def _same_functions(a, b, rng: np.random.Generator, points: int = 5, tol: float 
         assert [canonical(c.label) for c in a.constraints] == [canonical(c.label) for c in b.constraints]
     for _ in range(points):
         z = rng.uniform(0.05, 0.2, a.size)
-        for pa, pb in zip(a.kkt_parts(z, a.x0), b.kkt_parts(z, b.x0), strict=True):
+        for pa, pb in zip(a.kkt_parts(z, a.x0 if x is None else x), b.kkt_parts(z, b.x0 if x is None else x),
+                          strict=True):
             np.testing.assert_allclose(pa, pb, rtol=tol, atol=tol)
 
 
@@ -457,3 +459,23 @@ game:
 def test_a_subset_naming_no_agent_is_refused() -> None:
     with pytest.raises(ConfigError, match=r"'p4' is not an agent"):
         load_config(text=SUBSET.replace("EQ", "variational").replace("[p1, p2]", "[p1, p4]"))
+
+
+def test_the_merge_template_at_n_3_is_the_written_merge() -> None:
+    """configs/algames_merge_n.yaml (an ode integrated by RK3, families of cars and pairs) against
+    configs/algames_merge.yaml (ALGAMES's RK3 step written out per state): the same L, c and derivatives at the
+    same plant state (to rounding: the step is grouped differently), and its nominal x0 is ALGAMES's."""
+    template = compile_game(load_config(CONFIGS / "algames_merge_n.yaml"))
+    written = compile_game(load_config(CONFIGS / "algames_merge.yaml"))
+    _same_functions(template, written, np.random.default_rng(5), tol=1e-10, x=written.x0)
+    np.testing.assert_allclose(template.x0, [-0.80, -0.05, 0.0, 0.90, -1.00, -0.05, 0.0, 0.90, -0.90, -0.30,
+                                             np.pi / 12, 0.95], atol=1e-15)
+
+
+@pytest.mark.parametrize("N", [4, 8])
+def test_the_same_merge_file_holds_any_number_of_cars(N: int) -> None:
+    cfg = load_config(CONFIGS / "algames_merge_n.yaml", {"game.parameters.N": N})
+    g = cfg.game
+    assert len(g.agents) == N and len(g.states) == 4 * N and len(g.x0) == 4 * N
+    assert len(g.shared_constraints) == N * (N - 1) // 2
+    assert g.x0[4 * (N - 2)] == pytest.approx(-0.8 - 0.2 * (N - 2))  # the last car on the main road

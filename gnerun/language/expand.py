@@ -73,7 +73,8 @@ def expands(data: Any) -> bool:
     game = data.get("game") if isinstance(data, dict) else None
     if not isinstance(game, dict):
         return False
-    return _uses(game)
+    x0 = game.get("x0")
+    return _uses(game) or (isinstance(x0, list) and any(isinstance(v, str | dict) for v in x0))
 
 
 def _uses(value: Any) -> bool:
@@ -95,6 +96,7 @@ class Expander:
         self.out = SourceMap(smap.file, overridden=dict(smap.overridden))
         self.items = 0
         self.vectors: dict[str, list] = {}
+        self.scalars: dict[str, float] = {}  # numeric parameters (for numbers written as expressions)
         self.definitions: dict[str, str] = {}
 
     # entry point ---------------------------------------------------------------------------------------
@@ -127,6 +129,8 @@ class Expander:
                     self.vectors[name] = self._vector(value, ("game", "parameters", name))
                     continue
                 kept[name] = value
+                if isinstance(value, int | float) and not isinstance(value, bool):
+                    self.scalars[name] = value
                 if isinstance(value, int) and not isinstance(value, bool):
                     base[name] = value
         horizon = game.get("horizon")
@@ -265,14 +269,41 @@ class Expander:
                     items.append(self._walk(item, src + (idx,), dst + (len(items),), scope, logical + ("*",)))
             return items
         if isinstance(value, str):
+            if logical == ("x0", "*"):
+                return self._number(value, src, scope)
             if _matches(logical):
                 return self._expression(value, src, scope)
             return self._template(value, src, scope)
         return value
 
+    def _number(self, value: Any, path: PathKey, scope: _Scope) -> Any:
+        """A number written as an expression of the indices and numeric parameters (``-0.8 - 0.2*(i - 1)``,
+        ``pi/12``), evaluated when the config is loaded; a number as it is."""
+        if not isinstance(value, str):
+            return value
+        text = self._expression(value, path, scope)
+        env = {k: v for k, v in self.scalars.items()}
+        try:
+            parsed = parse_expression(text)
+        except ExpressionError as e:
+            raise _Problem(path, f"in the number {value!r}: {e.message}", scope.indices) from None
+        unknown = sorted(_names(text) - set(env) - {"pi"} - set(numpy_functions()))
+        if unknown:
+            raise _Problem(path, f"{unknown[0]!r} in {value!r} is not an index or a numeric parameter", scope.indices)
+        with _quiet():
+            number = float(evaluate(parsed, env, numpy_functions()))
+        if not math.isfinite(number):
+            raise _Problem(path, f"{value!r} is {number}, not a finite number", scope.indices)
+        return number
+
     def _emit(self, body: dict, src: PathKey, dst: PathKey, items: list, scope: _Scope, logical: tuple) -> None:
         """One copy of a family item: ``{names: [...]}`` adds names (states), ``{expr: E}`` adds the expression
         E (constraints), anything else is one item."""
+        if set(body) == {"values"} and isinstance(body["values"], list):  # numbers (x0), one list per copy
+            for j, value in enumerate(body["values"]):
+                items.append(self._number(value, src + ("values", j), scope))
+                self._copy_position(src + ("values", j), dst + (len(items) - 1,), scope=scope)
+            return
         if set(body) == {"names"} and isinstance(body["names"], list):
             for j, name in enumerate(body["names"]):
                 items.append(self._walk(name, src + ("names", j), dst + (len(items),), scope, logical + ("*",)))
