@@ -58,6 +58,7 @@ EXPECTED = {  # test name -> max_examples; the module checks that all of them ra
     "overrides": 1000,
     "sweep_specs": 400,
     "cli_validate": 30,
+    "templates": 600,
 }
 HARD_LIMIT = 30.0  # seconds per case: a hang fails the case instead of stalling the suite
 CANARY = Path(f"/tmp/gnerun-canary-{uuid.uuid4().hex}")  # must never be created
@@ -98,6 +99,8 @@ def _totals() -> Iterator[None]:
     if set(CASES) == set(EXPECTED):  # the whole module ran (not a -k selection)
         assert all(CASES[k] >= EXPECTED[k] for k in EXPECTED), CASES
         assert total >= 10_000
+    if "templates" in CASES:  # the generator reaches valid families too, not only mistakes
+        assert OUTCOMES.get("templates: loaded", 0) >= 10, OUTCOMES
     if "mutated_configs" in CASES:  # both outcomes are common: the generator reaches past the schema
         assert OUTCOMES.get("refused when loaded", 0) >= 200 and OUTCOMES.get("solved: converged", 0) >= 200
 
@@ -106,7 +109,7 @@ def _totals() -> Iterator[None]:
 # Outcomes
 # -------------------------------------------------------------------------------------------------
 
-LOCATED = re.compile(r"^(<string>|\S+\.yaml|--set .*)(:\d+:\d+)?: \S")
+LOCATED = re.compile(r"^(<string>|\S+\.yaml|--set .*)(:\d+:\d+)?( \(for [^)]*\))?: \S")  # (for i = 2): a family copy
 
 
 def assert_one_line(err: BaseException) -> None:
@@ -317,6 +320,56 @@ def test_structured_yaml_documents(data, flow) -> None:
     text = yaml.safe_dump(data, default_flow_style=flow, sort_keys=False, allow_unicode=True)
     with bounded():
         load_outcome(text)
+
+
+# templates: families, ranges, braces, sums, indexing and definitions, well and badly formed ---------------------
+
+INT_TEXT = st.one_of(st.integers(-3, 12).map(str), st.sampled_from(["N", "N-1", "i", "i+1", "j", "T", "2*N", "N/2",
+                                                                     "10**9", "-10**12", "1e400", "k", "", "(",
+                                                                     "N*N*N*N", "i/0", "pi", "x1"]))
+RANGE_TEXT = st.one_of(st.builds(lambda a, b: f"{a}..{b}", INT_TEXT, INT_TEXT),
+                       st.sampled_from(["1..1000000000", "1..N..2", "..", "1.5..3", "3", "a..b", "1..10**9"]))
+TEMPLATE_STRING = st.one_of(
+    st.sampled_from(["x{i}", "x{j}", "x{i+1}", "x{N}", "x{{i}}", "x{i", "x}", "x{}", "x{10**20}", "x{1/3}", "x1"]),
+    st.builds(lambda a: f"x{{{a}}}", INT_TEXT))
+EXPR_TEXT = st.one_of(
+    TEMPLATE_STRING.map(lambda t: f"{t}**2"),
+    st.builds(lambda t, r: f"sum({t} for k in {r})", TEMPLATE_STRING, RANGE_TEXT),
+    st.builds(lambda t, r, f: f"{f}({t}*k for k in {r})", TEMPLATE_STRING, RANGE_TEXT,
+              st.sampled_from(["max", "min", "prod", "sum"])),
+    st.sampled_from(["c[i]", "c[i][1]", "c[0]", "c[N+1]", "c[", "c]", "d[1]", "S", "S + T", "x1*tau", "pi*x1",
+                     "sum(sum(x{k} for k in 1..j) for j in 1..N)", "atan2(x1)", "hypot(x1, x1)"]))
+
+
+VALID_FAMILY = st.sampled_from([{"i": "1..N"}, {"i": "1..3"}, {"i": "2..N"}, {"i": "1..N", "j": "i..i"}])
+VALID_COST = st.sampled_from(["x{i}**2 - c[i]*x{i}", "x{i}**2 + 0.1*x{i}*sum(x{k} for k in 1..N)",
+                              "(x{i} - 0.1*i)**2 + 0.01*S*x{i}", "prod(x{i} + k for k in 1..2) + max(x{i}, -x{i}, 0)",
+                              "x{i}**2 + atan2(x{i}, 2) + hypot(x{i}, 1) - pi*x{i}"])
+
+
+@_settings("templates")
+@given(st.one_of(VALID_FAMILY, st.dictionaries(st.sampled_from(["i", "j", "N", "T", "k", "1", "for"]), RANGE_TEXT,
+                                                max_size=3)),
+       st.one_of(st.just("x{i}"), TEMPLATE_STRING), st.one_of(VALID_COST, EXPR_TEXT),
+       st.one_of(st.none(), st.just("sum(x{k} for k in 1..N)"), EXPR_TEXT),
+       st.sampled_from([3, 3, 3, 0, -1, 2.5, 10**6]))
+def test_templates(family, name, cost, definition, n) -> None:
+    """A generated family of agents: loading gives a Config or located one-line messages, quickly; a Config
+    compiles and solves (or is refused in one line)."""
+    _count("templates")
+    doc = {"game": {"kind": "static", "parameters": {"N": n, "c": [1.0, 2.0, 3.0]},
+                    "agents": [{"for": family, "name": "p" + name, "variables": {name: {"lower": -1, "upper": 1}},
+                                "cost": cost}]}}
+    if definition is not None:
+        doc["game"]["definitions"] = {"S": definition}
+    text = yaml.safe_dump(doc, sort_keys=False)
+    with bounded(10.0):
+        cfg = load_outcome(text)
+        if cfg is not None:
+            OUTCOMES["templates: loaded"] = OUTCOMES.get("templates: loaded", 0) + 1
+            if sum(len(a.variables) for a in cfg.game.agents) <= 50:
+                run_outcome(cfg)
+    assert not CANARY.exists()
 
 
 def _alias_bomb(width: int, levels: int) -> str:
