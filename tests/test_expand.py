@@ -479,3 +479,18 @@ def test_the_same_merge_file_holds_any_number_of_cars(N: int) -> None:
     assert len(g.agents) == N and len(g.states) == 4 * N and len(g.x0) == 4 * N
     assert len(g.shared_constraints) == N * (N - 1) // 2
     assert g.x0[4 * (N - 2)] == pytest.approx(-0.8 - 0.2 * (N - 2))  # the last car on the main road
+
+
+def test_the_mcp_demo_template_is_the_written_demo() -> None:
+    """configs/mcp_demo.yaml (families, vector parameters, an ode by Heun's method, x0 from a vector) against the
+    benchmark library's demo written out (the exact zero-order-hold step per state): the same functions to
+    rounding, and the same solution."""
+    from benchmarks.problems import trajectory
+
+    written_cfg = load_config(text=trajectory.mcp_demo_problem().config_yaml)
+    template_cfg = load_config(CONFIGS / "mcp_demo.yaml")
+    _same_functions(compile_game(template_cfg), compile_game(written_cfg), np.random.default_rng(6), tol=1e-12,
+                    labels=False)
+    ra, rb = solve(template_cfg, out=None), solve(written_cfg, out=None)
+    assert ra.status == rb.status == "converged"
+    np.testing.assert_allclose(ra.z[:36], rb.z[:36], atol=1e-8)
