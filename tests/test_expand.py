@@ -494,3 +494,14 @@ def test_the_mcp_demo_template_is_the_written_demo() -> None:
     ra, rb = solve(template_cfg, out=None), solve(written_cfg, out=None)
     assert ra.status == rb.status == "converged"
     np.testing.assert_allclose(ra.z[:36], rb.z[:36], atol=1e-8)
+
+
+def test_the_intersection_config_is_the_written_intersection() -> None:
+    """configs/algames_intersection.yaml (an RK3 ode, pi, families of states and pairs) against the benchmark
+    library's intersection written out, at the same plant state: the same functions to rounding."""
+    from benchmarks.problems import trajectory
+
+    written = compile_game(load_config(text=trajectory.intersection_problems(1)[0].config_yaml))
+    config = compile_game(load_config(CONFIGS / "algames_intersection.yaml"))
+    _same_functions(config, written, np.random.default_rng(7), points=2, tol=1e-10, x=written.x0)
+    np.testing.assert_allclose(config.x0, trajectory.INTERSECTION.x0, atol=1e-15)
