@@ -109,7 +109,7 @@ def test_exact_derivatives_match_central_differences(name: str, cfg) -> None:
     game = compile_game(cfg)
     rng = np.random.default_rng(20240611)
     n, m = game.n, game.m
-    for _ in range(2 if game.size < 500 else 1):  # one point for the largest games (each costs a difference per unknown)
+    for _ in range(2 if game.size < 500 else 1):  # one point on the largest games
         a, x = _random_point(name, game, rng)
         lam = rng.uniform(0.0, 2.0, m)
         z = np.concatenate([a, lam])
