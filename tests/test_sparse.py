@@ -136,3 +136,29 @@ def test_cli_reports_an_inapplicable_formulation_with_exit_code_2(tmp_path) -> N
     assert proc.returncode == 2
     assert "Traceback" not in proc.stderr
     assert "solver.formulation" in proc.stderr and "static game" in proc.stderr
+
+
+def test_the_superlu_ordering_is_the_one_with_least_fill() -> None:
+    """Ordering factorises the first matrix with every candidate, keeps the one whose L and U have fewest nonzeros,
+    and uses it from then on; its factors solve the system."""
+    import scipy.sparse as sp
+
+    from gnerun.game import sparse as gs
+
+    rng = np.random.default_rng(0)
+    n = 300
+    # a banded matrix (minimum degree on M^T M keeps it banded) plus a few dense rows and columns
+    M = sp.diags([rng.uniform(1, 2, n - 1), rng.uniform(4, 5, n), rng.uniform(1, 2, n - 1)], [-1, 0, 1]).tolil()
+    for k in rng.choice(n, 4, replace=False):
+        M[k, :] = rng.uniform(0, 0.01, n)
+        M[k, k] = 5.0
+    M = M.tocsc()
+    fills = {spec: (lambda lu: lu.L.nnz + lu.U.nnz)(gs._splu(M, spec)) for spec in gs.ORDERINGS}
+    ordering = gs.Ordering()
+    lu, rcond = ordering.factor(M)
+    assert ordering.spec == min(fills, key=fills.get)
+    b = rng.standard_normal(n)
+    np.testing.assert_allclose(M @ lu.solve(b), b, atol=1e-10)
+    assert 0 < rcond <= 1
+    lu2, _ = ordering.factor(M)  # the kept choice
+    np.testing.assert_allclose(lu2.solve(b), lu.solve(b), atol=1e-12)

@@ -65,6 +65,8 @@ class SparseKKT:
         self.affine = affine  # dF/dw constant: LQ games
         self._lam0 = self.size - self.m  # first multiplier column (and first c row)
         self._not_multipliers = np.arange(self._lam0)
+        # SuperLU orderings per kind of matrix: the reduced Newton system, its normal equations, the interior one
+        self.orderings = {"newton": Ordering(), "normal": Ordering(), "interior": Ordering()}
 
     def residual(self, z: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The condensed L(z) and c(a) alone (states rolled out, costates solved; no Jacobian)."""
@@ -180,18 +182,56 @@ def compile_sparse(cfg: Config, game: CompiledGame) -> SparseKKT:
     return SparseKKT(game, function, residual, function.sparsity_out(1), affine, S)
 
 
-def factor(M: sp.csc_matrix) -> tuple[spla.SuperLU | None, float]:
-    """SuperLU factors of M and an estimate of its reciprocal 1-norm condition number (0 when singular)."""
+ORDERINGS = ("MMD_ATA", "COLAMD")
+
+
+class Ordering:
+    """SuperLU's column ordering for one kind of matrix of one game, chosen at its first factorisation: the one of
+    ``ORDERINGS`` with the least fill (nonzeros of L and U; deterministic, unlike a timing). Minimum degree on M^T M
+    keeps the fill linear in T for long horizons with few agents; COLAMD fills less with many agents (the 8-car
+    merge's interior matrix: 0.77 instead of 1.07 million nonzeros, factorised in 75 instead of 137 ms). The choice
+    is a property of the sparsity pattern, kept with the game's sparse system like the pattern itself."""
+
+    def __init__(self) -> None:
+        self.spec: str | None = None
+
+    def factor(self, M: sp.csc_matrix) -> tuple[spla.SuperLU | None, float]:
+        if self.spec is not None:
+            return factor(M, self.spec)
+        best: tuple[int, str, spla.SuperLU] | None = None
+        for spec in ORDERINGS:
+            lu = _splu(M, spec)
+            if lu is not None and (best is None or lu.L.nnz + lu.U.nnz < best[0]):
+                best = (lu.L.nnz + lu.U.nnz, spec, lu)
+        if best is None:
+            return None, 0.0
+        self.spec = best[1]
+        return best[2], _rcond(M, best[2])
+
+
+def _splu(M: sp.csc_matrix, spec: str) -> spla.SuperLU | None:
     try:
-        lu = spla.splu(M, permc_spec="MMD_ATA")  # minimum degree on M^T M: fill linear in T (COLAMD: not)
+        return spla.splu(M, permc_spec=spec)
     except RuntimeError:  # "Factor is exactly singular"
+        return None
+
+
+def factor(M: sp.csc_matrix, permc_spec: str = "MMD_ATA") -> tuple[spla.SuperLU | None, float]:
+    """SuperLU factors of M and an estimate of its reciprocal 1-norm condition number (0 when singular)."""
+    lu = _splu(M, permc_spec)
+    if lu is None:
         return None, 0.0
+    return lu, _rcond(M, lu)
+
+
+def _rcond(M: sp.csc_matrix, lu: spla.SuperLU) -> float:
+    """An estimate of M's reciprocal 1-norm condition number from its factors."""
     if M.shape[0] == 0:
-        return lu, 1.0
+        return 1.0
     inverse = spla.LinearOperator(M.shape, matvec=lu.solve, rmatvec=lambda b: lu.solve(b, trans="T"),
                                   dtype=float)
     with np.errstate(all="ignore"):
         inv_norm = spla.onenormest(inverse, t=1)
     norm = abs(M).sum(axis=0).max()
     rcond = 1.0 / (norm * inv_norm) if np.isfinite(inv_norm) and inv_norm > 0 else 0.0
-    return lu, float(rcond)
+    return float(rcond)

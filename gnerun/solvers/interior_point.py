@@ -298,9 +298,8 @@ class SparseBarrier:
     def direction(self, parts, it: InteriorIterate, D: np.ndarray, rhs_I: np.ndarray):
         import scipy.sparse as sp
 
-        from ..game.sparse import factor
-
         ip, system = self.ip, self.system
+        ordering = system.orderings["interior"]
         n, I, E, lam0, keep = ip.n, ip.I, ip.E, self.lam0, self.keep
         diag = np.zeros(system.size)
         diag[lam0 + I] = -D
@@ -313,7 +312,7 @@ class SparseBarrier:
 
         def solve(delta: float):
             shift[:n] = delta
-            lu, rcond = factor((base + sp.diags(shift)).tocsc() if delta else base)
+            lu, rcond = ordering.factor((base + sp.diags(shift)).tocsc() if delta else base)
             if lu is None or not rcond > 0.0:
                 return None
             sol = np.zeros(system.size)

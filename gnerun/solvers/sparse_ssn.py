@@ -6,7 +6,7 @@ import numpy as np
 from scipy.sparse import linalg as spla
 
 from ..game.compile import CompiledGame
-from ..game.sparse import SparseKKT, SparseParts, factor
+from ..game.sparse import SparseKKT, SparseParts
 from ..language.config import DisturbanceConfig, SolverConfig
 from .ssn import SemismoothNewton, SSNState
 
@@ -48,10 +48,10 @@ class SparseSemismoothNewton(SemismoothNewton):
             if entry is None:
                 if len(self._lus) >= 64:
                     self._lus.clear()
-                entry = self._lus[key] = factor(J[keep][:, keep].tocsc())
+                entry = self._lus[key] = system.orderings["newton"].factor(J[keep][:, keep].tocsc())
         else:
             J = system.matrix(parts.J)
-            entry = factor(J[keep][:, keep].tocsc())
+            entry = system.orderings["newton"].factor(J[keep][:, keep].tocsc())
         lu, rcond = entry
         if lu is None or not rcond >= self.options.min_rcond:
             return None, rcond
@@ -74,7 +74,7 @@ class SparseSemismoothNewton(SemismoothNewton):
         r = -(parts.F - J[:, lam0 + inactive] @ lam[inactive])  # F with the inactive multipliers at zero
         M = J[keep][:, keep].tocsc()
         N = (M.T @ M + mu * sp.identity(keep.size, format="csc")).tocsc()
-        lu, _ = factor(N)
+        lu, _ = system.orderings["normal"].factor(N)
         if lu is None:
             return None
         dy = lu.solve(M.T @ r[keep])
