@@ -137,8 +137,10 @@ class CompiledGame:
         a, lam, x, L, c = sym.a, sym.lam, sym.x, sym.L, sym.c
         dL = ca.jacobian(L, ca.vertcat(a, lam))
         dc = ca.jacobian(c, a) if self.m else ca.SX(0, self.n)
-        affine = not ca.depends_on(ca.vec(dL), ca.vertcat(a, lam, x)) and not ca.depends_on(ca.vec(dc),
-                                                                                             ca.vertcat(a, x))
+        # the constraints' derivatives first: the smaller test, and nonlinear constraints end it (a quarter of the
+        # derivative set-up of the 5-car merge was the test on dL)
+        affine = not ca.depends_on(ca.vec(dc), ca.vertcat(a, x)) and not ca.depends_on(ca.vec(dL),
+                                                                                        ca.vertcat(a, lam, x))
         kkt = ca.Function("kkt", [a, lam, x], [ca.densify(v) for v in (L, c, dL, dc)], ["a", "lam", "x"],
                           ["L", "c", "dL_dz", "dc_da"])
         offset_map = None
