@@ -472,7 +472,7 @@ def _constraint_rows(texts: list, env: dict, fns: dict, owner: int | None, stage
         stages = constraint_stages(spec)
         if stages is not None and stage not in stages:
             continue
-        carriers = constraint_agents(spec) if not isinstance(spec, str) and hasattr(spec, "agents") else None
+        carriers = constraint_agents(spec)
         if carriers is not None and owner is not None and agent_names[owner] not in carriers:
             continue
         text = constraint_text(spec)

@@ -95,7 +95,7 @@ class Variable(Strict):
 
     lower: Annotated[float | None, Field(allow_inf_nan=True), _bound("lower", -math.inf)] = None
     upper: Annotated[float | None, Field(allow_inf_nan=True), _bound("upper", math.inf)] = None
-    start: Annotated[float | list[float], PlainValidator(lambda v: _start_value(v))] = 0.0  # inputs: may be a list
+    start: Annotated[float | list[float], PlainValidator(_start_value)] = 0.0  # inputs: may be a list
 
 
 def _names_to_variables(v: Any) -> Any:
@@ -147,8 +147,8 @@ def constraint_stages(c: StageConstraint | SharedSpec) -> list[int] | None:
     return None if isinstance(c, str) else c.stages
 
 
-def constraint_agents(c: SharedSpec) -> list[str] | None:
-    """The agents that carry a shared constraint (None: every agent)."""
+def constraint_agents(c: StageConstraint | SharedSpec) -> list[str] | None:
+    """The agents that carry a shared constraint (None: every agent; an agent's own constraint names none)."""
     return c.agents if isinstance(c, SharedConstraint) else None
 
 

@@ -338,12 +338,10 @@ class SemismoothNewton:
             # in the multipliers alone (a = a(lambda) keeps L = 0):
             # min ||c_A(lambda)||^2 + mu ||lambda_A - lambda_A^k||^2
             entry = self._active_set(state.active)
-            A, dual = entry.A, self._dual
-            w0 = game.offsets(state.x)
-            y, _ = lapack.dgetrs(dual.lu, dual.piv, w0[:n])
+            A = entry.A
+            y, rhs = self._dual_rhs(A, game.offsets(state.x))
             lam_A = z[n + A]
-            r = w0[n + A] - dual.C[A] @ y - entry.S @ lam_A
-            d = levenberg_marquardt(entry.S, r, mu)
+            d = levenberg_marquardt(entry.S, rhs - entry.S @ lam_A, mu)
             return None if d is None else self._dual_point(A, lam_A + d, y)
         if self.reduced:
             A = np.flatnonzero(state.active | self._eq) if self._eq_rows.size else np.flatnonzero(state.active)
@@ -498,13 +496,7 @@ class SemismoothNewton:
         A = np.flatnonzero(active | self._eq)
         dual = self._dual
         S = None
-        if A.size > self.game.n:
-            # more active rows than decisions: their gradients are dependent, the system singular (nothing to
-            # factorise); the Schur complement is kept for the Levenberg-Marquardt step
-            if dual is not None:
-                S = dual.C[A] @ dual.PinvE[:, A]
-            lu, piv, info, rcond = None, np.zeros(0, dtype=np.int32), 0, 0.0
-        elif dual is not None:
+        if dual is not None:
             # S_AA = C_A P^{-1} E_A; a row of C_A with one nonzero (a bound) picks a scaled row of P^{-1} E_A
             PA = dual.PinvE[:, A]
             single = dual.single[A]
@@ -513,6 +505,11 @@ class SemismoothNewton:
             general = ~single
             if general.any():
                 S[general] = dual.C[A[general]] @ PA
+        if A.size > self.game.n:
+            # more active rows than decisions: their gradients are dependent, the system singular (nothing to
+            # factorise); the Schur complement is kept for the Levenberg-Marquardt step
+            lu, piv, info, rcond = None, np.zeros(0, dtype=np.int32), 0, 0.0
+        elif dual is not None:
             lu, piv, info, rcond = _factor(S)
         else:
             lu, piv, info, rcond = _factor(self._reduced_matrix(KKTParts(None, None, self._dL, self._dc), A))
@@ -521,6 +518,13 @@ class SemismoothNewton:
             self._maps.clear()
         entry = self._maps[key] = _ActiveSet(lu if ok else None, piv, A, float(rcond), S=S)
         return entry
+
+    def _dual_rhs(self, A: np.ndarray, w0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """y = P^{-1} l0 and the Schur system's right-hand side c0_A - C_A y for the offsets w0 = [l0; c0] (a
+        vector, or one per column)."""
+        dual, n = self._dual, self.game.n
+        y, _ = lapack.dgetrs(dual.lu, dual.piv, w0[:n])
+        return y, w0[n + A] - dual.C[A] @ y
 
     def _dual_point(self, A: np.ndarray, lam_A: np.ndarray, y: np.ndarray) -> np.ndarray:
         """z = (a, lambda) with lambda_A = ``lam_A``, the other multipliers zero and a = -y - P^{-1} E_A lambda_A
@@ -555,10 +559,8 @@ class SemismoothNewton:
     def _lq_solve(self, entry: _ActiveSet, w0: np.ndarray) -> np.ndarray:
         """z^+ for the offsets w0 = [l0; c0] (a vector, or one per column) by the kept factors of ``entry``."""
         n, A = self.game.n, entry.A
-        dual = self._dual
-        if dual is not None:
-            y, _ = lapack.dgetrs(dual.lu, dual.piv, w0[:n])
-            rhs = w0[n + A] - dual.C[A] @ y
+        if self._dual is not None:
+            y, rhs = self._dual_rhs(A, w0)
             lam_A = lapack.dgetrs(entry.lu, entry.piv, rhs)[0] if A.size else rhs
             return self._dual_point(A, lam_A, y)
         rhs = np.concatenate([-w0[:n], -w0[n + A]])
