@@ -162,3 +162,63 @@ def test_the_superlu_ordering_is_the_one_with_least_fill() -> None:
     assert 0 < rcond <= 1
     lu2, _ = ordering.factor(M)  # the kept choice
     np.testing.assert_allclose(lu2.solve(b), lu.solve(b), atol=1e-12)
+
+
+def test_costates_only_for_the_states_an_agent_reaches() -> None:
+    """Agent i's costates cover the states its inputs move through the dynamics, to a fixed point: here agent 1
+    drives x1 and, through it, x3; agent 2 drives x2 alone; nobody drives x4."""
+    from gnerun.game.sparse import compile_sparse, reachable_states
+
+    cfg = load_config({"name": "reach", "game": {
+        "kind": "dynamic", "horizon": 3, "states": ["x1", "x2", "x3", "x4"],
+        "dynamics": {"x1": "x1 + u1", "x2": "0.5*x2 + u2**2", "x3": "x3 + 0.1*x1", "x4": "0.9*x4"},
+        "x0": [1, 2, 3, 4],
+        "agents": [{"name": "one", "inputs": {"u1": {}}, "stage_cost": "x1**2 + x3**2 + u1**2 + x2"},
+                   {"name": "two", "inputs": {"u2": {}}, "stage_cost": "(x2 - x1)**2 + u2**2"}]}})
+    game = compile_game(cfg)
+    system = compile_sparse(cfg, game)
+    r1, r2 = reachable_states(_dynamics(cfg), [[0], [1]])
+    np.testing.assert_array_equal(r1, [True, False, True, False])
+    np.testing.assert_array_equal(r2, [False, True, False, False])
+    T1 = 4  # stages 1..T+1
+    assert [s.stop - s.start for s in system.costates] == [2 * T1, 1 * T1]
+    assert system.size == game.n + 4 * T1 + 3 * T1 + game.m
+    # and the steps are still the condensed ones
+    cond = make_solver(cfg.model_copy(update={"solver": cfg.solver.model_copy(update={"formulation": "condensed"})}),
+                       game)
+    sparse = make_solver(cfg.model_copy(update={"solver": cfg.solver.model_copy(update={"formulation": "sparse"})}),
+                         game)
+    a, b = cond.init(), sparse.init()
+    for _ in range(4):
+        a, b = cond.step(a), sparse.step(b)
+        np.testing.assert_allclose(b.z, a.z, rtol=0, atol=1e-10)
+
+
+def _dynamics(cfg):
+    import casadi as ca
+
+    from gnerun.game.compile import _expressions, _layout
+
+    lay = _layout(cfg.game)
+    return _expressions(cfg.game, lay, ca.SX.sym("a", lay.n), ca.SX.sym("x", lay.nx), []).dynamics
+
+
+def test_the_globalized_sparse_method_takes_the_condensed_iterates() -> None:
+    """On the 3-car merge from zero inputs the default method meets singular Newton systems (Levenberg-Marquardt
+    steps) and enters its interior phase; the sparse formulation takes the same iterates through all of it: its
+    Levenberg-Marquardt step is the condensed one (the states and costates eliminated, not regularised), and its
+    interior direction makes each player's block of the Schur complement positive definite as the condensed
+    form does."""
+    cfg = load_config(CONFIGS / "algames_merge_n.yaml")
+    game = compile_game(cfg)
+    solvers = {f: make_solver(cfg.model_copy(update={"solver": cfg.solver.model_copy(update={"formulation": f})}),
+                              game) for f in ("condensed", "sparse")}
+    a, b = solvers["condensed"].init(), solvers["sparse"].init()
+    singular = interior = 0
+    for _ in range(30):
+        a, b = solvers["condensed"].step(a), solvers["sparse"].step(b)
+        assert b.search.phase == a.search.phase and b.status == a.status
+        np.testing.assert_allclose(b.z, a.z, rtol=0, atol=1e-7 * (1 + np.abs(a.z).max()))
+        singular += a.search.phase == "newton" and a.rcond == 0.0
+        interior += a.search.phase == "interior"
+    assert singular >= 3 and interior >= 5

@@ -5,7 +5,12 @@ and a step costs O(T^2) to O(T^3) in the horizon T. Here the states xi(1..T+1) s
 dynamics as equality constraints f(xi(tau), u(tau)) - xi(tau+1) = 0 and one costate sequence p_i per
 agent (agent i's multipliers of the dynamics in its own problem). Agent i's Lagrangian is
 
-    L_i = J_i(xi, a) + lambda_i^T g_i(xi, a) [+ lambda_s^T g_s] + p_i^T d(xi, a; x),
+    L_i = J_i(xi, a) + lambda_i^T g_i(xi, a) [+ lambda_s^T g_s] + p_i^T d_i(xi, a; x),
+
+where d_i are the defects of the states that agent i's inputs can reach through the dynamics (all of them when
+the dynamics couple the agents; a car's own four when the cars move independently). The other states do not
+depend on agent i's decisions: they are data of its problem, and their costates would solve equations of their
+own that feed back into nothing. Leaving them out makes an N-car game's costates O(N) instead of O(N^2).
 
 and the whole system F(w) = [(grad_{a_i} L_i)_i; (grad_xi L_i)_i; d; c] in w = (a, xi, p, lambda) has a
 block-banded Jacobian: every row and column belongs to one stage and touches only its neighbours. One
@@ -47,17 +52,19 @@ class SparseParts(NamedTuple):
 class SparseKKT:
     """The full-space KKT system of a dynamic game, evaluated at rolled-out states and solved costates.
 
-    Unknowns w = (a [n], xi [S], p_1..p_N [N S], lambda [m]) with S = nx (T + 1); rows
-    F = (G_a [n], G_xi [N S], d [S], c [m]). Build with :func:`compile_sparse`.
+    Unknowns w = (a [n], xi [S], p_1..p_N [S_1 + ... + S_N], lambda [m]) with S = nx (T + 1) and S_i = S's share
+    that agent i reaches; rows F = (G_a [n], G_xi [sum S_i], d [S], c [m]). Build with :func:`compile_sparse`.
     """
 
     def __init__(self, game: CompiledGame, function: ca.Function, residual: ca.Function, pattern: ca.Sparsity,
-                 affine: bool, S: int):
+                 affine: bool, S: int, costates: list[slice], states: list[np.ndarray]):
         self.game = game
         self._residual = Evaluator(residual)
         self.n, self.m, self.S = game.n, game.m, S
         self.N = len(game.agent_names)
-        self.size = self.n + S + self.N * S + self.m
+        self.costates = costates  # agent i's costates p_i: these positions of p (and rows of G_xi)
+        self.states = states  # the positions in xi of the states agent i reaches (stage-major)
+        self.size = self.n + S + (costates[-1].stop if costates else 0) + self.m
         self._eval = Evaluator(function, dense=False)
         colind, row = pattern.colind(), pattern.row()
         self.pattern = sp.csc_matrix((np.zeros(len(row)), np.asarray(row), np.asarray(colind)),
@@ -65,8 +72,8 @@ class SparseKKT:
         self.affine = affine  # dF/dw constant: LQ games
         self._lam0 = self.size - self.m  # first multiplier column (and first c row)
         self._not_multipliers = np.arange(self._lam0)
-        # SuperLU orderings per kind of matrix: the reduced Newton system, its normal equations, the interior one
-        self.orderings = {"newton": Ordering(), "normal": Ordering(), "interior": Ordering()}
+        # SuperLU orderings per kind of matrix: the reduced Newton system, the regularised one, the interior one
+        self.orderings = {"newton": Ordering(), "regularized": Ordering(), "interior": Ordering()}
 
     def residual(self, z: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The condensed L(z) and c(a) alone (states rolled out, costates solved; no Jacobian)."""
@@ -122,32 +129,45 @@ def compile_sparse(cfg: Config, game: CompiledGame) -> SparseKKT:
         raise AssertionError("sparse and condensed constraint orders differ")
     m = len(rows)
     lam = ca.SX.sym("lam", m)
-    P = ca.SX.sym("p", N * S)
+    inputs = [(i, j) for i, names in enumerate(lay.variable_names) for j in range(len(names))]
+    reach = reachable_states(ex.dynamics, [[k for k, (i, _) in enumerate(inputs) if i == agent] for agent in range(N)])
+    # agent i's states in xi, stage-major, and the offsets of its costates in p
+    own = [np.array([tau * nx + k for tau in range(T + 1) for k in np.flatnonzero(r)], dtype=int) for r in reach]
+    offsets = np.cumsum([0, *[idx.size for idx in own]])
+    P = ca.SX.sym("p", int(offsets[-1]))
     c = ca.vertcat(*[r.expr for r in rows]) if rows else ca.SX(0, 1)
     d = ca.vertcat(*ex.defects)
     shared = game.shared_slice
+    common_grads: dict[tuple[int, ...], ca.SX] = {}  # the shared rows' lambda^T c, differentiated once per set
     Ga, Gx, gx_only = [], [], []
     for i in range(N):
         ms = game.multiplier_slices[i]
         Li = ex.costs[i]
         if ms.stop > ms.start:
             Li = Li + ca.dot(lam[ms], c[ms])
-        common = shared_rows_carried(rows[shared], shared.start, i)
-        if common.size:
-            Li = Li + ca.dot(lam[common.tolist()], c[common.tolist()])
-        gx_only.append(ca.gradient(Li, X))  # grad_xi of J_i + lambda^T c (no costates)
-        Pi = P[i * S:(i + 1) * S]
-        Li = Li + ca.dot(Pi, d)
-        Ga.append(ca.gradient(Li, a[lay.agent_slices[i]]))
-        Gx.append(ca.gradient(Li, X))
+        Xi = X[own[i].tolist()]
+        ai = a[lay.agent_slices[i]]
+        common = tuple(shared_rows_carried(rows[shared], shared.start, i).tolist())
+        if common and common not in common_grads:
+            common_grads[common] = ca.gradient(ca.dot(lam[list(common)], c[list(common)]), ca.vertcat(a, X))
+        g_a = ca.gradient(Li, ai)
+        g_x = ca.gradient(Li, Xi)  # grad_xi of J_i + lambda^T c (no costates)
+        if common:
+            g_a = g_a + common_grads[common][lay.agent_slices[i]]
+            g_x = g_x + common_grads[common][(n + own[i]).tolist()]
+        gx_only.append(g_x)
+        Pi = P[int(offsets[i]):int(offsets[i + 1])]
+        dP = ca.dot(Pi, d[own[i].tolist()])
+        Ga.append(g_a + ca.gradient(dP, ai))
+        Gx.append(g_x + ca.gradient(dP, Xi))
     F = ca.vertcat(*Ga, *Gx, d, c)
     w = ca.vertcat(a, X, P, lam)
     J = ca.jacobian(F, w)
     full = ca.Function("full", [a, X, P, lam, x], [F, J])
 
-    # projection: xi rolled out from (x, a); p_i from grad_xi L_i = 0, backwards:
-    # p_i(tau) = grad_{xi(tau+1)} (J_i + lambda^T c) + f_xi(xi(tau+1), u(tau+1))^T p_i(tau+1), p_i(T+1) = 0
-    inputs = [(i, j) for i, names in enumerate(lay.variable_names) for j in range(len(names))]
+    # projection: xi rolled out from (x, a); p_i from grad_xi L_i = 0, backwards over agent i's states R_i:
+    # p_i(tau) = grad_{xi_R(tau+1)} (J_i + lambda^T c) + f_xi[R, R](xi(tau+1), u(tau+1))^T p_i(tau+1), p_i(T+1) = 0
+    # (f_xi[not R, R] = 0: a state that depends on one agent i reaches is one it reaches)
 
     def u_at(tau: int) -> ca.SX:
         return ca.vertcat(*[a[lay.agent_slices[i].start + tau * len(lay.variable_names[i]) + j] for i, j in inputs])
@@ -162,24 +182,51 @@ def compile_sparse(cfg: Config, game: CompiledGame) -> SparseKKT:
     costates = []
     for i in range(N):
         gi = gx_only[i]
-        p_next = ca.SX.zeros(nx)
+        R = np.flatnonzero(reach[i]).tolist()
+        k = len(R)
+        p_next = ca.SX.zeros(k)
         stages = [None] * (T + 1)
         for tau in range(T, -1, -1):
-            p = gi[tau * nx:(tau + 1) * nx]
+            p = gi[tau * k:(tau + 1) * k]
             if tau < T:
-                p = p + ca.mtimes(f_xi(X[tau * nx:(tau + 1) * nx], u_at(tau + 1)).T, p_next)
+                p = p + ca.mtimes(f_xi(X[tau * nx:(tau + 1) * nx], u_at(tau + 1))[R, R].T, p_next)
             stages[tau] = p
             p_next = p
         costates.append(ca.vertcat(*stages))
     adjoint = ca.Function("adjoint", [a, X, lam, x], [ca.vertcat(*costates)])
     P_proj = adjoint(a, X_roll, lam, x)
     F_proj, J_proj = full(a, X_roll, P_proj, lam, x)
-    F0, _ = full(a, X_roll, ca.SX.zeros(N * S), ca.SX.zeros(m), x)
+    F0, _ = full(a, X_roll, ca.SX.zeros(P.numel()), ca.SX.zeros(m), x)
     function = ca.Function("sparse_kkt", [a, lam, x], [F_proj, J_proj, F0], ["a", "lam", "x"], ["F", "J", "F0"])
     residual = ca.Function("sparse_residual", [a, lam, x], [ca.densify(F_proj[:n]), ca.densify(F_proj[F.numel() - m:])],
                            ["a", "lam", "x"], ["L", "c"])
     affine = not ca.depends_on(J, ca.vertcat(a, X, P, lam, x))
-    return SparseKKT(game, function, residual, function.sparsity_out(1), affine, S)
+    return SparseKKT(game, function, residual, function.sparsity_out(1), affine, S,
+                     [slice(int(offsets[i]), int(offsets[i + 1])) for i in range(N)], own)
+
+
+def reachable_states(dynamics: ca.Function, agent_inputs: list[list[int]]) -> list[np.ndarray]:
+    """Per agent, the states its inputs can move (structurally): those the dynamics f(xi, u) make depend on its
+    inputs, then every state whose derivative depends on one of them, to a fixed point."""
+    Bx = _pattern(dynamics.jac_sparsity(0, 0))
+    Bu = _pattern(dynamics.jac_sparsity(0, 1))
+    out = []
+    for cols in agent_inputs:
+        r = Bu[:, cols].any(axis=1)
+        while True:
+            grown = r | Bx[:, r].any(axis=1)
+            if (grown == r).all():
+                break
+            r = grown
+        out.append(r)
+    return out
+
+
+def _pattern(sparsity: ca.Sparsity) -> np.ndarray:
+    rows, cols = sparsity.get_triplet()
+    B = np.zeros(sparsity.shape, dtype=bool)
+    B[np.asarray(rows, dtype=int), np.asarray(cols, dtype=int)] = True
+    return B
 
 
 ORDERINGS = ("MMD_ATA", "COLAMD")

@@ -36,7 +36,8 @@ What makes it work on the field's games, measured on the benchmark suite (``pyth
 The linear algebra has the two forms of the semismooth Newton step: condensed (the inequality multipliers
 eliminated, one dense factorisation of n unknowns and the equality multipliers; constraint rows with a single
 nonzero, such as bounds, add to the diagonal) and sparse (the full-space system of a dynamic game with -D on its
-multiplier block, factorised by SuperLU; there a player's block is regularised only when the matrix is singular).
+multiplier block, factorised by SuperLU; the players' blocks of its Schur complement made positive definite in the
+same way, so that both forms take the same direction).
 
 Rows that no decision variable reaches (SPEC §3b) take no part: their multipliers stay zero.
 """
@@ -281,9 +282,18 @@ class DenseBarrier:
 
 
 class SparseBarrier:
-    """The interior-point Newton system in the sparse formulation of a dynamic game: the full-space matrix of
+    """The interior-point Newton system in the sparse formulation of a dynamic game: the full-space matrix K of
     (a, xi, p, lambda) with -D on the inequality multipliers' diagonal, factorised by SuperLU. Its Schur
-    complement on (a, lambda) is the condensed matrix, as for the semismooth Newton step."""
+    complement on (a, lambda_E) is the condensed matrix, as for the semismooth Newton step; each player's own
+    block of that complement is made positive definite as in the condensed form (:func:`convexify`), by a shift
+    of the player's diagonal in K (which shifts the complement's block by the same), so both forms take the same
+    direction.
+
+    Player i's block S_ii = K_ii + K_iR y, where K_RR y = -K_Ri over what the complement eliminates
+    (R: states, costates, inequality multipliers), is found stage-structured, without factorising K_RR: the
+    dynamics' rows give the states' response to a_i (a block-triangular solve), the inequality rows the
+    multipliers' (a division by D), and agent i's costate rows its costates' response; K_iR touches no other
+    agent's costates."""
 
     def __init__(self, system, ip: InteriorPoint) -> None:
         self.system = system
@@ -294,6 +304,59 @@ class SparseBarrier:
         keep = np.ones(size, dtype=bool)
         keep[self.lam0 + ip.fixed] = False
         self.keep = np.flatnonzero(keep)
+        self._templates: list[dict] | None = None
+
+    def _blocks(self) -> list[dict]:
+        """Per agent, the sub-blocks of K that its block of the complement is built from, as gathers from K's
+        nonzeros (the pattern is fixed: sliced once)."""
+        if self._templates is None:
+            ip, system = self.ip, self.system
+            n, S, lam0 = ip.n, system.S, self.lam0
+            P = lam0 - n - S
+            lam_I = lam0 + ip.I
+            self._templates = []
+            for ai, pi, own in zip(ip.newton.game.agent_slices, system.costates, system.states, strict=True):
+                a_cols = np.arange(ai.start, ai.stop)
+                d_rows, x_cols = n + P + own, n + own
+                g_rows, p_cols = np.arange(n + pi.start, n + pi.stop), np.arange(n + S + pi.start, n + S + pi.stop)
+                self._templates.append({
+                    "Dx": _Gather(system.pattern, d_rows, x_cols), "Da": _Gather(system.pattern, d_rows, a_cols),
+                    "Cx": _Gather(system.pattern, lam_I, x_cols), "Ca": _Gather(system.pattern, lam_I, a_cols),
+                    "Gx": _Gather(system.pattern, g_rows, x_cols), "Gl": _Gather(system.pattern, g_rows, lam_I),
+                    "Ga": _Gather(system.pattern, g_rows, a_cols), "Aa": _Gather(system.pattern, a_cols, a_cols),
+                    "Ax": _Gather(system.pattern, a_cols, x_cols), "Ap": _Gather(system.pattern, a_cols, p_cols),
+                    "Al": _Gather(system.pattern, a_cols, lam_I)})
+        return self._templates
+
+    def _shifts(self, data: np.ndarray, D: np.ndarray) -> tuple[np.ndarray, float] | None:
+        """Per decision, the shift that makes its player's block of the Schur complement positive definite, and
+        the largest diagonal entry of the shifted complement (the condensed form's scale); ``None`` if a
+        dynamics block is singular (then no shift). ``data``: K's nonzeros without -D."""
+        from scipy.sparse import linalg as spla
+
+        ip = self.ip
+        shift = np.zeros(ip.n)
+        scale = 1.0
+        for ai, b in zip(ip.newton.game.agent_slices, self._blocks(), strict=True):
+            Dx = b["Dx"].sparse(data)
+            if Dx.shape[0]:
+                # the states' response D_x Y_x = -D_a: block lower-triangular with -I on the diagonal, factorised
+                # without pivoting or reordering (no fill); the costates' block of K is D_x^T
+                try:
+                    lu = spla.splu(Dx, permc_spec="NATURAL", diag_pivot_thresh=0.0)
+                except RuntimeError:
+                    return None
+                Yx = -lu.solve(b["Da"].dense(data))
+            else:
+                Yx = np.zeros((0, ai.stop - ai.start))
+            Ylam = (b["Cx"].sparse(data) @ Yx + b["Ca"].dense(data)) / D[:, None]
+            rhs = -(b["Ga"].dense(data) + b["Gx"].sparse(data) @ Yx + b["Gl"].sparse(data) @ Ylam)
+            Yp = lu.solve(rhs, trans="T") if Dx.shape[0] else rhs
+            block = (b["Aa"].dense(data) + b["Ax"].sparse(data) @ Yx + b["Ap"].sparse(data) @ Yp
+                     + b["Al"].sparse(data) @ Ylam)
+            shift[ai] = convexifying_shift(block)
+            scale = max(scale, float(np.max(np.abs(np.diag(block) + shift[ai]), initial=0.0)))
+        return shift, scale
 
     def direction(self, parts, it: InteriorIterate, D: np.ndarray, rhs_I: np.ndarray):
         import scipy.sparse as sp
@@ -303,11 +366,18 @@ class SparseBarrier:
         n, I, E, lam0, keep = ip.n, ip.I, ip.E, self.lam0, self.keep
         diag = np.zeros(system.size)
         diag[lam0 + I] = -D
-        base = (system.matrix(parts.J) + sp.diags(diag)).tocsc()[keep][:, keep]
+        J = system.matrix(parts.J)
+        base = (J + sp.diags(diag)).tocsc()[keep][:, keep]
         rhs = -parts.F.copy()
         rhs[lam0 + I] = rhs_I
         rhs[lam0 + E] = -it.c[E]
-        self.scale = max(1.0, float(np.max(np.abs(base.diagonal()[:n]), initial=0.0)))
+        convex = self._shifts(parts.J, D)
+        if convex is None:
+            self.scale = max(1.0, float(np.max(np.abs(base.diagonal()[:n]), initial=0.0)))
+        else:
+            shifts, self.scale = convex
+            if shifts.any():
+                base = (base + sp.diags(np.concatenate([shifts, np.zeros(keep.size - n)]))).tocsc()
         shift = np.zeros(keep.size)
 
         def solve(delta: float):
@@ -325,6 +395,34 @@ class SparseBarrier:
         return solve
 
 
+class _Gather:
+    """One sub-block (rows, cols) of a fixed sparsity pattern, rebuilt from the pattern's nonzeros by a gather
+    (sparse slicing at every call costs more than the arithmetic it serves)."""
+
+    def __init__(self, pattern, rows: np.ndarray, cols: np.ndarray) -> None:
+        import scipy.sparse as sp
+
+        numbered = sp.csc_matrix((np.arange(1, pattern.nnz + 1, dtype=float), pattern.indices, pattern.indptr),
+                                 shape=pattern.shape)
+        sub = numbered[rows][:, cols].tocsc()
+        sub.sort_indices()
+        self.shape = sub.shape
+        self.indices, self.indptr = sub.indices, sub.indptr
+        self.positions = sub.data.astype(np.int64) - 1
+        self.row_of = self.indices
+        self.col_of = np.repeat(np.arange(sub.shape[1]), np.diff(sub.indptr))
+
+    def sparse(self, data: np.ndarray):
+        import scipy.sparse as sp
+
+        return sp.csc_matrix((data[self.positions], self.indices, self.indptr), shape=self.shape)
+
+    def dense(self, data: np.ndarray) -> np.ndarray:
+        out = np.zeros(self.shape)
+        out[self.row_of, self.col_of] = data[self.positions]
+        return out
+
+
 def _factor(M: np.ndarray):
     from .ssn import _factor as factor
 
@@ -337,17 +435,23 @@ def convexify(S: np.ndarray, blocks: list[slice]) -> None:
     the direction is then a descent direction of every player's own barrier problem. Convex players' blocks are
     left as they are."""
     for sl in blocks:
-        block = S[sl, sl]
-        sym = 0.5 * (block + block.T)
-        if _positive_definite(sym):
-            continue
-        scale = max(1.0, float(np.max(np.abs(np.diag(sym)), initial=0.0)))
-        delta = 1e-8 * scale
-        eye = np.eye(sym.shape[0])
-        while delta < 1e12 * scale and not _positive_definite(sym + delta * eye):
-            delta *= 10.0
-        idx = np.arange(sl.start, sl.stop)
-        S[idx, idx] += delta
+        delta = convexifying_shift(S[sl, sl])
+        if delta:
+            idx = np.arange(sl.start, sl.stop)
+            S[idx, idx] += delta
+
+
+def convexifying_shift(block: np.ndarray) -> float:
+    """The multiple of the identity :func:`convexify` adds to one player's block (0 for a convex player)."""
+    sym = 0.5 * (block + block.T)
+    if _positive_definite(sym):
+        return 0.0
+    scale = max(1.0, float(np.max(np.abs(np.diag(sym)), initial=0.0)))
+    delta = 1e-8 * scale
+    eye = np.eye(sym.shape[0])
+    while delta < 1e12 * scale and not _positive_definite(sym + delta * eye):
+        delta *= 10.0
+    return delta
 
 
 def _positive_definite(sym: np.ndarray) -> bool:

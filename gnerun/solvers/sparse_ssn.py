@@ -59,8 +59,18 @@ class SparseSemismoothNewton(SemismoothNewton):
         return system.new_iterate(z, sol, A), rcond
 
     def regularized_point(self, state: SSNState, mu: float) -> np.ndarray | None:
-        """Levenberg-Marquardt on the reduced full-space system (see the condensed method): the normal equations
-        keep the block-banded structure, with twice the bandwidth."""
+        """The condensed method's Levenberg-Marquardt step, in the full space: y = (da, dxi, p^+, dlambda_A)
+        minimises ||M_1 y - r_1||^2 + mu ||(da, dlambda_A)||^2 subject to M_2 y = r_2, where rows 1 are the
+        stationarity in a and the active constraints, and rows 2 (the costate equations and the dynamics) are the
+        ones the condensed system eliminates. Their solution is the condensed step (the states and costates
+        follow from (da, dlambda_A) through rows 2), found from one sparse symmetric system without the normal
+        equations' product:
+
+            [ mu E^T E   M_1^T   M_2^T ] [y  ]   [0  ]
+            [ M_1        -I      0     ] [nu1] = [r_1]
+            [ M_2        0       0     ] [nu2]   [r_2]
+
+        (nu1 = M_1 y - r_1 is the residual, E picks (da, dlambda_A))."""
         import scipy.sparse as sp
 
         system, parts, z = self.system, state.parts, state.z
@@ -73,14 +83,18 @@ class SparseSemismoothNewton(SemismoothNewton):
         lam0 = system.size - m
         r = -(parts.F - J[:, lam0 + inactive] @ lam[inactive])  # F with the inactive multipliers at zero
         M = J[keep][:, keep].tocsc()
-        N = (M.T @ M + mu * sp.identity(keep.size, format="csc")).tocsc()
-        lu, _ = system.orderings["normal"].factor(N)
+        size = keep.size
+        first = np.zeros(size, dtype=bool)  # rows 1 (and the columns E picks): a and the active multipliers
+        first[:n] = True
+        first[lam0:] = True
+        K = sp.bmat([[sp.diags(mu * first.astype(float)), M.T], [M, sp.diags(-first.astype(float))]], format="csc")
+        lu, _ = system.orderings["regularized"].factor(K)
         if lu is None:
             return None
-        dy = lu.solve(M.T @ r[keep])
+        dy = lu.solve(np.concatenate([np.zeros(size), r[keep]]))[:size]
         if not np.all(np.isfinite(dy)):
             return None
         z_new = np.zeros_like(z)
         z_new[:n] = z[:n] + dy[:n]
-        z_new[n + A] = lam[A] + dy[keep.size - A.size:]
+        z_new[n + A] = lam[A] + dy[size - A.size:]
         return z_new
