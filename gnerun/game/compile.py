@@ -222,6 +222,17 @@ class CompiledGame:
         return {"dL": dL, "dc": dc, "W": W, "x": None}
 
     @functools.cached_property
+    def linear_dynamics(self) -> bool:
+        """The one-step dynamics affine in (x, u) (a static game: True); tested on one stage, without the
+        condensed derivatives."""
+        if self._dynamics is None:
+            return True
+        f = self._dynamics.function
+        x, u = ca.SX.sym("x", f.nnz_in(0)), ca.SX.sym("u", f.nnz_in(1))
+        d = ca.jacobian(f(x, u), ca.vertcat(x, u))
+        return not ca.depends_on(ca.vec(d), ca.vertcat(x, u))
+
+    @functools.cached_property
     def linear_rows(self) -> np.ndarray:
         """Rows of c that are affine in a (polyhedral constraints)."""
         return _affine_rows(self._symbolic.c, self._symbolic.a, self.m)

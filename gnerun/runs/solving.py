@@ -50,17 +50,23 @@ def make_solver(cfg: Config, game: CompiledGame, *, disturbed: bool = True) -> S
 
 
 # auto: the sparse formulation from this many unknowns of the condensed system on (measured crossover,
-# benchmarks/README: below it the dense factorisation of the condensed system is faster)
+# benchmarks/README: below it the dense factorisation of the condensed system is faster); with nonlinear dynamics
+# from fewer, where the condensed derivatives (dense, nested through the dynamics) cost more to build and to
+# evaluate: ALGAMES's 5-car merge (600 unknowns) builds its sparse system in 0.6 s instead of 1.9 s, at the same
+# cost per iteration (7.8 against 7.0 ms; the 4-car merge, 440 unknowns: 5.5 against 4.1 ms)
 SPARSE_FROM = 800
+SPARSE_FROM_NONLINEAR = 500
 
 
 def formulation(cfg: Config, game: CompiledGame) -> str:
     """The formulation a solve uses: the config's choice, or for ``auto`` sparse where it applies and the
-    condensed system is large."""
+    condensed system is large (``SPARSE_FROM`` unknowns, ``SPARSE_FROM_NONLINEAR`` with nonlinear dynamics)."""
     chosen = cfg.solver.formulation
     if chosen != "auto":
         return chosen
-    return "sparse" if game.size >= SPARSE_FROM and not sparse_obstacles(cfg) else "condensed"
+    if sparse_obstacles(cfg):
+        return "condensed"
+    return "sparse" if game.size >= (SPARSE_FROM if game.linear_dynamics else SPARSE_FROM_NONLINEAR) else "condensed"
 
 
 def iterate(solver: SemismoothNewton, state: SSNState,
