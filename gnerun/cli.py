@@ -170,8 +170,12 @@ def solve(config: ConfigArg, out: OutOpt = None, set_: SetOpt = None, quiet: Qui
         return
     cert = result.certificate
     typer.echo(f"status: {result.status}: {result.message}")
-    gaps = ", ".join(f"{k} {_fmt(v, '.1e')}" for k, v in cert["best_response_gap"].items())
-    typer.echo(f"certificate: KKT residual {_fmt(cert['kkt_residual'], '.1e')}; best-response gaps: {gaps}")
+    if "best_response_gap" in cert:
+        gaps = ", ".join(f"{k} {_fmt(v, '.1e')}" for k, v in cert["best_response_gap"].items())
+        checked = f"best-response gaps: {gaps}"
+    else:
+        checked = "best responses not checked (run.certificate: false)"
+    typer.echo(f"certificate: KKT residual {_fmt(cert['kkt_residual'], '.1e')}; {checked}")
     typer.echo(f"solver time {result.time_s * 1e3:.2f} ms ({result.iterations} iterations); "
                f"compile {result.compile_time_s * 1e3:.0f} ms")
     typer.echo(f"run directory: {result.run_dir}")

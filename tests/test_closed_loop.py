@@ -268,3 +268,29 @@ def test_a_process_that_ignores_ctrl_c_keeps_ignoring_it_in_a_closed_loop() -> N
         signal.signal(signal.SIGINT, previous)
     with Interrupt().installed():  # an ordinary process: Ctrl-C becomes a request
         assert signal.getsignal(signal.SIGINT) not in (signal.SIG_IGN, previous)
+
+
+def test_without_reference_and_certificate_the_same_solution_and_loop(tmp_path: Path) -> None:
+    """run.reference: none skips z* (and the errors), run.certificate: false the best responses: what the solver
+    does is unchanged, bit for bit; the summary says what was skipped."""
+    cfg = load_config(CONFIGS / "vehicles.yaml", {"run.steps": 6, "run.K": [1, 3]})
+    lean = cfg.model_copy(update={"run": cfg.run.model_copy(update={"reference": "none", "certificate": False})})
+    full, fast = solve(cfg), solve(lean, out=tmp_path / "solve")
+    assert fast.status == full.status == "converged" and np.array_equal(fast.z, full.z)
+    assert fast.error_history is None and full.error_history is not None
+    assert "best_response_gap" not in fast.certificate and fast.certificate["kkt_residual"] < 1e-9
+    summary = json.loads((tmp_path / "solve" / "summary.json").read_text())
+    assert summary["reference"]["status"] == "skipped" and "best_response_gap" not in summary["certificate"]
+    a, b = simulate(cfg), simulate(lean)
+    for K in (1, 3):
+        np.testing.assert_array_equal(b[K].u, a[K].u)
+        np.testing.assert_array_equal(b[K].x, a[K].x)
+        assert np.all(np.isnan(b[K].e_norm)) and np.all(np.isfinite(a[K].e_norm))
+        assert set(b[K].reference_status) == {"skipped"}
+
+
+def test_cli_says_the_best_responses_were_not_checked(tmp_path: Path) -> None:
+    proc = run_cli("solve", str(CONFIGS / "harker.yaml"), "--set", "run.certificate=false", "--set",
+                   "run.reference=none", "--out", str(tmp_path / "run"))
+    assert proc.returncode == 0, proc.stderr
+    assert "best responses not checked (run.certificate: false)" in proc.stdout

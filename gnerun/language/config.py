@@ -277,6 +277,12 @@ class RunConfig(Strict):
     on_failure: Literal["continue", "stop"] = Field(
         "continue", description="a failed solver step in simulate: continue (the plant gets the inputs of the "
                                 "last iterate before it) or stop that closed loop there")
+    reference: Literal["exact", "none"] = Field(
+        "exact", description="exact: also solve for the exact solution z* (z*(t) in simulate) and report the "
+                             "errors ||z - z*||; none: skip it, for runs where only the solution or the loop matters")
+    certificate: bool = Field(
+        True, description="solve: check the equilibrium by each agent's best response (and restart from an "
+                          "improving one); false: the KKT residual alone")
 
 
 class Config(Strict):

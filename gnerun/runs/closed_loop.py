@@ -241,16 +241,20 @@ def closed_loop(cfg: Config, game: CompiledGame, K: int, run: RunDirectory | Non
         # z*(t): the solution the solver reaches from the same warm start with an unlimited budget (so that e(t)
         # measures the effect of the budget K, on the branch the loop follows when equilibria are not unique);
         # then from z*(t-1), then cold
-        ref = reference_solution(game, cfg, z_warm, x)
-        for start in (z_star_prev, game.z_start()):
-            if ref.converged:
-                break
-            ref = reference_solution(game, cfg, start, x)
-        z_star = ref.z if ref.converged else None
-        ref_status.append(str(ref.status))
+        if cfg.run.reference == "none":
+            z_star = None
+            ref_status.append("skipped")
+        else:
+            ref = reference_solution(game, cfg, z_warm, x)
+            for start in (z_star_prev, game.z_start()):
+                if ref.converged:
+                    break
+                ref = reference_solution(game, cfg, start, x)
+            z_star = ref.z if ref.converged else None
+            ref_status.append(str(ref.status))
         if z_star is not None:
             z_star_prev = z_star
-        elif run is not None:
+        elif run is not None and cfg.run.reference == "exact":
             run.log("warning", f"K={K} t={t}: the exact solution z*(t) was not found ({ref.message}); "
                                "e(t) is not available")
 

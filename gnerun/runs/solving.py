@@ -145,12 +145,14 @@ class Certified:
 
 def certified_solve(game: CompiledGame, solver: SemismoothNewton, state: SSNState, x: np.ndarray | None = None,
                     on_iterate: Callable[[SSNState], None] | None = None,
-                    note: Callable[[str], None] | None = None, restarts: int | None = None) -> Certified:
+                    note: Callable[[str], None] | None = None, restarts: int | None = None,
+                    best_responses: bool = True) -> Certified:
     """Iterate from ``state`` to the end and certify: converged means that no agent can improve alone. At a KKT
     point where some can (a nonconvex player's saddle or a worse local minimum), those agents move to the best
     responses the certificate found, the multipliers are reset, and the solver starts again from there (one
-    iteration), up to ``restarts`` times (default ``CERTIFY_RESTARTS``)."""
-    from ..solvers.certificate import certificate, improving_agents
+    iteration), up to ``restarts`` times (default ``CERTIFY_RESTARTS``). ``best_responses=False``: the KKT
+    residuals alone (``run.certificate: false``), no best responses and no restarts."""
+    from ..solvers.certificate import certificate, improving_agents, kkt_residuals
 
     restarts = CERTIFY_RESTARTS if restarts is None else restarts
     elapsed = 0.0
@@ -159,6 +161,8 @@ def certified_solve(game: CompiledGame, solver: SemismoothNewton, state: SSNStat
         t = time.perf_counter()
         state = iterate(solver, state, on_iterate)
         elapsed += time.perf_counter() - t
+        if not best_responses:
+            return Certified(state, kkt_residuals(game, state.z, x), {}, used, elapsed)
         best: dict[str, np.ndarray] = {}
         cert = certificate(game, state.z, x, best)
         improving = improving_agents(game, cert, state.z[: game.n], x) if state.status == Status.CONVERGED else {}
@@ -268,8 +272,9 @@ def _solve(cfg: Config, game: CompiledGame, solver: SemismoothNewton, run: RunDi
            compile_time: float, on_iterate: Callable[[SSNState, float | None], None] | None) -> SolveResult:
     x = game.x0
     z0 = game.z_start()
-    ref = reference_solution(game, cfg, z0, x)
-    z_star = ref.z if ref.converged else None
+    exact = cfg.run.reference == "exact"
+    ref = reference_solution(game, cfg, z0, x) if exact else None
+    z_star = ref.z if ref is not None and ref.converged else None
     history: list[SSNState] = []
     sink_time = 0.0
 
@@ -287,17 +292,18 @@ def _solve(cfg: Config, game: CompiledGame, solver: SemismoothNewton, run: RunDi
     if run is not None:
         run.log("info", f"solve {cfg.name}: {game.n} decisions, {game.m} multipliers, {cfg.solver.kind} "
                         f"({cfg.solver.complementarity}), disturbance {cfg.disturbance.kind}")
-        if not ref.converged:
+        if ref is not None and not ref.converged:
             run.log("warning", f"the undisturbed reference solve did not converge ({ref.message}); "
                                "error norms are not available")
     def note(text: str) -> None:
         if run is not None:
             run.log("info", text)
 
-    outcome = certified_solve(game, solver, solver.init(z0, x), x, record, note)
+    outcome = certified_solve(game, solver, solver.init(z0, x), x, record, note,
+                              best_responses=cfg.run.certificate)
     state, cert = outcome.state, outcome.certificate
     elapsed = outcome.time_s - sink_time  # the solver alone: the sink's I/O and the certificate are excluded
-    if outcome.restarts and state.status == Status.CONVERGED:  # the reference is the equilibrium reached, polished
+    if exact and outcome.restarts and state.status == Status.CONVERGED:  # the equilibrium reached, polished
         ref = reference_solution(game, cfg, state.z, x)
         z_star = ref.z if ref.converged else None
     errors = None if z_star is None else [float(np.linalg.norm(s.z - z_star)) for s in history]
@@ -325,7 +331,7 @@ def _solve(cfg: Config, game: CompiledGame, solver: SemismoothNewton, run: RunDi
         solution=game.solution_by_agent(state.z[: game.n]),
         multipliers=game.multipliers_by_agent(state.z[game.n :]),
         z_star=z_star,
-        reference_status=str(ref.status),
+        reference_status=str(ref.status) if ref is not None else "skipped",
         certificate=cert,
         time_s=elapsed,
         compile_time_s=compile_time,
