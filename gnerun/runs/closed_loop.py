@@ -212,6 +212,7 @@ def closed_loop(cfg: Config, game: CompiledGame, K: int, run: RunDirectory | Non
     times = np.zeros(steps)
     status: list[str] = []
     ref_status: list[str] = []
+    exact = cfg.run.reference == "exact"  # z*(t) and e(t), or neither (run.reference: none)
     zs = np.full((steps, size), np.nan)
     zstars = np.full((steps, size), np.nan)
 
@@ -241,7 +242,7 @@ def closed_loop(cfg: Config, game: CompiledGame, K: int, run: RunDirectory | Non
         # z*(t): the solution the solver reaches from the same warm start with an unlimited budget (so that e(t)
         # measures the effect of the budget K, on the branch the loop follows when equilibria are not unique);
         # then from z*(t-1), then cold
-        if cfg.run.reference == "none":
+        if not exact:
             z_star = None
             ref_status.append("skipped")
         else:
@@ -254,7 +255,7 @@ def closed_loop(cfg: Config, game: CompiledGame, K: int, run: RunDirectory | Non
             ref_status.append(str(ref.status))
         if z_star is not None:
             z_star_prev = z_star
-        elif run is not None and cfg.run.reference == "exact":
+        elif run is not None and exact:
             run.log("warning", f"K={K} t={t}: the exact solution z*(t) was not found ({ref.message}); "
                                "e(t) is not available")
 

@@ -310,22 +310,25 @@ class SparseBarrier:
         """Per agent, the sub-blocks of K that its block of the complement is built from, as gathers from K's
         nonzeros (the pattern is fixed: sliced once)."""
         if self._templates is None:
+            import scipy.sparse as sp
+
             ip, system = self.ip, self.system
             n, S, lam0 = ip.n, system.S, self.lam0
             P = lam0 - n - S
             lam_I = lam0 + ip.I
+            pattern = system.pattern
+            # the pattern with its nonzeros numbered from 1 (a slice of it says which nonzeros it holds)
+            numbered = sp.csc_matrix((np.arange(1, pattern.nnz + 1, dtype=float), pattern.indices, pattern.indptr),
+                                     shape=pattern.shape)
             self._templates = []
             for ai, pi, own in zip(ip.newton.game.agent_slices, system.costates, system.states, strict=True):
                 a_cols = np.arange(ai.start, ai.stop)
                 d_rows, x_cols = n + P + own, n + own
                 g_rows, p_cols = np.arange(n + pi.start, n + pi.stop), np.arange(n + S + pi.start, n + S + pi.stop)
-                self._templates.append({
-                    "Dx": _Gather(system.pattern, d_rows, x_cols), "Da": _Gather(system.pattern, d_rows, a_cols),
-                    "Cx": _Gather(system.pattern, lam_I, x_cols), "Ca": _Gather(system.pattern, lam_I, a_cols),
-                    "Gx": _Gather(system.pattern, g_rows, x_cols), "Gl": _Gather(system.pattern, g_rows, lam_I),
-                    "Ga": _Gather(system.pattern, g_rows, a_cols), "Aa": _Gather(system.pattern, a_cols, a_cols),
-                    "Ax": _Gather(system.pattern, a_cols, x_cols), "Ap": _Gather(system.pattern, a_cols, p_cols),
-                    "Al": _Gather(system.pattern, a_cols, lam_I)})
+                blocks = {"Dx": (d_rows, x_cols), "Da": (d_rows, a_cols), "Cx": (lam_I, x_cols), "Ca": (lam_I, a_cols),
+                          "Gx": (g_rows, x_cols), "Gl": (g_rows, lam_I), "Ga": (g_rows, a_cols),
+                          "Aa": (a_cols, a_cols), "Ax": (a_cols, x_cols), "Ap": (a_cols, p_cols), "Al": (a_cols, lam_I)}
+                self._templates.append({k: _Gather(numbered, r, c) for k, (r, c) in blocks.items()})
         return self._templates
 
     def _shifts(self, data: np.ndarray, D: np.ndarray) -> tuple[np.ndarray, float] | None:
@@ -397,19 +400,15 @@ class SparseBarrier:
 
 class _Gather:
     """One sub-block (rows, cols) of a fixed sparsity pattern, rebuilt from the pattern's nonzeros by a gather
-    (sparse slicing at every call costs more than the arithmetic it serves)."""
+    (sparse slicing at every call costs more than the arithmetic it serves). ``numbered``: the pattern with its
+    nonzeros numbered 1, 2, ..."""
 
-    def __init__(self, pattern, rows: np.ndarray, cols: np.ndarray) -> None:
-        import scipy.sparse as sp
-
-        numbered = sp.csc_matrix((np.arange(1, pattern.nnz + 1, dtype=float), pattern.indices, pattern.indptr),
-                                 shape=pattern.shape)
+    def __init__(self, numbered, rows: np.ndarray, cols: np.ndarray) -> None:
         sub = numbered[rows][:, cols].tocsc()
         sub.sort_indices()
         self.shape = sub.shape
         self.indices, self.indptr = sub.indices, sub.indptr
         self.positions = sub.data.astype(np.int64) - 1
-        self.row_of = self.indices
         self.col_of = np.repeat(np.arange(sub.shape[1]), np.diff(sub.indptr))
 
     def sparse(self, data: np.ndarray):
@@ -419,7 +418,7 @@ class _Gather:
 
     def dense(self, data: np.ndarray) -> np.ndarray:
         out = np.zeros(self.shape)
-        out[self.row_of, self.col_of] = data[self.positions]
+        out[self.indices, self.col_of] = data[self.positions]
         return out
 
 
