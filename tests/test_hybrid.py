@@ -10,7 +10,7 @@ from benchmarks.problems import fk, lq
 from gnerun.game.compile import compile_game
 from gnerun.language.config import load_config
 from gnerun.runs.solving import iterate, make_solver, solve
-from gnerun.solvers import hybrid
+from gnerun.solvers import avi, hybrid
 from gnerun.solvers.certificate import kkt_residuals
 from gnerun.solvers.ssn import FAILURES, SemismoothNewton, Status
 
@@ -30,6 +30,13 @@ game:
       variables: {x2: {lower: -1, upper: 1, start: 0}}
       cost: "(x2 - 0.25*x1)**2"
 """
+
+
+@pytest.fixture
+def no_avi_step(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The globalized method without its first step on LQ games (the affine VI's solution, gnerun.solvers.avi), so
+    that the mechanisms after it meet the games that need them."""
+    monkeypatch.setattr(avi, "UP_TO", -1)
 
 
 def _fk(name: str, start: str):
@@ -53,9 +60,10 @@ def test_a_degenerate_start_is_singular_for_the_local_method_and_solved_by_the_d
     assert max(res.certificate["best_response_gap"].values()) <= 1e-9
 
 
-def test_a_continuum_of_equilibria_ends_at_one_certified_point() -> None:
+def test_a_continuum_of_equilibria_ends_at_one_certified_point(no_avi_step: None) -> None:
     # FK A.11 as a plain GNE: both players carry x1 + x2 <= 1 with their own multipliers; every point of the segment
-    # x1 + x2 = 1, x1 in [1/2, 1], is an equilibrium (player 1 wants 1, player 2 wants 1/2)
+    # x1 + x2 = 1, x1 in [1/2, 1], is an equilibrium (player 1 wants 1, player 2 wants 1/2); JPhi is singular at
+    # every one of them, and the Levenberg-Marquardt steps end at one
     res = solve(load_config(CONFIGS / "fk_a11.yaml", {"game.equilibrium": "generalized"}))
     assert res.status == "converged", res.message
     x1, x2 = res.solution["p1"]["x1"], res.solution["p2"]["x2"]
@@ -64,11 +72,18 @@ def test_a_continuum_of_equilibria_ends_at_one_certified_point() -> None:
     assert max(res.certificate["best_response_gap"].values()) <= 1e-9
 
 
+@pytest.mark.parametrize("avi_step", [True, False])
 @pytest.mark.parametrize("T", [5, 20])
-def test_the_bounded_lq_family_is_solved_in_both_equilibria(T: int) -> None:
+def test_the_bounded_lq_family_is_solved_in_both_equilibria(T: int, avi_step: bool,
+                                                            monkeypatch: pytest.MonkeyPatch) -> None:
+    """With the affine VI's solution as the first step (one iteration), and without it (the Newton and interior
+    phases)."""
+    if not avi_step:
+        monkeypatch.setattr(avi, "UP_TO", -1)
     for problem in (p for p in lq.lq_problems() if f"T={T} " in p.name):
         game, _, state = _solved(problem)
         assert state.status == Status.CONVERGED, (problem.name, state.message)
+        assert (state.k == 1) == avi_step, (problem.name, state.k)
         gaps = problem.best_response_gaps(state.z[: game.n])  # independent: each agent's QP by DAQP
         assert max(gaps.values()) <= 1e-8, (problem.name, gaps)
         if problem.reference is not None:
@@ -306,7 +321,7 @@ def _newton_steps_before_the_interior_phase(cfg, game) -> list[float]:
     return merits
 
 
-def test_a_levenberg_marquardt_step_that_barely_moves_ends_the_newton_phase() -> None:
+def test_a_levenberg_marquardt_step_that_barely_moves_ends_the_newton_phase(no_avi_step: None) -> None:
     """On the generalized LQ game the Newton phase meets a stationary point of ||Phi|| that is no solution (the
     copies of the shared row make JPhi singular): one Levenberg-Marquardt step there that changes ||Phi|| by less
     than FLAT hands over to the interior phase at once, not after the watchdog's WATCHDOG steps."""
@@ -318,7 +333,7 @@ def test_a_levenberg_marquardt_step_that_barely_moves_ends_the_newton_phase() ->
     assert all(abs(b - a) >= hybrid.FLAT * a for a, b in zip(newton, newton[1:], strict=False))
 
 
-def test_without_that_rule_the_newton_phase_lingers(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_without_that_rule_the_newton_phase_lingers(monkeypatch: pytest.MonkeyPatch, no_avi_step: None) -> None:
     monkeypatch.setattr(hybrid, "FLAT", 0.0)
     cfg = load_config(text=lq.lq_yaml(5, "generalized"))
     merits = _newton_steps_before_the_interior_phase(cfg, compile_game(cfg))

@@ -6,6 +6,12 @@ variables, or dependent constraint gradients make JPhi singular, and far from a 
 overshoot. This method keeps the local method's steps and adds what it lacks, after PATH's design (a Newton step
 first, judged by a nonmonotone watchdog; a more robust method when it fails; restarts when that stalls):
 
+0. **The affine VI's solution** (LQ games whose KKT system is an affine variational inequality: Nash problems,
+   variational GNEs, and plain GNEs whose shared rows every player involved carries; :mod:`gnerun.solvers.avi`).
+   The first step is the Josephy-Newton step [eq:JN], which for an affine game is the exact solution, by DAQP's
+   active-set AVI solver in C (PATH's design: a pivotal method on the linearisation). One iteration; the Newton
+   phase goes on from there, or from z^0 where DAQP finds no solution (an LQ plain GNE without a variational
+   equilibrium, FK A.8).
 1. **Newton phase.** The semismooth Newton step (min map or Fischer-Burmeister, with the configured perturbation)
    is taken unless it multiplies ||Phi|| by more than ``BLOWUP`` over a nonmonotone reference (the largest of its
    last ``MEMORY`` values), as PATH's watchdog does: the local method's own path may climb before it converges.
@@ -40,6 +46,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from .avi import AffineVI
 from .interior_point import STARTS, InteriorIterate, InteriorPoint
 from .ssn import FAILURES, SemismoothNewton, SSNState, Status, _norm
 
@@ -69,6 +76,7 @@ class Memory:
     origin: np.ndarray  # z^0, where restarts begin
     handover0: float  # the first hand-over threshold (restarts begin with it)
     attempt: int = 0  # interior-phase starts so far
+    crash: bool = False  # the first step is still to be the affine VI's solution (LQ games, gnerun.solvers.avi)
 
 
 class HybridNewton:
@@ -82,6 +90,11 @@ class HybridNewton:
         self.options = newton.options
         self.interior = InteriorPoint(newton)
         self.handover = handover  # False: the interior phase alone (solver.globalization: interior_point)
+        # LQ games whose KKT system is an affine VI: the first step solves it (unperturbed runs only: a perturbed
+        # method is run to be studied step by step)
+        d = newton.disturbance
+        exact = d.kind == "none" or d.scale == 0
+        self.avi = AffineVI.of(self.game) if handover and exact and newton.condensed else None
 
     # the step-wise interface (STYLE.md) ----------------------------------------------------
     def init(self, z0: np.ndarray | None = None, x: np.ndarray | None = None,
@@ -91,10 +104,11 @@ class HybridNewton:
             return state
         merit = state.residual_norm
         threshold = self._threshold(merit)
-        memory = Memory("newton", (merit,), merit, 0, None, threshold, state.z, threshold)
+        memory = Memory("newton", (merit,), merit, 0, None, threshold, state.z, threshold, crash=self.avi is not None)
+        state.search = memory  # a new state, held by nothing else yet
         if not self.handover:  # the interior phase alone: its start point is z^0
-            return self._start_interior(replace(state, search=memory), 0, k=0)
-        return replace(state, search=memory)
+            return self._start_interior(state, 0, k=0)
+        return state
 
     def restart(self, z0: np.ndarray, x: np.ndarray | None = None,
                 rng: np.random.Generator | None = None) -> SSNState:
@@ -143,7 +157,26 @@ class HybridNewton:
         z = self.newton.regularized_point(state, state.residual_norm * (1.0 if near else LM_FAR))
         return (candidate, False) if z is None else (self.newton.advance(state, z, rcond=candidate.rcond), True)
 
+    def _crash(self, state: SSNState, memory: Memory) -> SSNState | None:
+        """The affine VI's solution as the first iterate (:mod:`gnerun.solvers.avi`), if DAQP finds one that
+        reduces ||Phi||; None otherwise (the Newton step is taken instead)."""
+        z = self.avi.point(self.game.offsets(state.x), state.z.size)
+        if z is None:
+            return None
+        candidate = self.newton.advance(state, z)
+        merit = candidate.residual_norm
+        if candidate.status != Status.RUNNING or not merit < state.residual_norm:
+            return None
+        candidate.search = Memory("newton", (*memory.merits[-MEMORY + 1:], merit), merit, 0, None, memory.handover,
+                                  memory.origin, memory.handover0)
+        return candidate
+
     def _newton_step(self, state: SSNState, memory: Memory) -> SSNState:
+        if memory.crash:
+            crashed = self._crash(state, memory)
+            if crashed is not None:
+                return crashed
+            memory = replace(memory, crash=False)
         candidate, regularized = self._candidate(state, memory)
         merit = candidate.residual_norm
         # a Levenberg-Marquardt step that barely changes ||Phi|| (neither a decrease nor a climb the watchdog may
@@ -172,7 +205,7 @@ class HybridNewton:
         memory: Memory = state.search
         z, w, eps = self.interior.start(memory.origin, state.x, attempt, warm)
         memory = replace(memory, phase="interior", best=math.inf, stalls=0, attempt=attempt,
-                         handover=memory.handover0)
+                         handover=memory.handover0, crash=False)
         start = self._state_at(state, z, memory, k=state.k if k is None else k)
         memory = replace(memory, interior=self.interior.measure(z, w, start.parts.L, start.parts.c, eps))
         start = replace(start, search=memory)
