@@ -58,7 +58,8 @@ def test_defaults_are_filled_in() -> None:
     assert cfg.disturbance.kind == "none" and cfg.disturbance.plant.kind == "none"
     assert cfg.game.equilibrium == "generalized" and cfg.game.shared_constraints == []
     resolved = cfg.resolved_yaml()
-    for key in ("complementarity: min", "tie_tol:", "min_rcond:", "globalization: auto", "warm_start: previous"):
+    for key in ("complementarity: min", "tie_tol:", "min_rcond:", "globalization: auto", "warm_start: shift",
+                "initial: solve", "safeguard: fallback"):
         assert key in resolved
 
 

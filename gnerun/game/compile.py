@@ -425,20 +425,59 @@ class CompiledGame:
                      self.n + np.arange(ms.start, ms.stop)].astype(int)
 
     def shift(self, z: np.ndarray) -> np.ndarray:
-        """Shifted warm start of a dynamic game: every stage-major block drops stage 0, repeats stage T."""
+        """Shifted warm start of a dynamic game: every stage-major block drops stage 0, repeats stage T. A row's
+        multiplier moves with its constraint to the stage before, except where that stage's row is another function
+        (a constraint that depends on tau, e.g. a safety margin that grows over the first stages): there it starts
+        from zero (:attr:`shift_changed_rows`)."""
         out = np.array(z, dtype=float)
         if self.kind != "dynamic":
             return out
-        stages = self.horizon + 1
-        n = self.n
-        blocks = list(self.agent_slices) + [slice(n + s.start, n + s.stop)
-                                            for s in [*self.multiplier_slices, self.shared_slice]]
-        for sl in blocks:
-            length = sl.stop - sl.start
-            if length:
-                b = out[sl].reshape(stages, length // stages)
-                out[sl] = np.concatenate([b[1:], b[-1:]]).reshape(-1)
+        out = out[self._shifted(out.size)]
+        changed = self.shift_changed_rows
+        if changed.any():
+            out[self.n:][changed] = 0.0
         return out
+
+    def _shifted(self, size: int) -> np.ndarray:
+        """The permutation of z that the shift applies (z[i] <- z[source[i]]), kept per size."""
+        key = ("shift", size)
+        if key not in self.derived:
+            stages = self.horizon + 1
+            n = self.n
+            source = np.arange(size)
+            blocks = list(self.agent_slices) + [slice(n + s.start, n + s.stop)
+                                                for s in [*self.multiplier_slices, self.shared_slice]]
+            for sl in blocks:
+                length = sl.stop - sl.start
+                if length:
+                    b = source[sl].reshape(stages, length // stages)
+                    source[sl] = np.concatenate([b[1:], b[-1:]]).reshape(-1)
+            self.derived[key] = source
+        return self.derived[key]
+
+    @functools.cached_property
+    def shift_changed_rows(self) -> np.ndarray:
+        """Rows of c whose multiplier the shift would take from a different function: the row at stage tau compared
+        with the same constraint at tau + 1 on the same states and inputs (a shifted plan, one random point: two
+        different functions differ there almost surely)."""
+        changed = np.zeros(self.m, dtype=bool)
+        if self.kind != "dynamic" or not self.m or self._dynamics is None:
+            return changed
+        rng = np.random.default_rng(0)
+        a = self.a_start + rng.uniform(-0.5, 0.5, self.n)
+        x = self.x0 + rng.uniform(-0.5, 0.5, self.nx)
+        x1 = self.step_dynamics(x, self.first_inputs(a))
+        source = self._shifted(self.size)
+        a_shift = a[source[: self.n]]
+        before, _ = self.constraint_values(a, x)
+        after, _ = self.constraint_values(a_shift, x1)
+        rows = source[self.n:] - self.n  # the row each multiplier comes from
+        moved = rows != np.arange(self.m)
+        with np.errstate(invalid="ignore"):
+            differ = ~np.isclose(after, before[rows], rtol=1e-9, atol=1e-12, equal_nan=True)
+        changed = moved & differ
+        changed.flags.writeable = False
+        return changed
 
     def first_inputs(self, a: np.ndarray) -> np.ndarray:
         """u(0): every agent's first input, in agent order (what the plant receives)."""
@@ -746,6 +785,57 @@ def compile_game(cfg: Config) -> CompiledGame:
                      agent_names=[ag.name for ag in g.agents], lay=lay, equilibrium=g.equilibrium,
                      n_shared=len(g.shared_constraints),
                      state_names=list(g.states) if isinstance(g, DynamicGame) else [], dynamics=ex.dynamics)
+
+
+@dataclass(frozen=True)
+class StageConstraints:
+    """The constraint rows of the first stage (tau = 0) as functions of the inputs u applied and the state x_next
+    they produce: what a closed loop's applied step must satisfy. Built by :func:`compile_stage_constraints`."""
+
+    function: Evaluator  # (x_next, u) -> c
+    equality: np.ndarray
+    labels: list[str]
+
+    def violations(self, x_next: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """Each row's violation: max(c_j, 0), |c_j| for an equality (0 where it holds)."""
+        if not self.labels:
+            return np.zeros(0)
+        c = self.function(x_next, u)[0].reshape(-1)
+        return np.where(self.equality, np.abs(c), np.maximum(c, 0.0))
+
+    def violation(self, x_next: np.ndarray, u: np.ndarray) -> tuple[float, str | None]:
+        """The largest violation and its row's label (0.0 and None when every row holds; nan if not finite)."""
+        v = self.violations(x_next, u)
+        if not v.size:
+            return 0.0, None
+        if not np.all(np.isfinite(v)):
+            return math.nan, self.labels[int(np.flatnonzero(~np.isfinite(v))[0])]
+        j = int(np.argmax(v))
+        return (float(v[j]), self.labels[j]) if v[j] > 0 else (0.0, None)
+
+
+def compile_stage_constraints(cfg: Config) -> StageConstraints:
+    """Every agent's and every shared constraint row at tau = 0, in terms of (x_next, u): the stage's rows of the
+    game, written with the state as a variable instead of f(x, u), so that they can be checked on the state the
+    plant actually reached (with its disturbance)."""
+    g = cfg.game
+    if not isinstance(g, DynamicGame):
+        raise ValueError("a static game has no stages")
+    lay = _layout(g)
+    sizes = [len(v) for v in lay.variable_names]
+    first = np.concatenate([np.arange(sl.start, sl.start + k) for sl, k in zip(lay.agent_slices, sizes, strict=True)])
+    one = _Layout(lay.variable_names, _slices(sizes), sum(sizes), lay.nx, 0, lay.a_start[first], lay.x0,
+                  lay.a_lower[first], lay.a_upper[first])
+    u = ca.SX.sym("u", one.n)
+    x, x_next = ca.SX.sym("x", lay.nx), ca.SX.sym("x_next", lay.nx)
+    ex = _expressions(g, one, u, x, list(range(len(g.agents))), states=x_next)
+    rows = [replace(r, info=replace(r.info, label=f"{g.agents[r.info.owner].name}: {r.info.label}"))
+            for i in range(len(g.agents)) for r in ex.own_rows[i]]
+    rows += [replace(r, info=replace(r.info, label=f"shared: {r.info.label}")) for r in ex.shared_common]
+    c = ca.vertcat(*[r.expr for r in rows]) if rows else ca.SX(0, 1)
+    fn = ca.Function("stage_constraints", [x_next, u], [ca.densify(c)], ["x_next", "u"], ["c"])
+    return StageConstraints(Evaluator(fn), np.array([r.info.equality for r in rows], dtype=bool),
+                            [r.info.label for r in rows])
 
 
 def compile_agent_problem(cfg: Config, agent: int, tau: float) -> CompiledGame:

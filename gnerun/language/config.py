@@ -273,7 +273,17 @@ class RunConfig(Strict):
         default_factory=lambda: [5], min_length=1, description="iteration budgets; one number is a list of one")
     steps: int = Field(30, ge=1, le=10_000_000)
     warm_start: Literal["previous", "shift"] = Field(
-        "previous", description="previous: the last iterate (the paper's rule); shift: drop stage 0, repeat the last")
+        "shift", description="shift: the plan applied at the last sampling time without its stage 0, its last stage "
+                             "repeated (the MPC convention); previous: the last iterate as it is (the paper's rule)")
+    initial: Literal["solve", "start"] = Field(
+        "solve", description="simulate: solve: the first sampling time is solved to tolerance (at most "
+                             "solver.max_iter steps), the budget K applies from the second; start: K steps from the "
+                             "start values at every sampling time (the paper's rule)")
+    safeguard: Literal["fallback", "none"] = Field(
+        "fallback", description="simulate: fallback: an iterate that is not converged is applied only if it is the "
+                                "best plan at hand (its first step safe, the least ||Phi||), otherwise the shifted "
+                                "previous plan or a better earlier iterate; none: the K-th iterate is applied (the "
+                                "paper's rule)")
     on_failure: Literal["continue", "stop"] = Field(
         "continue", description="a failed solver step in simulate: continue (the plant gets the inputs of the "
                                 "last iterate before it) or stop that closed loop there")

@@ -29,11 +29,16 @@ class LogEntry(Message):
 
 
 class MpcState(Message):
-    """The plant at sampling time t and the input applied (``/K<k>/mpc/state``); u is null at the last t."""
+    """The plant at sampling time t and the input applied (``/K<k>/mpc/state``); u is null at the last t. With it:
+    the solver's status at t (empty at the last t), whether the applied plan was a fallback (not z^K(t)), and the
+    largest constraint violation at u(t) and the state it produced."""
 
     t: int
     x: list[float | None]
     u: list[float | None] | None
+    status: str = ""
+    fallback: bool = False
+    constraint_violation: float | None = None
 
 
 class MpcIterate(Message):

@@ -1,8 +1,9 @@
 """`gnerun simulate`: time-distributed CG-MPC with a fixed iteration budget K [eq:TDO].
 
 At every sampling time t the solver takes at most K steps from the warm start, every agent's first
-input u(t) is applied, and the plant moves to x(t+1) = f(x(t), u(t)) + w(t). Alongside, z*(t), the
-exact solution at x(t), is computed (to tolerance, outside the K budget) to measure the tracking
+input u(t) of the plan chosen by the safeguard (:mod:`gnerun.runs.safeguard`: z^K(t) itself unless it is not
+converged and a better plan is at hand) is applied, and the plant moves to x(t+1) = f(x(t), u(t)) + w(t).
+Alongside, z*(t), the exact solution at x(t), is computed (to tolerance, outside the K budget) to measure the tracking
 error e(t) = z^K(t) - z*(t) of Theorem "bounded error": the solution the solver reaches from the same
 warm start without a budget (then from z*(t-1), then cold), i.e. the isolated solution the iterates
 track, which is the one equilibrium when it is unique.
@@ -25,12 +26,13 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from ..game.compile import CompiledGame, compile_game
+from ..game.compile import CompiledGame, StageConstraints, compile_game, compile_stage_constraints
 from ..language.config import Config, PlantDisturbance
 from ..log.mcap_log import json_ready
 from ..log.messages import MpcError, MpcIterate, MpcState
 from ..solvers.ssn import FAILURES, Status
 from .rundir import RunDirectory, recording
+from .safeguard import Plan, _finite_or_inf, choose, first_step_violation
 from .solving import make_solver, reference_solution
 
 
@@ -49,6 +51,9 @@ class ClosedLoopResult:
     solve_time_s: np.ndarray  # (steps,): time of the solver steps alone
     status: list[str]  # per t: converged | incomplete (K steps, tol not met) | a failure status
     reference_status: list[str]  # per t: the status of the z*(t) solve
+    constraint_violation: np.ndarray  # (steps,): the largest violation of a stage-0 row at u(t) and x(t + 1)
+    worst_constraint: list[str | None]  # per t: that row's label (None when every row holds)
+    fallback: np.ndarray  # (steps,): True where the applied plan was not z^K(t) (run.safeguard)
     z: np.ndarray = field(repr=False)  # (steps, size): z^K(t)
     z_star: np.ndarray = field(repr=False)  # (steps, size): z*(t)
     completed: int | None = None  # sampling times done; fewer than steps if the loop stopped or was interrupted
@@ -67,6 +72,16 @@ class ClosedLoopResult:
     def failed_steps(self) -> list[int]:
         failures = {str(f) for f in FAILURES}
         return [t for t, s in enumerate(self.status) if s in failures]
+
+    @property
+    def fallback_steps(self) -> list[int]:
+        return [int(t) for t in np.flatnonzero(self.fallback[: self.done])]
+
+    @property
+    def max_constraint_violation(self) -> float:
+        """The worst violation over the sampling times run (nan if a state or input was not finite)."""
+        v = self.constraint_violation[: self.done]
+        return float(v.max()) if v.size and np.all(np.isfinite(v)) else (0.0 if not v.size else math.nan)
 
     @property
     def final_e_norm(self) -> float:
@@ -90,6 +105,10 @@ class ClosedLoopResult:
             "status": self.status,
             "reference_status": self.reference_status,
             "failed_steps": self.failed_steps,
+            "fallback_steps": self.fallback_steps,
+            "constraint_violation": self.constraint_violation[:done].tolist(),
+            "worst_constraint": self.worst_constraint[:done],
+            "max_constraint_violation": self.max_constraint_violation,
             "max_e_norm": _nanmax(self.e_norm),
             "final_e_norm": self.final_e_norm,
             "median_solve_time_s": float(np.median(self.solve_time_s[:done])) if done else math.nan,
@@ -149,8 +168,26 @@ class PlantNoise:
         return np.zeros(self.scale.size)
 
 
-# progress(K, t, steps, e_norm) is called after every sampling time
-Progress = Callable[[int, int, int, float], None]
+@dataclass(frozen=True)
+class StepReport:
+    """One sampling time of a closed loop, as it happens (what ``simulate``'s ``progress`` callback receives)."""
+
+    K: int
+    t: int
+    steps: int
+    x: np.ndarray  # x(t)
+    u: np.ndarray  # u(t), the inputs applied
+    status: str  # converged | incomplete | a failure status
+    fallback: bool  # the applied plan was not z^K(t) (run.safeguard)
+    constraint_violation: float  # at u(t) and the state x(t + 1) it produced
+    iterations: int
+    residual_norm: float  # ||Phi(z^K(t); x(t))||
+    e_norm: float  # ||z^K(t) - z*(t)|| (nan with run.reference: none)
+    solve_time_s: float
+
+
+# progress(report) is called after every sampling time
+Progress = Callable[[StepReport], None]
 
 
 class Interrupt:
@@ -185,21 +222,29 @@ class Interrupt:
 
 
 def closed_loop(cfg: Config, game: CompiledGame, K: int, run: RunDirectory | None = None,
-                progress: Progress | None = None, interrupt: Interrupt | None = None) -> ClosedLoopResult:
+                progress: Progress | None = None, interrupt: Interrupt | None = None,
+                stage: StageConstraints | None = None) -> ClosedLoopResult:
     """One closed loop of ``cfg.run.steps`` sampling times with at most K solver steps each.
 
-    A failed solver step (singular JPhi, NaN, divergence) is recorded in ``status`` and ``/log``; then
-    ``run.on_failure`` decides: ``continue`` applies the inputs of the last iterate before the failed step
-    (and warm-starts from it) and goes on, ``stop`` ends this loop at that step.
+    ``run.initial`` says whether the first sampling time is solved without a budget, ``run.safeguard`` which plan
+    the plant receives (:mod:`gnerun.runs.safeguard`), ``run.warm_start`` how that plan warm-starts the next
+    sampling time. A failed solver step (singular JPhi, NaN, divergence) is recorded in ``status`` and ``/log``; then
+    ``run.on_failure`` decides: ``continue`` applies the best plan at hand (safeguard: fallback) or the inputs of the
+    last iterate before the failed step (safeguard: none) and goes on, ``stop`` ends this loop at that step. Every
+    sampling time reports the largest violation of a stage-0 constraint row at the inputs applied and the state they
+    produced (plant disturbance included).
     Arrays keep their length; the sampling times not run are NaN (``completed`` says how many ran).
     """
     solver = make_solver(cfg, game)
+    stage = stage if stage is not None else compile_stage_constraints(cfg)
     steps = cfg.run.steps
     nx, size = game.nx, game.size
     nu = sum(len(v) for v in game.variable_names)
     plant = PlantNoise(cfg.disturbance.plant, nx)
     agents = game.agent_names
     agent_idx = [game.agent_indices(i) for i in range(len(agents))]
+    guard = cfg.run.safeguard == "fallback"
+    shift = cfg.run.warm_start == "shift"
 
     x = np.array(game.x0, dtype=float)
     xs = np.full((steps + 1, nx), np.nan)
@@ -210,6 +255,9 @@ def closed_loop(cfg: Config, game: CompiledGame, K: int, run: RunDirectory | Non
     res = np.full(steps, np.nan)
     its = np.zeros(steps, dtype=int)
     times = np.zeros(steps)
+    viol = np.full(steps, np.nan)
+    worst: list[str | None] = []
+    fallback = np.zeros(steps, dtype=bool)
     status: list[str] = []
     ref_status: list[str] = []
     exact = cfg.run.reference == "exact"  # z*(t) and e(t), or neither (run.reference: none)
@@ -217,6 +265,7 @@ def closed_loop(cfg: Config, game: CompiledGame, K: int, run: RunDirectory | Non
     zstars = np.full((steps, size), np.nan)
 
     z_warm = game.z_start()
+    applied = z_warm  # the plan applied at the last sampling time
     z_star_prev = game.z_start()
     rng = None
     topic = f"/K{K}/mpc"
@@ -227,7 +276,9 @@ def closed_loop(cfg: Config, game: CompiledGame, K: int, run: RunDirectory | Non
         for k, r, zk in trace:
             err = None if z_star is None else float(np.linalg.norm(zk - z_star))
             run.write(f"{topic}/iterate", MpcIterate(t=t, k=k, residual_norm=r, error_norm=err))
-        run.write(f"{topic}/state", MpcState(t=t, x=x.tolist(), u=None if u is None else u.tolist()))
+        run.write(f"{topic}/state", MpcState(t=t, x=x.tolist(), u=None if u is None else u.tolist(),
+                                             status=status[t], fallback=bool(fallback[t]),
+                                             constraint_violation=float(viol[t])))
         run.write(f"{topic}/error", MpcError(t=t, e_norm=float(e[t]),
                                               e_norm_agent={a: float(v[t]) for a, v in e_agent.items()}))
         run.flush()
@@ -259,11 +310,13 @@ def closed_loop(cfg: Config, game: CompiledGame, K: int, run: RunDirectory | Non
             run.log("warning", f"K={K} t={t}: the exact solution z*(t) was not found ({ref.message}); "
                                "e(t) is not available")
 
+        # run.initial: solve: the first sampling time without a budget (the solver's max_iter)
+        budget = cfg.solver.max_iter if t == 0 and cfg.run.initial == "solve" else K
         t0 = time.perf_counter()
         state = solver.init(z_warm, x, rng)
         elapsed = time.perf_counter() - t0
         trace = [(0, state.residual_norm, state.z)]
-        for _ in range(K):
+        for _ in range(budget):
             if solver.terminate(state)[1] in FAILURES | {Status.CONVERGED}:
                 break
             t0 = time.perf_counter()
@@ -279,10 +332,6 @@ def closed_loop(cfg: Config, game: CompiledGame, K: int, run: RunDirectory | Non
             status.append("converged")
         elif failed:
             status.append(str(final))
-            if run is not None:
-                action = ("the closed loop stops here (on_failure: stop)" if cfg.run.on_failure == "stop" else
-                          "the plant gets the inputs of the last iterate before it (on_failure: continue)")
-                run.log("warning", f"K={K} t={t}: {final}: {state.message}; {action}")
         else:
             status.append("incomplete")
 
@@ -296,33 +345,74 @@ def closed_loop(cfg: Config, game: CompiledGame, K: int, run: RunDirectory | Non
             e[t] = np.linalg.norm(z - z_star)
             for a, idx in zip(agents, agent_idx, strict=True):
                 e_agent[a][t] = np.linalg.norm(z[idx] - z_star[idx])
+        if failed and run is not None:
+            action = ("the closed loop stops here (on_failure: stop)" if cfg.run.on_failure == "stop" else
+                      "the plant gets the best plan at hand (safeguard: fallback)" if guard else
+                      "the plant gets the inputs of the last iterate before it (on_failure: continue)")
+            run.log("warning", f"K={K} t={t}: {final}: {state.message}; {action}")
         if failed and cfg.run.on_failure == "stop":
+            worst.append(None)
             if run is not None:
                 record(t, trace, z_star, x, None)
             ended, completed = "stopped", t + 1
             break
-        if failed:
-            z = trace[-1][2]  # the last iterate before the failed step (a diverged or NaN one is not used)
-        u = game.first_inputs(z[: game.n])
+        if guard and final != Status.CONVERGED:
+            plan = _safeguarded(game, solver, stage, x, trace, plan_prev=None if t == 0 else applied)
+            applied, fallback[t] = plan.z, failed or plan.k != state.k
+            if fallback[t] and run is not None and not failed:
+                which = "the shifted previous plan" if plan.k < 0 else f"iterate {plan.k}"
+                run.log("info", f"K={K} t={t}: fallback to {which} (||Phi|| {plan.residual_norm:.2e}, first step "
+                                f"violation {plan.violation:.2e}; z^K: ||Phi|| {state.residual_norm:.2e})")
+        else:
+            # the paper's rule: z^K(t); after a failed step the last iterate before it (a diverged or NaN one is not
+            # used)
+            applied = trace[-1][2] if failed else z
+            fallback[t] = failed
+        u = game.first_inputs(applied[: game.n])
         us[t] = u
         w = plant()
         ws[t] = w
+        x_next = game.step_dynamics(x, u) + w
+        viol[t], label = stage.violation(x_next, u)
+        worst.append(label)
 
         if run is not None:
             record(t, trace, z_star, x, u)
         if progress is not None:
-            progress(K, t, steps, float(e[t]))
+            progress(StepReport(K, t, steps, x.copy(), u.copy(), status[t], bool(fallback[t]), float(viol[t]),
+                                int(its[t]), float(res[t]), float(e[t]), float(elapsed)))
 
-        x = game.step_dynamics(x, u) + w
-        z_warm = game.shift(z) if cfg.run.warm_start == "shift" else z
+        x = x_next
+        # the solver goes on from its own iterates (time-distributed optimisation), even where the plant got another
+        # plan: from the best of them (a nonmonotone method's last iterate may have climbed), or from the plan
+        # applied when no step was taken
+        z_next = min(trace[1:], key=lambda it: _finite_or_inf(it[1]))[2] if guard and len(trace) > 1 else \
+            applied if failed else z
+        z_warm = game.shift(z_next) if shift else z_next
     else:
         xs[steps] = x
         if run is not None:
-            run.write(f"{topic}/state", MpcState(t=steps, x=x.tolist(), u=None))
+            run.write(f"{topic}/state", MpcState(t=steps, x=x.tolist(), u=None, status="", fallback=False,
+                                                 constraint_violation=None))
             run.flush()
     return ClosedLoopResult(K=K, x=xs, u=us, w=ws, e_norm=e, e_norm_agent=e_agent, residual_norm=res,
                             iterations=its, solve_time_s=times, status=status, reference_status=ref_status,
+                            constraint_violation=viol, worst_constraint=worst, fallback=fallback,
                             z=zs, z_star=zstars, completed=completed, ended=ended)
+
+
+def _safeguarded(game: CompiledGame, solver, stage: StageConstraints, x: np.ndarray, trace: list,
+                 plan_prev: np.ndarray | None) -> Plan:
+    """The plan to apply (gnerun.runs.safeguard): among the iterates of this sampling time (the last first) and the
+    fallback plan, the plan applied at t - 1 shifted (at t = 0 the warm start z^0)."""
+    candidates = [Plan(zk, r, first_step_violation(game, stage, x, zk), k) for k, r, zk in reversed(trace[1:])]
+    if plan_prev is None:
+        zf, merit = trace[0][2], trace[0][1]
+    else:
+        zf = game.shift(plan_prev)
+        merit = trace[0][1] if np.array_equal(zf, trace[0][2]) else solver.init(zf, x).residual_norm
+    candidates.append(Plan(zf, merit, first_step_violation(game, stage, x, zf), -1))
+    return choose(candidates)
 
 
 def simulate(cfg: Config, out: str | Path | None = None, *, force: bool = False,
@@ -332,6 +422,7 @@ def simulate(cfg: Config, out: str | Path | None = None, *, force: bool = False,
         raise InputError(f"{cfg.source or cfg.name}: simulate needs a dynamic game (game.kind: dynamic); "
                          "use `gnerun solve` for a static game")
     game = compile_game(cfg)
+    stage = compile_stage_constraints(cfg)
     run = RunDirectory.create(out, cfg, command="simulate", force=force) if out is not None else None
     sim = Simulation()
     sim.game = game
@@ -340,16 +431,19 @@ def simulate(cfg: Config, out: str | Path | None = None, *, force: bool = False,
     with recording(run), interrupt.installed():
         if run is not None:
             run.log("info", f"simulate {cfg.name}: K = {cfg.run.K}, {cfg.run.steps} steps, warm start "
-                            f"{cfg.run.warm_start}, solver {cfg.solver.kind}, solver disturbance "
+                            f"{cfg.run.warm_start}, initial {cfg.run.initial}, safeguard {cfg.run.safeguard}, "
+                            f"solver {cfg.solver.kind}, solver disturbance "
                             f"{cfg.disturbance.kind}, plant {cfg.disturbance.plant.kind}, on_failure "
                             f"{cfg.run.on_failure}")
         for K in dict.fromkeys(cfg.run.K):
             if interrupt.requested:
                 break
-            sim[K] = r = closed_loop(cfg, game, K, run, progress, interrupt)
+            sim[K] = r = closed_loop(cfg, game, K, run, progress, interrupt, stage)
             if run is not None:
                 run.log("info", f"K={K}: {r.ended} after {r.done} sampling times, max e "
-                                f"{_nanmax(r.e_norm):.3e}, final e {r.final_e_norm}, failed steps {r.failed_steps}")
+                                f"{_nanmax(r.e_norm):.3e}, final e {r.final_e_norm}, failed steps {r.failed_steps}, "
+                                f"fallback steps {r.fallback_steps}, max constraint violation "
+                                f"{r.max_constraint_violation:.3e}")
         sim.interrupted = interrupt.requested
         if run is not None:
             run.write_summary(sim.summary())
