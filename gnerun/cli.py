@@ -205,13 +205,20 @@ def simulate(config: ConfigArg, out: OutOpt = None, set_: SetOpt = None, quiet: 
             raise typer.Exit(130) from None
     if quiet:
         return
-    typer.echo(f"{'K':>4}  {'max e':>10}  {'final e':>10}  {'median step':>12}  {'max step':>10}  {'failed':>6}")
+    typer.echo(f"{'K':>4}  {'max e':>10}  {'final e':>10}  {'median step':>12}  {'max step':>10}  {'failed':>6}"
+               f"  {'fallback':>8}  {'max violation':>13}")
     for K, r in sim.items():
         failed = len(r.failed_steps)
         finite = r.e_norm[r.e_norm == r.e_norm]
         typer.echo(f"{K:>4}  {_fmt(float(finite.max()) if finite.size else None):>10}  {_fmt(float(r.e_norm[-1])):>10}"
                    f"  {_ms(float(sorted(r.solve_time_s)[len(r.solve_time_s) // 2])):>12}"
-                   f"  {_ms(float(r.solve_time_s.max())):>10}  {failed:>6}")
+                   f"  {_ms(float(r.solve_time_s.max())):>10}  {failed:>6}  {len(r.fallback_steps):>8}"
+                   f"  {_fmt(r.max_constraint_violation):>13}")
+    worst = {K: r for K, r in sim.items() if r.max_constraint_violation > 0}
+    for K, r in worst.items():
+        v = r.constraint_violation
+        t = max(range(r.done), key=lambda i: v[i] if v[i] == v[i] else -1.0)
+        typer.echo(f"K={K}: largest violation {_fmt(r.max_constraint_violation)} at t = {t}: {r.worst_constraint[t]}")
     typer.echo(f"run directory: {sim.run_dir}")
 
 
@@ -434,8 +441,8 @@ class _progress:
             self.tasks[K] = self.bar.add_task("", total=self.cfg.run.steps, K=K, e="-")
         return self.update
 
-    def update(self, K: int, t: int, steps: int, e: float) -> None:
-        self.bar.update(self.tasks[K], completed=t + 1, e=_fmt(e, ".2e"))
+    def update(self, step) -> None:
+        self.bar.update(self.tasks[step.K], completed=step.t + 1, e=_fmt(step.e_norm, ".2e"))
 
     def __exit__(self, *exc) -> None:
         if self.bar is not None:

@@ -4,6 +4,8 @@
   and the disturbed solve of Fig. 1).
 - Study 2 (closed loops): x(t) of the loop with the largest K, and ||e(t)|| per K on a log scale (Fig. 2).
 - Study 3 (distributed closed loops): ||e_i(t)|| per agent, one panel per K (Fig. 3).
+- Games with positions (closed loops): the paths in the plane and the pairwise distances against the required
+  ones (:mod:`gnerun.view.paths`).
 
 Everything plotted is read from the MCAP log (:func:`gnerun.mcap_log.read_run`), so any run from any
 machine, finished or killed, can be drawn without solving again. Values that are null in the log, or
@@ -17,6 +19,7 @@ import re
 from pathlib import Path
 
 from ..log.mcap_log import RunRecord, read_run
+from .paths import has_positions, paths_figure
 
 _K_TOPIC = re.compile(r"^/K(\d+)/mpc/(state|error|iterate)$")
 
@@ -156,9 +159,12 @@ def make_figures(paths: list[str | Path]) -> dict[str, object]:
     if solves:
         figures["study1" if len(solves) > 1 else f"{run_name(solves[0])}-study1"] = study1_figure(solves)
     for run in runs:
-        if closed_loops(run):
+        loops = closed_loops(run)
+        if loops:
             kind = "study3" if solver_kind(run) == "distributed" else "study2"
             figures[f"{run_name(run)}-{kind}"] = (study3_figure if kind == "study3" else study2_figure)(run)
+            if has_positions(run):
+                figures[f"{run_name(run)}-paths"] = paths_figure(run, loops)
     return figures
 
 

@@ -1,0 +1,173 @@
+"""The closed loop's safeguard (gnerun/runs/safeguard.py), the stage-0 constraint check, the shifted warm start of rows
+that change with tau, and the per-step reports: on bare plans, closed forms and the field's trajectory games."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from gnerun.game.compile import compile_game, compile_stage_constraints
+from gnerun.language.config import load_config
+from gnerun.log.mcap_log import read_run
+from gnerun.runs.closed_loop import StepReport, simulate
+from gnerun.runs.safeguard import SAFE, Plan, choose, first_step_violation
+from gnerun.solvers.ssn import FAILURES
+from gnerun.view.paths import FAILED, required_distances, vehicles
+
+from .conftest import CONFIGS
+
+DEMO = CONFIGS / "mcp_demo.yaml"
+EDGE = 2.82842712474619  # the demo's arena: |px|, |py| <= 2 sqrt 2
+PAPER_RULE = {"run.initial": "start", "run.warm_start": "previous", "run.safeguard": "none"}
+
+
+def _plan(r: float, v: float, k: int) -> Plan:
+    return Plan(np.zeros(1), r, v, k)
+
+
+def test_a_safe_plan_beats_an_unsafe_one_and_the_least_residual_wins_among_safe_ones() -> None:
+    assert choose([_plan(1e-9, 1e-3, 3), _plan(1.0, 0.0, -1)]).k == -1  # unsafe, however close to equilibrium
+    assert choose([_plan(1e-2, 0.0, 3), _plan(1e-3, SAFE / 2, 2), _plan(1.0, 0.0, -1)]).k == 2
+    assert choose([_plan(1e-2, 0.5, 3), _plan(1e-3, 0.1, 2)]).k == 2  # none safe: the least violation
+    assert choose([_plan(math.nan, 0.0, 3), _plan(5.0, 0.0, -1)]).k == -1  # a non-finite residual is last
+    assert choose([_plan(1e-3, 0.0, 3), _plan(1e-3, 0.0, -1)]).k == 3  # ties: the first (the iterate)
+
+
+def test_the_stage_constraints_are_the_games_first_stage_rows_on_the_state_reached() -> None:
+    cfg = load_config(DEMO)
+    game = compile_game(cfg)
+    stage = compile_stage_constraints(cfg)
+    rng = np.random.default_rng(1)
+    for _ in range(5):
+        a = rng.normal(size=game.n)
+        x = game.x0 + rng.normal(size=game.nx)
+        u = game.first_inputs(a)
+        c, _ = game.constraint_values(a, x)
+        first = [j for j, info in enumerate(game.constraints) if info.stage == 0]
+        np.testing.assert_allclose(stage.function(game.step_dynamics(x, u), u)[0].ravel(), c[first], atol=1e-12)
+    # a closed form: the players 0.5 apart at x_next violate (px1 - px2)^2 + (py1 - py2)^2 >= 1 by 0.75
+    value, label = stage.violation(np.array([0.0, 0, 0, 0, 0.5, 0, 0, 0]), np.zeros(4))
+    assert value == pytest.approx(0.75) and label.startswith("shared: (px1 - px2)**2")
+    # and 3.5 beyond the arena's edge
+    value, label = stage.violation(np.array([0.0, 0, 0, 0, EDGE + 3.5, 0, 0, 0]), np.zeros(4))
+    assert value == pytest.approx(3.5) and label == "player2: px2 <= edge [tau=0]"
+    assert first_step_violation(game, stage, game.x0, game.z_start()) == 0.0
+
+
+def _distances(x: np.ndarray) -> np.ndarray:
+    return np.hypot(x[:, 0] - x[:, 4], x[:, 1] - x[:, 5])
+
+
+def test_the_demo_stays_safe_at_every_budget_and_reports_its_violations(tmp_path) -> None:
+    """MCPTrajectoryGameSolver's demo with the defaults: no applied input lets the distance constraint be violated by
+    more than 1e-3 or leaves the arena, at K = 1, 3, 5, 10; the reported violations are those of the logged states."""
+    out = tmp_path / "demo"
+    sim = simulate(load_config(DEMO, {"run.K": [1, 3, 5, 10], "run.steps": 50, "run.reference": "none"}), out=out)
+    logged = read_run(out)
+    for K, r in sim.items():
+        x = r.x
+        assert np.all(np.isfinite(x))
+        assert 1.0 - _distances(x[1:]).min() ** 2 <= 1e-3, K
+        assert np.abs(x[:, [0, 1, 4, 5]]).max() <= EDGE + 1e-9, K
+        # independently of the solver: the violation of every row at u(t) and x(t + 1), from the logged states
+        states = logged.messages[f"/K{K}/mpc/state"]
+        xs = np.array([m["x"] for m in states])
+        viol = np.maximum(1.0 - _distances(xs[1:]) ** 2, 0.0)
+        viol = np.maximum(viol, np.max(np.abs(xs[1:, [0, 1, 4, 5]]) - EDGE, axis=1).clip(min=0.0))
+        np.testing.assert_allclose([m["constraint_violation"] for m in states[:-1]], viol, atol=1e-12)
+        np.testing.assert_allclose(r.constraint_violation, viol, atol=1e-12)
+        assert r.max_constraint_violation == pytest.approx(viol.max(), abs=1e-12)
+        assert [m["t"] for m in states if m["fallback"]] == r.fallback_steps
+        assert [m["status"] for m in states[:-1]] == r.status
+    summary = __import__("json").loads((out / "summary.json").read_text())
+    for K, r in sim.items():
+        s = summary["by_K"][str(K)]
+        assert s["fallback_steps"] == r.fallback_steps
+        assert s["max_constraint_violation"] == pytest.approx(r.max_constraint_violation, abs=1e-15)
+        assert len(s["constraint_violation"]) == len(s["status"]) == 50
+
+
+def test_without_the_safeguard_the_demo_flies_off_at_K1() -> None:
+    """The paper's rule on the same game: K = 1 applies iterates whose inputs drive the players out of the arena."""
+    sim = simulate(load_config(DEMO, {"run.K": [1], "run.steps": 50, "run.reference": "none", **PAPER_RULE}))
+    r = sim[1]
+    assert np.abs(r.x[:, [0, 1, 4, 5]]).max() > 2 * EDGE
+    assert r.max_constraint_violation > 1.0 and not r.fallback_steps
+
+
+def test_a_fallback_step_applies_the_shifted_previous_plan(monkeypatch: pytest.MonkeyPatch) -> None:
+    """When no iterate of a sampling time beats it, the plant gets the previous plan's second input."""
+    from gnerun.runs import closed_loop, safeguard
+
+    monkeypatch.setattr(safeguard, "SAFE", -1.0)  # no plan is safe: the least violation, then the first listed
+    applied: list[np.ndarray] = []
+    original = closed_loop._safeguarded
+
+    def spy(game, solver, stage, x, trace, plan_prev):
+        plan = original(game, solver, stage, x, [trace[0]], plan_prev)  # the iterates withheld: the fallback only
+        applied.append((plan_prev, plan))
+        return plan
+
+    monkeypatch.setattr(closed_loop, "_safeguarded", spy)
+    sim = simulate(load_config(DEMO, {"run.K": [3], "run.steps": 5, "run.reference": "none"}))
+    r = sim[3]
+    game = sim.game
+    for t, (previous, plan) in enumerate(applied, start=1):
+        assert plan.k == -1
+        np.testing.assert_array_equal(r.u[t], game.first_inputs(game.shift(previous)[: game.n]))
+    assert r.fallback_steps == [t for t in range(5) if r.status[t] != "converged"]
+
+
+def test_rows_that_change_with_tau_are_not_given_their_successors_multipliers() -> None:
+    """ALGAMES's MPC merge grows the collision radius from 0.09 at the first planned knot to 0.10: the three stage-0
+    collision rows are other functions than their successors, and only they start from zero in a shifted plan."""
+    game = compile_game(load_config(CONFIGS / "algames_merge_mpc.yaml"))
+    changed = np.flatnonzero(game.shift_changed_rows)
+    assert len(changed) == 3
+    assert all(game.constraints[j].stage == 0 and "min(tau, 1)" in game.constraints[j].label for j in changed)
+    z = np.arange(game.size, dtype=float) + 1.0
+    shifted = game.shift(z)
+    assert np.all(shifted[game.n + changed] == 0.0)
+    assert np.count_nonzero(shifted[game.n:] == 0.0) == 3
+    for name in ("algames_merge.yaml", "mcp_demo.yaml", "vehicles.yaml", "paper_study2.yaml"):
+        assert not compile_game(load_config(CONFIGS / name)).shift_changed_rows.any(), name
+
+
+def test_the_mpc_merge_keeps_its_distances_at_K2() -> None:
+    """ALGAMES's 41-knot MPC merge, 20 sampling times at K = 2: no collision (distance >= 0.18 on the step taken),
+    the road kept, every violation reported at zero."""
+    sim = simulate(load_config(CONFIGS / "algames_merge_mpc.yaml", {"run.K": [2], "run.steps": 20,
+                                                                    "run.reference": "none"}))
+    r = sim[2]
+    x = r.x
+    cars = [(0, 1), (4, 5), (8, 9)]
+    for i, (a, b) in enumerate(cars):
+        assert np.all(x[1:, b] <= 0.09 + 1e-9)
+        for c, d in cars[i + 1:]:
+            assert np.hypot(x[1:, a] - x[1:, c], x[1:, b] - x[1:, d]).min() >= 0.18 - 1e-9
+    assert r.max_constraint_violation <= 1e-9
+    assert sum(s == "converged" for s in r.status) >= 5  # the merge itself (t = 2..15) is where K = 2 falls short
+
+
+def test_the_progress_callback_sees_every_step_as_it_happens() -> None:
+    seen: list[StepReport] = []
+    sim = simulate(load_config(DEMO, {"run.K": [1, 3], "run.steps": 8, "run.reference": "none"}), progress=seen.append)
+    assert [(s.K, s.t) for s in seen] == [(K, t) for K in (1, 3) for t in range(8)]
+    for s in seen:
+        r = sim[s.K]
+        np.testing.assert_array_equal(s.x, r.x[s.t])
+        np.testing.assert_array_equal(s.u, r.u[s.t])
+        assert s.status == r.status[s.t] and s.fallback == (s.t in r.fallback_steps)
+        assert s.constraint_violation == r.constraint_violation[s.t] and s.iterations == r.iterations[s.t]
+        assert math.isnan(s.e_norm)  # run.reference: none
+
+
+def test_the_paths_figure_reads_its_vehicles_and_required_distances() -> None:
+    cfg = load_config(CONFIGS / "algames_merge_mpc.yaml")
+    assert [(v, i, j) for v, i, j in vehicles(cfg.game.states)] == [("1", 0, 1), ("2", 4, 5), ("3", 8, 9)]
+    distances = required_distances(cfg.model_dump(mode="json"))
+    assert distances == {("px1", "px2"): pytest.approx(0.18), ("px1", "px3"): pytest.approx(0.18),
+                         ("px2", "px3"): pytest.approx(0.18)}
+    assert FAILED == {str(s) for s in FAILURES}
