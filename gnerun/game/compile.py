@@ -180,6 +180,15 @@ class CompiledGame:
         return c.reshape(-1), dc.reshape(self.m, self.n)
 
     @functools.cached_property
+    def _constraint_only(self) -> Evaluator:
+        sym = self._symbolic
+        return Evaluator(ca.Function("c", [sym.a, sym.x], [ca.densify(sym.c)], ["a", "x"], ["c"]))
+
+    def constraint(self, a: np.ndarray, x: np.ndarray | None = None) -> np.ndarray:
+        """c(a; x) without its derivative (cheap to build for any game)."""
+        return self._constraint_only(a, self._x(x))[0].reshape(-1)
+
+    @functools.cached_property
     def zero_gradient_rows(self) -> np.ndarray:
         """Rows of c that depend on no decision variable (structurally): at a stage where the decisions cannot
         reach a constraint (a position one step after an input that drives its second derivative), the row is a
@@ -469,8 +478,7 @@ class CompiledGame:
         x1 = self.step_dynamics(x, self.first_inputs(a))
         source = self._shifted(self.size)
         a_shift = a[source[: self.n]]
-        before, _ = self.constraint_values(a, x)
-        after, _ = self.constraint_values(a_shift, x1)
+        before, after = self.constraint(a, x), self.constraint(a_shift, x1)
         rows = source[self.n:] - self.n  # the row each multiplier comes from
         moved = rows != np.arange(self.m)
         with np.errstate(invalid="ignore"):

@@ -423,6 +423,8 @@ def simulate(cfg: Config, out: str | Path | None = None, *, force: bool = False,
                          "use `gnerun solve` for a static game")
     game = compile_game(cfg)
     stage = compile_stage_constraints(cfg)
+    if cfg.run.warm_start == "shift":
+        game.shift_changed_rows  # noqa: B018 (found once, before the loop: it evaluates c at a test point)
     run = RunDirectory.create(out, cfg, command="simulate", force=force) if out is not None else None
     sim = Simulation()
     sim.game = game
