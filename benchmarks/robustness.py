@@ -28,6 +28,7 @@ import numpy as np
 
 from gnerun import __version__, compile_game, load_config, make_solver
 from gnerun.runs.solving import certified_solve
+from gnerun.solvers.certificate import NewtonResponses
 
 from .problems import Problem
 
@@ -95,17 +96,17 @@ class _Compiled:
             game = compile_game(cfg)
             solver = make_solver(cfg, game)
             solver.init()  # first-use costs (derivatives built on first use) are compilation, not solving
-            self._cache[key] = (game, solver)
-        game, solver = self._cache[key]
-        return game, solver, None if x0 is None else np.asarray(x0, dtype=float)
+            self._cache[key] = (game, solver, NewtonResponses(cfg, game))
+        game, solver, responses = self._cache[key]
+        return game, solver, responses, None if x0 is None else np.asarray(x0, dtype=float)
 
 
 def run(problem: Problem, method: str, compiled: _Compiled, certify: bool = True) -> Outcome:
     """Solve ``problem`` as ``gnerun solve`` does (:func:`~gnerun.runs.solving.certified_solve`: a KKT point at
     which a player can improve alone is left from that player's best response), then check it independently."""
     cfg = load_config(text=problem.config_yaml, overrides=METHODS[method] or None)
-    game, solver, x0 = compiled.get(cfg)
-    outcome = certified_solve(game, solver, solver.init(None, x0), x0)
+    game, solver, responses, x0 = compiled.get(cfg)
+    outcome = certified_solve(game, solver, solver.init(None, x0), x0, responses=responses)
     state, elapsed = outcome.state, outcome.time_s
     a = state.z[: game.n]
     max_gap = ref_err = None

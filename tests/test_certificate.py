@@ -301,6 +301,29 @@ def test_a_local_maximum_of_a_player_is_found_from_the_corners_of_its_box() -> N
         assert gaps[name] == pytest.approx(independent[name], rel=1e-6) and gaps[name] > 1e-3
 
 
+def test_newton_best_responses_find_the_same_gaps() -> None:
+    """The same point of FK A.2 certified by Newton solves of the players' own problems: the same gaps as the
+    independent check, and no player at the equilibrium of Harker's game can gain."""
+    from benchmarks.problems import fk
+    from gnerun.solvers.certificate import NewtonResponses
+
+    problem = next(p for p in fk.problems() if p.name == "A.2" and p.start == "x0 = 1")
+    cfg = load_config(text=problem.config_yaml)
+    game = compile_game(cfg)
+    a = np.array([0.3, 0.1938, 0.1938, 0.1938, 0.0685, 0.01, 0.01, 0.01, 0.01, 0.01])
+    cert = certificate(game, np.concatenate([a, np.zeros(game.m)]), responses=NewtonResponses(cfg, game))
+    independent = problem.best_response_gaps(a)
+    for name in ("p2", "p3", "p4"):
+        assert cert["best_response_gap"][name] == pytest.approx(independent[name], rel=1e-6)
+        assert cert["best_response_gap"][name] > 1e-3 and cert["best_response_note"][name].startswith("ok (Newton")
+    cfg = load_config(CONFIGS / "harker.yaml")
+    game = compile_game(cfg)
+    star = np.array([5.0, 9.0])
+    cert = certificate(game, _z(game, star), responses=NewtonResponses(cfg, game))
+    assert all(abs(g) <= GAP_TOL for g in cert["best_response_gap"].values())
+    assert all(note.startswith("ok (Newton") for note in cert["best_response_note"].values())
+
+
 def test_best_responses_gain_nothing_from_violating_a_priced_constraint() -> None:
     # FK A.10c at its equilibrium: SLSQP's best responses may break a consumer's budget by ~1e-8; at the candidate's
     # multipliers (~100) that looked like a gain of ~1e-6 before violations were charged

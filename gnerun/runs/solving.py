@@ -146,12 +146,13 @@ class Certified:
 def certified_solve(game: CompiledGame, solver: SemismoothNewton, state: SSNState, x: np.ndarray | None = None,
                     on_iterate: Callable[[SSNState], None] | None = None,
                     note: Callable[[str], None] | None = None, restarts: int | None = None,
-                    best_responses: bool = True) -> Certified:
+                    best_responses: bool = True, responses=None) -> Certified:
     """Iterate from ``state`` to the end and certify: converged means that no agent can improve alone. At a KKT
     point where some can (a nonconvex player's saddle or a worse local minimum), those agents move to the best
     responses the certificate found, the multipliers are reset, and the solver starts again from there (one
     iteration), up to ``restarts`` times (default ``CERTIFY_RESTARTS``). ``best_responses=False``: the KKT
-    residuals alone (``run.certificate: false``), no best responses and no restarts."""
+    residuals alone (``run.certificate: false``), no best responses and no restarts. ``responses``: a
+    :class:`~gnerun.solvers.certificate.NewtonResponses` for the best responses (SLSQP without)."""
     from ..solvers.certificate import certificate, improving_agents, kkt_residuals
 
     restarts = CERTIFY_RESTARTS if restarts is None else restarts
@@ -164,7 +165,7 @@ def certified_solve(game: CompiledGame, solver: SemismoothNewton, state: SSNStat
         if not best_responses:
             return Certified(state, kkt_residuals(game, state.z, x), {}, used, elapsed)
         best: dict[str, np.ndarray] = {}
-        cert = certificate(game, state.z, x, best)
+        cert = certificate(game, state.z, x, best, responses)
         improving = improving_agents(game, cert, state.z[: game.n], x) if state.status == Status.CONVERGED else {}
         if not improving or used >= restarts or not all(name in best for name in improving):
             return Certified(state, cert, improving, used, elapsed)
@@ -299,8 +300,10 @@ def _solve(cfg: Config, game: CompiledGame, solver: SemismoothNewton, run: RunDi
         if run is not None:
             run.log("info", text)
 
+    from ..solvers.certificate import NewtonResponses
+
     outcome = certified_solve(game, solver, solver.init(z0, x), x, record, note,
-                              best_responses=cfg.run.certificate)
+                              best_responses=cfg.run.certificate, responses=NewtonResponses(cfg, game))
     state, cert = outcome.state, outcome.certificate
     elapsed = outcome.time_s - sink_time  # the solver alone: the sink's I/O and the certificate are excluded
     if exact and outcome.restarts and state.status == Status.CONVERGED:  # the equilibrium reached, polished
@@ -312,9 +315,9 @@ def _solve(cfg: Config, game: CompiledGame, solver: SemismoothNewton, run: RunDi
         status = str(Status.NOT_AN_EQUILIBRIUM)
         who = ", ".join(f"{name} by {gap:.2e}" for name, gap in outcome.improving.items())
         message = (f"a KKT point (||Phi|| = {state.residual_norm:.2e} after {state.k} iterations) that is not an "
-                   f"equilibrium: alone, {who} (best response found by SLSQP), after {outcome.restarts} restart(s) "
-                   "from the players' best responses; a nonconvex player's stationary point, not its minimum "
-                   "(try other start values)")
+                   f"equilibrium: alone, {who} (best response found by the certificate), after {outcome.restarts} "
+                   "restart(s) from the players' best responses; a nonconvex player's stationary point, not its "
+                   "minimum (try other start values)")
     elif outcome.restarts:
         message += (f" (after {outcome.restarts} restart(s) from the best responses of players who could improve "
                     "alone at a KKT point)")
