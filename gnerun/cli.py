@@ -161,7 +161,8 @@ def solve(config: ConfigArg, out: OutOpt = None, set_: SetOpt = None, quiet: Qui
                        f"{_fmt(state.step_norm):>10}  {state.active_set_changes:>7}")
 
         try:
-            result = run_solve(cfg, out=out_dir, force=force, on_iterate=show)
+            stage = (lambda text: typer.echo(f"... {text}", err=True)) if not quiet and sys.stderr.isatty() else None
+            result = run_solve(cfg, out=out_dir, force=force, on_iterate=show, on_stage=stage)
         except KeyboardInterrupt:
             typer.echo(f"interrupted: {out_dir} holds the log of the iterates made"
                        if (out_dir / "run.mcap").is_file() else "interrupted", err=True)
@@ -214,7 +215,7 @@ def simulate(config: ConfigArg, out: OutOpt = None, set_: SetOpt = None, quiet: 
                    f"  {_ms(float(sorted(r.solve_time_s)[len(r.solve_time_s) // 2])):>12}"
                    f"  {_ms(float(r.solve_time_s.max())):>10}  {failed:>6}  {len(r.fallback_steps):>8}"
                    f"  {_fmt(r.max_constraint_violation):>13}")
-    worst = {K: r for K, r in sim.items() if r.max_constraint_violation > 0}
+    worst = {K: r for K, r in sim.items() if r.max_constraint_violation > 1e-9}  # above rounding
     for K, r in worst.items():
         v = r.constraint_violation
         t = max(range(r.done), key=lambda i: v[i] if v[i] == v[i] else -1.0)

@@ -338,3 +338,14 @@ def test_best_responses_gain_nothing_from_violating_a_priced_constraint() -> Non
     assert state.status == "converged"
     gaps = certificate(game, state.z)["best_response_gap"]
     assert max(gaps.values()) <= 1e-9
+
+
+def test_a_solve_says_when_it_computes_the_exact_solution_and_the_certificate() -> None:
+    stages: list[str] = []
+    res = solve(load_config(CONFIGS / "harker.yaml"), on_stage=stages.append)
+    assert res.status == "converged"
+    assert len(stages) == 2 and "exact solution" in stages[0] and "best response" in stages[1]
+    stages.clear()
+    solve(load_config(CONFIGS / "harker.yaml", {"run.reference": "none", "run.certificate": False}),
+          on_stage=stages.append)
+    assert stages == []

@@ -146,13 +146,15 @@ class Certified:
 def certified_solve(game: CompiledGame, solver: SemismoothNewton, state: SSNState, x: np.ndarray | None = None,
                     on_iterate: Callable[[SSNState], None] | None = None,
                     note: Callable[[str], None] | None = None, restarts: int | None = None,
-                    best_responses: bool = True, responses=None) -> Certified:
+                    best_responses: bool = True, responses=None,
+                    on_stage: Callable[[str], None] | None = None) -> Certified:
     """Iterate from ``state`` to the end and certify: converged means that no agent can improve alone. At a KKT
     point where some can (a nonconvex player's saddle or a worse local minimum), those agents move to the best
     responses the certificate found, the multipliers are reset, and the solver starts again from there (one
     iteration), up to ``restarts`` times (default ``CERTIFY_RESTARTS``). ``best_responses=False``: the KKT
     residuals alone (``run.certificate: false``), no best responses and no restarts. ``responses``: a
-    :class:`~gnerun.solvers.certificate.NewtonResponses` for the best responses (SLSQP without)."""
+    :class:`~gnerun.solvers.certificate.NewtonResponses` for the best responses (SLSQP without); ``on_stage`` is told
+    when the certificate starts."""
     from ..solvers.certificate import certificate, improving_agents, kkt_residuals
 
     restarts = CERTIFY_RESTARTS if restarts is None else restarts
@@ -165,6 +167,9 @@ def certified_solve(game: CompiledGame, solver: SemismoothNewton, state: SSNStat
         if not best_responses:
             return Certified(state, kkt_residuals(game, state.z, x), {}, used, elapsed)
         best: dict[str, np.ndarray] = {}
+        if on_stage is not None:
+            on_stage(f"checking the best response of each of {len(game.agent_names)} agents (run.certificate: "
+                     "false skips it)")
         cert = certificate(game, state.z, x, best, responses)
         improving = improving_agents(game, cert, state.z[: game.n], x) if state.status == Status.CONVERGED else {}
         if not improving or used >= restarts or not all(name in best for name in improving):
@@ -253,12 +258,14 @@ class SolveResult:
 
 
 def solve(cfg: Config, out: str | Path | None = None, *, force: bool = False,
-          on_iterate: Callable[[SSNState, float | None], None] | None = None) -> SolveResult:
+          on_iterate: Callable[[SSNState, float | None], None] | None = None,
+          on_stage: Callable[[str], None] | None = None) -> SolveResult:
     """Solve the config's game (a static game, or a dynamic game at its x0).
 
     ``out=None`` writes nothing; otherwise ``out`` becomes a run directory (SPEC §4) with
     ``config.yaml``, ``run.mcap`` (every iterate, flushed as it is made) and ``summary.json``.
-    ``on_iterate(state, error_norm)`` sees every iterate as it is made (error_norm = ||z^k - z*||).
+    ``on_iterate(state, error_norm)`` sees every iterate as it is made (error_norm = ||z^k - z*||);
+    ``on_stage(text)`` is told what a long solve is doing besides iterating (the exact solution, the certificate).
     """
     t0 = time.perf_counter()
     game = compile_game(cfg)
@@ -266,14 +273,17 @@ def solve(cfg: Config, out: str | Path | None = None, *, force: bool = False,
     solver = make_solver(cfg, game)
     run = RunDirectory.create(out, cfg, command="solve", force=force) if out is not None else None
     with recording(run):
-        return _solve(cfg, game, solver, run, compile_time, on_iterate)
+        return _solve(cfg, game, solver, run, compile_time, on_iterate, on_stage)
 
 
 def _solve(cfg: Config, game: CompiledGame, solver: SemismoothNewton, run: RunDirectory | None,
-           compile_time: float, on_iterate: Callable[[SSNState, float | None], None] | None) -> SolveResult:
+           compile_time: float, on_iterate: Callable[[SSNState, float | None], None] | None,
+           on_stage: Callable[[str], None] | None = None) -> SolveResult:
     x = game.x0
     z0 = game.z_start()
     exact = cfg.run.reference == "exact"
+    if exact and on_stage is not None:
+        on_stage("solving for the exact solution z* of the error norms (run.reference: none skips it)")
     ref = reference_solution(game, cfg, z0, x) if exact else None
     z_star = ref.z if ref is not None and ref.converged else None
     history: list[SSNState] = []
@@ -303,7 +313,8 @@ def _solve(cfg: Config, game: CompiledGame, solver: SemismoothNewton, run: RunDi
     from ..solvers.certificate import NewtonResponses
 
     outcome = certified_solve(game, solver, solver.init(z0, x), x, record, note,
-                              best_responses=cfg.run.certificate, responses=NewtonResponses(cfg, game))
+                              best_responses=cfg.run.certificate, responses=NewtonResponses(cfg, game),
+                              on_stage=on_stage)
     state, cert = outcome.state, outcome.certificate
     elapsed = outcome.time_s - sink_time  # the solver alone: the sink's I/O and the certificate are excluded
     if exact and outcome.restarts and state.status == Status.CONVERGED:  # the equilibrium reached, polished
