@@ -10,7 +10,7 @@ from benchmarks.family import family_config, family_yaml
 from gnerun import simulate, solve
 from gnerun.game.compile import compile_game
 from gnerun.language.config import ConfigError, load_config
-from gnerun.runs.solving import SPARSE_FROM, formulation, make_solver
+from gnerun.runs.solving import SPARSE_WORK, formulation, make_solver
 from gnerun.solvers.sparse_ssn import SparseSemismoothNewton
 from gnerun.solvers.ssn import SemismoothNewton, Status
 
@@ -93,7 +93,7 @@ def test_sparse_and_condensed_give_the_same_closed_loop(name: str) -> None:
 def test_long_horizons_choose_the_sparse_formulation_and_solve() -> None:
     cfg = family_config(3, 120)
     game = compile_game(cfg)
-    assert cfg.solver.formulation == "auto" and game.size >= SPARSE_FROM
+    assert cfg.solver.formulation == "auto" and game.size * (game.horizon + 1) >= SPARSE_WORK
     assert formulation(cfg, game) == "sparse"
     assert formulation(family_config(3, 10), compile_game(family_config(3, 10))) == "condensed"
     res = solve(cfg)
