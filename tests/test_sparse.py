@@ -10,7 +10,7 @@ from benchmarks.family import family_config, family_yaml
 from gnerun import simulate, solve
 from gnerun.game.compile import compile_game
 from gnerun.language.config import ConfigError, load_config
-from gnerun.runs.solving import SPARSE_WORK, formulation, make_solver
+from gnerun.runs.solving import SPARSE_FROM, SPARSE_WORK, formulation, make_solver
 from gnerun.solvers.sparse_ssn import SparseSemismoothNewton
 from gnerun.solvers.ssn import SemismoothNewton, Status
 
@@ -90,10 +90,23 @@ def test_sparse_and_condensed_give_the_same_closed_loop(name: str) -> None:
         assert np.nanmax(sims["sparse"][1].e_norm) > 1 and np.nanmax(sims["sparse"][5].e_norm) < 1e-12
 
 
+def test_nonlinear_dynamics_choose_by_unknowns_times_stages() -> None:
+    """The 41-knot MPC merge (600 unknowns, 40 stages) is sparse, the 21-knot 5-car merge (600 unknowns, 20 stages)
+    condensed; the demo's linear dynamics keep the count of unknowns (403 at T = 30: condensed)."""
+    mpc = load_config(CONFIGS / "algames_merge_mpc.yaml")
+    game = compile_game(mpc)
+    assert game.size * 40 >= SPARSE_WORK and formulation(mpc, game) == "sparse"
+    five = load_config(CONFIGS / "algames_merge_n.yaml", {"game.parameters.N": 5})
+    game = compile_game(five)
+    assert game.size == 600 and formulation(five, game) == "condensed"
+    demo = load_config(CONFIGS / "mcp_demo.yaml", {"game.horizon": 30})
+    assert formulation(demo, compile_game(demo)) == "condensed"
+
+
 def test_long_horizons_choose_the_sparse_formulation_and_solve() -> None:
     cfg = family_config(3, 120)
     game = compile_game(cfg)
-    assert cfg.solver.formulation == "auto" and game.size * (game.horizon + 1) >= SPARSE_WORK
+    assert cfg.solver.formulation == "auto" and game.size >= SPARSE_FROM
     assert formulation(cfg, game) == "sparse"
     assert formulation(family_config(3, 10), compile_game(family_config(3, 10))) == "condensed"
     res = solve(cfg)

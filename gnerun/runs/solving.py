@@ -49,25 +49,30 @@ def make_solver(cfg: Config, game: CompiledGame, *, disturbed: bool = True) -> S
     return globalized(newton)
 
 
-# auto: the sparse formulation once the condensed system's size times the number of stages, U (T + 1), reaches this:
-# the condensed system's derivatives are dense and nest through the dynamics (their cost grows with both), the sparse
-# system's grow with T alone. Measured per iteration, condensed / sparse (this machine, OPENBLAS_NUM_THREADS=1,
-# loaded): ALGAMES's merge N = 2..5 at T = 19 (U (T + 1) = 3,600..12,000) 0.37, 0.61, 0.93, 0.65; the 41-knot MPC merge
-# at T = 9, 19, 29, 39 (1,500..24,000) 0.65, 0.60, 1.13, 1.10; the intersection (27,200) 1.70; the demo at T = 30
-# (12,500) 0.43; the paper's game at T = 40 and 100 (11,800 and 71,400) 0.42 and 1.99; the LQ family from
-# 3,000 to 15,500 0.45 to 0.88. A count of unknowns alone (800, 500 with nonlinear dynamics) took the sparse form
-# for the 5-car merge (1.5 times slower) and the condensed one for the paper's game at T = 100 (2 times slower).
+# auto, nonlinear dynamics: the sparse formulation once the condensed system's size times the number of stages,
+# U (T + 1), reaches SPARSE_WORK: the condensed derivatives are dense and nest through the dynamics (their cost grows
+# with both), the sparse system's grow with T alone. Measured per iteration, condensed / sparse (this machine,
+# OPENBLAS_NUM_THREADS=1, loaded): ALGAMES's merge N = 2..5 at T = 19 (U (T + 1) = 3,600..12,000) 0.37, 0.61, 0.93,
+# 0.65; the 41-knot MPC merge at T = 9, 19, 29, 39 (1,500..24,000) 0.65, 0.60, 1.13, 1.10; the intersection (27,200)
+# 1.70. A count of unknowns alone (500) took the sparse form for the 5-car merge (1.5 times slower there).
+# Linear dynamics: from SPARSE_FROM unknowns, the measured crossover of LQ games, whose condensed matrices are
+# constant (no evaluation, factorisations kept per active set): the bounded LQ family's plain GNE at T = 40 (492
+# unknowns, 20,000 by the other measure) takes 0.23 s sparse against 16 ms condensed through its interior phase.
 SPARSE_WORK = 20_000
+SPARSE_FROM = 800
 
 
 def formulation(cfg: Config, game: CompiledGame) -> str:
     """The formulation a solve uses: the config's choice, or for ``auto`` sparse where it applies and the
-    condensed system's size times the number of stages reaches ``SPARSE_WORK``."""
+    condensed system is large: ``SPARSE_FROM`` unknowns with linear dynamics, ``SPARSE_WORK`` unknowns times stages
+    with nonlinear ones."""
     chosen = cfg.solver.formulation
     if chosen != "auto":
         return chosen
     if sparse_obstacles(cfg):
         return "condensed"
+    if game.linear_dynamics:
+        return "sparse" if game.size >= SPARSE_FROM else "condensed"
     return "sparse" if game.size * ((game.horizon or 0) + 1) >= SPARSE_WORK else "condensed"
 
 
