@@ -32,7 +32,7 @@ from ..log.mcap_log import json_ready
 from ..log.messages import MpcError, MpcIterate, MpcState
 from ..solvers.ssn import FAILURES, Status
 from .rundir import RunDirectory, recording
-from .safeguard import Plan, _finite_or_inf, choose, first_step_violation
+from .safeguard import Plan, choose, finite_or_inf, first_step_violation
 from .solving import make_solver, reference_solution
 
 
@@ -386,7 +386,7 @@ def closed_loop(cfg: Config, game: CompiledGame, K: int, run: RunDirectory | Non
         # the solver goes on from its own iterates (time-distributed optimisation), even where the plant got another
         # plan: from the best of them (a nonmonotone method's last iterate may have climbed), or from the plan
         # applied when no step was taken
-        z_next = min(trace[1:], key=lambda it: _finite_or_inf(it[1]))[2] if guard and len(trace) > 1 else \
+        z_next = min(trace[1:], key=lambda it: finite_or_inf(it[1]))[2] if guard and len(trace) > 1 else \
             applied if failed else z
         z_warm = game.shift(z_next) if shift else z_next
     else:

@@ -53,8 +53,8 @@ class Plan:
         """Smaller is better: safe before unsafe; among safe plans the smaller ||Phi||, among unsafe the smaller
         violation (a non-finite value last)."""
         if self.safe:
-            return 0, _finite_or_inf(self.residual_norm)
-        return 1, _finite_or_inf(self.violation)
+            return 0, finite_or_inf(self.residual_norm)
+        return 1, finite_or_inf(self.violation)
 
 
 def first_step_violation(game: CompiledGame, stage: StageConstraints, x: np.ndarray, z: np.ndarray) -> float:
@@ -70,5 +70,5 @@ def choose(candidates: list[Plan]) -> Plan:
     return min(candidates, key=Plan.rank)
 
 
-def _finite_or_inf(v: float) -> float:
+def finite_or_inf(v: float) -> float:
     return v if math.isfinite(v) else math.inf
