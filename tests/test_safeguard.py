@@ -171,3 +171,54 @@ def test_the_paths_figure_reads_its_vehicles_and_required_distances() -> None:
     assert distances == {("px1", "px2"): pytest.approx(0.18), ("px1", "px3"): pytest.approx(0.18),
                          ("px2", "px3"): pytest.approx(0.18)}
     assert FAILED == {str(s) for s in FAILURES}
+
+
+STAGED = """
+name: staged
+game:
+  kind: dynamic
+  horizon: 5
+  states: [x1, x2]
+  dynamics: {x1: "x1 + u1", x2: "x2 + u2"}
+  x0: [0, 0]
+  agents:
+    - name: a1
+      inputs: {u1: {lower: -1, upper: 1}}
+      stage_cost: "(x1 - 2)**2 + 0.1*u1**2"
+      constraints: [{expr: "x1 <= 1.5", stages: 1..5}, {expr: "x1 + x2 <= 3", stages: [0, 2, 4]}]
+    - name: a2
+      inputs: {u2: {lower: -1, upper: 1}}
+      stage_cost: "(x2 + 2)**2 + 0.1*u2**2"
+"""
+
+
+def _by_reshape(game, z: np.ndarray) -> np.ndarray:
+    """The shift as every stage-major block dropping stage 0 and repeating stage T (rows alike at every stage)."""
+    out = z.copy()
+    n, stages = game.n, game.horizon + 1
+    for sl in [*game.agent_slices, *[slice(n + s.start, n + s.stop) for s in [*game.multiplier_slices,
+                                                                                 game.shared_slice]]]:
+        if sl.stop > sl.start:
+            b = z[sl].reshape(stages, -1)
+            out[sl] = np.concatenate([b[1:], b[-1:]]).reshape(-1)
+    return out
+
+
+def test_the_shift_moves_each_multiplier_with_its_constraint() -> None:
+    for name in ("algames_merge.yaml", "mcp_demo.yaml", "vehicles.yaml", "paper_study2.yaml"):
+        game = compile_game(load_config(CONFIGS / name))
+        z = np.random.default_rng(0).normal(size=game.size)
+        np.testing.assert_array_equal(game.shift(z), _by_reshape(game, z), err_msg=name)
+    # constraints at some stages only: a row takes its constraint's next row, and none where the next stage has no
+    # such row (a zero multiplier); the last stage keeps its own
+    game = compile_game(load_config(text=STAGED))
+    z = np.arange(game.size, dtype=float) + 1.0
+    shifted = game.shift(z)
+    row = {(c.label, c.owner): j for j, c in enumerate(game.constraints)}
+    for j, c in enumerate(game.constraints):
+        base, stage = c.label.rsplit(" [tau=", 1)[0], c.stage
+        successor = row.get((f"{base} [tau={stage + 1}]", c.owner)) if stage < game.horizon else j
+        assert shifted[game.n + j] == (0.0 if successor is None else z[game.n + successor]), c.label
+    assert shifted[game.n + row[("x1 + x2 <= 3 [tau=0]", 0)]] == 0.0  # no row at tau = 1
+    sim = simulate(load_config(text=STAGED, overrides={"run.K": [1, 3], "run.steps": 6, "run.reference": "none"}))
+    assert all(set(r.status) <= {"converged", "incomplete"} for r in sim.values())

@@ -434,35 +434,43 @@ class CompiledGame:
                      self.n + np.arange(ms.start, ms.stop)].astype(int)
 
     def shift(self, z: np.ndarray) -> np.ndarray:
-        """Shifted warm start of a dynamic game: every stage-major block drops stage 0, repeats stage T. A row's
-        multiplier moves with its constraint to the stage before, except where that stage's row is another function
-        (a constraint that depends on tau, e.g. a safety margin that grows over the first stages): there it starts
-        from zero (:attr:`shift_changed_rows`)."""
+        """Shifted warm start of a dynamic game: the inputs drop stage 0 and repeat stage T; a row's multiplier moves
+        with its constraint to the stage before (the last stage keeps its own), except where that stage's row is
+        another function (a constraint that depends on tau, e.g. a safety margin that grows over the first stages,
+        :attr:`shift_changed_rows`) or the constraint does not hold at the next stage (``stages``): there it starts
+        from zero."""
         out = np.array(z, dtype=float)
         if self.kind != "dynamic":
             return out
-        out = out[self._shifted(out.size)]
+        source = self._shift_source
+        out = np.where(source >= 0, out[np.maximum(source, 0)], 0.0)
         changed = self.shift_changed_rows
         if changed.any():
             out[self.n:][changed] = 0.0
         return out
 
-    def _shifted(self, size: int) -> np.ndarray:
-        """The permutation of z that the shift applies (z[i] <- z[source[i]]), kept per size."""
-        key = ("shift", size)
-        if key not in self.derived:
-            stages = self.horizon + 1
-            n = self.n
-            source = np.arange(size)
-            blocks = list(self.agent_slices) + [slice(n + s.start, n + s.stop)
-                                                for s in [*self.multiplier_slices, self.shared_slice]]
-            for sl in blocks:
-                length = sl.stop - sl.start
-                if length:
-                    b = source[sl].reshape(stages, length // stages)
-                    source[sl] = np.concatenate([b[1:], b[-1:]]).reshape(-1)
-            self.derived[key] = source
-        return self.derived[key]
+    @functools.cached_property
+    def _shift_source(self) -> np.ndarray:
+        """For every entry of z, the entry it takes in a shifted plan (-1: none, it starts from zero)."""
+        n, T = self.n, self.horizon
+        source = np.arange(self.size)
+        for sl in self.agent_slices:  # an agent's inputs are time-major, the same at every stage
+            b = source[sl].reshape(T + 1, (sl.stop - sl.start) // (T + 1))
+            source[sl] = np.concatenate([b[1:], b[-1:]]).reshape(-1)
+        # rows are matched by constraint (owner, text, carriers, and which occurrence at its stage) and stage
+        seen: dict[tuple, int] = {}
+        keys = []
+        for info in self.constraints:
+            base = (info.owner, info.label.rsplit(" [tau=", 1)[0], info.carriers, info.stage)
+            seen[base] = seen.get(base, -1) + 1
+            keys.append((*base[:3], seen[base]))
+        row = {(*key, info.stage): j for j, (key, info) in enumerate(zip(keys, self.constraints, strict=True))}
+        for j, (key, info) in enumerate(zip(keys, self.constraints, strict=True)):
+            if info.stage is not None and info.stage < T:
+                nxt = row.get((*key, info.stage + 1))
+                source[n + j] = -1 if nxt is None else n + nxt
+        source.flags.writeable = False
+        return source
 
     @functools.cached_property
     def shift_changed_rows(self) -> np.ndarray:
@@ -476,13 +484,13 @@ class CompiledGame:
         a = self.a_start + rng.uniform(-0.5, 0.5, self.n)
         x = self.x0 + rng.uniform(-0.5, 0.5, self.nx)
         x1 = self.step_dynamics(x, self.first_inputs(a))
-        source = self._shifted(self.size)
+        source = self._shift_source
         a_shift = a[source[: self.n]]
         before, after = self.constraint(a, x), self.constraint(a_shift, x1)
-        rows = source[self.n:] - self.n  # the row each multiplier comes from
-        moved = rows != np.arange(self.m)
+        rows = source[self.n:] - self.n  # the row each multiplier comes from (negative: none)
+        moved = (rows >= 0) & (rows != np.arange(self.m))
         with np.errstate(invalid="ignore"):
-            differ = ~np.isclose(after, before[rows], rtol=1e-9, atol=1e-12, equal_nan=True)
+            differ = ~np.isclose(after, before[np.maximum(rows, 0)], rtol=1e-9, atol=1e-12, equal_nan=True)
         changed = moved & differ
         changed.flags.writeable = False
         return changed
