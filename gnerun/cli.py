@@ -334,7 +334,14 @@ def inspect(run: Annotated[Path, typer.Argument(help="A run directory or its run
     typer.echo(f"config: {meta.get('config_name', '?')} (hash {meta.get('config_hash', '?')[:12]}, gnerun "
                f"{meta.get('version', '?')}, seed {meta.get('seed', '?')}, {meta.get('git_describe', '?')})")
     typer.echo(f"status: {status}")
-    if times:
+    if times and meta.get("log_time", "").startswith("simulated"):  # a closed loop's own time axis
+        ts = float((record.config.get("run") or {}).get("sampling_time") or 1.0)
+        first, last = min(times) / 1e9, max(times) / 1e9
+        typer.echo(f"time range: {first:g} .. {last:g} s of simulated time (t = {first / ts:g} .. {last / ts:g}, "
+                   f"sampling time {ts:g} s)")
+    elif times and meta.get("log_time", "").startswith("iteration"):  # a solve's: 1 s per iteration
+        typer.echo(f"time range: iterations k = {min(times) / 1e9:g} .. {max(times) / 1e9:g} (1 s each)")
+    elif times:  # logs of earlier versions: the wall clock
         first, last = (dt.datetime.fromtimestamp(t / 1e9, dt.UTC) for t in (min(times), max(times)))
         typer.echo(f"time range: {first.isoformat(timespec='seconds')} .. {last.isoformat(timespec='seconds')} "
                    f"({(max(times) - min(times)) / 1e9:.3f} s)")

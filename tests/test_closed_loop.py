@@ -124,7 +124,7 @@ def test_per_K_topics_equal_the_summary(study2_run) -> None:
         iterates = logged[K]["mpc/iterate"]
         assert [m["t"] for m in states] == list(range(31))
         assert [m["x"] for m in states] == s["x"]
-        assert [m["u"] for m in states[:-1]] == s["u"] and states[-1]["u"] is None
+        assert [m["u"] for m in states[:-1]] == s["u"] and "u" not in states[-1]  # no input after the last state
         assert [m["e_norm"] for m in errors] == s["e_norm"]
         for agent in ("agent1", "agent2", "agent3"):
             assert [m["e_norm_agent"][agent] for m in errors] == s["e_norm_agent"][agent]

@@ -496,6 +496,7 @@ def test_the_mcp_demo_template_is_the_written_demo() -> None:
     np.testing.assert_allclose(ra.z[:36], rb.z[:36], atol=1e-8)
 
 
+@pytest.mark.slow
 def test_the_intersection_config_is_the_written_intersection() -> None:
     """configs/algames_intersection.yaml (an RK3 ode, pi, families of states and pairs) against the benchmark
     library's intersection written out, at the same plant state: the same functions to rounding."""

@@ -85,6 +85,9 @@ def _fd_games() -> list[tuple[str, object]]:
 
 
 FD_GAMES = _fd_games()
+# the ALGAMES trajectory games take 10-70 s each here: in the full suite only
+FD_PARAMS = [pytest.param(name, cfg, id=name, marks=[pytest.mark.slow] if name.startswith("algames") else [])
+             for name, cfg in FD_GAMES]
 
 
 def _random_point(name: str, game: CompiledGame, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
@@ -104,7 +107,7 @@ def test_every_shipped_config_is_checked() -> None:
     assert {"paper_study1", "paper_study1_disturbed", "harker", "fk_a11", "fk_a12", "nonlinear_gne"} <= names
 
 
-@pytest.mark.parametrize("name, cfg", FD_GAMES, ids=[g[0] for g in FD_GAMES])
+@pytest.mark.parametrize("name, cfg", FD_PARAMS)
 def test_exact_derivatives_match_central_differences(name: str, cfg) -> None:
     game = compile_game(cfg)
     rng = np.random.default_rng(20240611)
@@ -452,7 +455,7 @@ def test_bounds_become_owner_constraints_with_labels() -> None:
 # --- 4. the structural pattern of JPhi --------------------------------------------------------------
 
 
-@pytest.mark.parametrize("name, cfg", FD_GAMES, ids=[g[0] for g in FD_GAMES])
+@pytest.mark.parametrize("name, cfg", FD_PARAMS)
 def test_jacobian_sparsity_covers_every_numerical_nonzero(name: str, cfg) -> None:
     game = compile_game(cfg)
     pattern = game.jacobian_sparsity()

@@ -252,6 +252,7 @@ def test_every_globalization_keeps_the_status_contract(globalization: str) -> No
             assert state.message
 
 
+@pytest.mark.slow
 def test_merges_from_random_states_converge_and_are_equilibria() -> None:
     from benchmarks.problems import trajectory
 

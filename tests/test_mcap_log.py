@@ -57,7 +57,7 @@ def test_every_iterate_is_in_the_log(study1_run) -> None:
     assert [m["error_norm"] for m in iterates] == summary["error_history"]
     for m in iterates:
         assert m["log10_residual_norm"] == pytest.approx(math.log10(m["residual_norm"]))
-    assert iterates[0]["step_norm"] is None  # NaN at k = 0 is written as null
+    assert "step_norm" not in iterates[0]  # NaN at k = 0 (no step yet) is left out
     logs = [m for t, m, _ in messages if t == "/log"]
     assert any("converged" in m["message"] for m in logs)
 
@@ -102,16 +102,23 @@ def test_chunks_are_zstd_compressed(study1_run) -> None:
     assert all(c.compression == "zstd" for c in summary.chunk_indexes)
 
 
-def test_nan_and_inf_are_written_as_null(tmp_path: Path) -> None:
+def test_nan_inf_and_missing_values_are_left_out(tmp_path: Path) -> None:
+    """JSON has no NaN, and a number field of the viewers' schemas admits no null: what is not a finite number is
+    not written (an array with such an entry is left out whole, so that no index shifts)."""
     path = tmp_path / "x.mcap"
     with RunLog(path, config_yaml="name: x\n", metadata={"version": "0"}) as log:
         log.write("/solve/iterate", SolveIterate(k=0, z=[1.0, math.nan, math.inf], residual_norm=math.inf,
                                                  log10_residual_norm=None, error_norm=math.nan, step_norm=-math.inf,
                                                  active_set_changes=0))
-    [(topic, msg, _)] = read_messages(path)
+        log.write("/solve/iterate", SolveIterate(k=1, z=[1.0, 2.0], residual_norm=0.0, error_norm=3.0,
+                                                 active_set_changes=2))
+    [(topic, first, _), (_, second, _)] = read_messages(path)
     assert topic == "/solve/iterate"
-    assert msg["z"] == [1.0, None, None]
-    assert msg["residual_norm"] is None and msg["error_norm"] is None and msg["step_norm"] is None
+    assert first == {"k": 0, "active_set_changes": 0}
+    assert second == {"k": 1, "z": [1.0, 2.0], "residual_norm": 0.0, "error_norm": 3.0, "active_set_changes": 2}
+    with open(path, "rb") as f:
+        for schema, _, message in make_reader(f).iter_messages():
+            jsonschema.validate(json.loads(message.data), json.loads(schema.data))
 
 
 def test_a_killed_writer_keeps_every_flushed_message(tmp_path: Path) -> None:
@@ -141,4 +148,4 @@ def test_topic_and_message_type_must_agree(tmp_path: Path) -> None:
     from gnerun.log.messages import LogEntry
 
     with RunLog(tmp_path / "x.mcap", config_yaml="", metadata={}) as log, pytest.raises(TypeError):
-        log.write("/solve/iterate", LogEntry(level="info", message="wrong topic"))
+        log.write("/solve/iterate", LogEntry.make("info", "wrong topic", 0))

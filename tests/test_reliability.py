@@ -22,6 +22,7 @@ from gnerun import simulate, solve
 from gnerun.game.compile import compile_game
 from gnerun.language.config import ConfigError, load_config
 from gnerun.log.mcap_log import read_run
+from gnerun.log.messages import level_name
 from gnerun.solvers.certificate import kkt_residuals
 
 from .conftest import CONFIGS, gnerun_command, run_cli
@@ -52,7 +53,8 @@ FAULTS = [
 
 
 def _log_entries(run: Path) -> list[dict]:
-    return read_run(run).messages.get("/log", [])
+    """The /log entries as {level name, message}."""
+    return [{"level": level_name(e), "message": e["message"]} for e in read_run(run).messages.get("/log", [])]
 
 
 @pytest.mark.parametrize(("name", "make", "status"), FAULTS, ids=[f[2] for f in FAULTS])
@@ -111,6 +113,7 @@ def test_simulate_stops_at_the_first_failed_step_when_asked(tmp_path) -> None:
     assert any("on_failure: stop" in e["message"] for e in record.messages["/log"])
 
 
+@pytest.mark.slow
 def test_converged_always_means_the_residual_meets_the_tolerance() -> None:
     """Over seeded random perturbations of three solvers: a converged result has ||Phi|| <= tol, checked
     again by an independent evaluation of the KKT residual."""
@@ -173,6 +176,7 @@ def _steps_are_whole(record, K: int = 1) -> int:
     return n
 
 
+@pytest.mark.slow
 def test_sigkill_at_a_random_step_leaves_every_completed_step_readable(tmp_path) -> None:
     out = tmp_path / "run"
     proc = _start(out)
@@ -252,6 +256,7 @@ def _limit_file_size(limit: int):
     return apply
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(sys.platform != "linux", reason="RLIMIT_FSIZE as a stand-in for a full disk")
 def test_a_full_disk_leaves_what_was_flushed_readable(tmp_path) -> None:
     out = tmp_path / "run"
@@ -288,6 +293,7 @@ def _payloads(run: Path) -> dict[str, list[bytes]]:
     return out
 
 
+@pytest.mark.slow
 def test_the_same_config_and_seed_give_the_same_run(tmp_path) -> None:
     over = {"disturbance.kind": "jacobian_noise", "disturbance.scale": 0.05, "disturbance.seed": 11,
             "disturbance.plant.kind": "gaussian", "disturbance.plant.scale": 0.05, "disturbance.plant.seed": 5,

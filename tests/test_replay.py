@@ -71,7 +71,7 @@ def test_recording_holds_the_logged_values(runs, tmp_path: Path) -> None:
             x = series[f"/paper-study2/K{K}/x/{name}"]
             assert x["t"] == [m["t"] for m in states] and x["value"] == [m["x"][j] for m in states]
         u = series[f"/paper-study2/K{K}/u/u2"]
-        assert u["value"] == [m["u"][1] for m in states if m["u"] is not None]
+        assert u["value"] == [m["u"][1] for m in states if "u" in m]
         errors = loop.messages[f"/K{K}/mpc/error"]
         assert series[f"/paper-study2/K{K}/e_norm"]["value"] == [m["e_norm"] for m in errors]
     # Fig. 3: per-agent errors of the distributed run

@@ -103,6 +103,7 @@ def test_nonlinear_dynamics_choose_by_unknowns_times_stages() -> None:
     assert formulation(demo, compile_game(demo)) == "condensed"
 
 
+@pytest.mark.slow
 def test_long_horizons_choose_the_sparse_formulation_and_solve() -> None:
     cfg = family_config(3, 120)
     game = compile_game(cfg)
@@ -216,6 +217,7 @@ def _dynamics(cfg):
     return _expressions(cfg.game, lay, ca.SX.sym("a", lay.n), ca.SX.sym("x", lay.nx), []).dynamics
 
 
+@pytest.mark.slow
 def test_the_globalized_sparse_method_takes_the_condensed_iterates() -> None:
     """On the 3-car merge from zero inputs the default method meets singular Newton systems (Levenberg-Marquardt
     steps) and enters its interior phase; the sparse formulation takes the same iterates through all of it: its

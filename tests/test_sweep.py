@@ -110,6 +110,7 @@ def _scheduler_address(scheduler_file: Path, proc: subprocess.Popen, timeout: fl
     raise AssertionError("the dask scheduler did not start")
 
 
+@pytest.mark.slow
 def test_local_and_dask_executors_write_identical_indexes(tmp_path: Path) -> None:
     """Local pool, a Dask LocalCluster, and a separate `dask scheduler` + `dask worker` on 127.0.0.1."""
     pytest.importorskip("distributed")
@@ -153,6 +154,7 @@ def _csv_without_timings(d: Path) -> list[list[str]]:
     return [[r[i] for i in keep] for r in rows]
 
 
+@pytest.mark.slow
 def test_index_rows_agree_with_each_points_own_run(tmp_path: Path) -> None:
     sw = load_sweep(_spec(tmp_path))
     result = run_sweep(sw, tmp_path / "out", workers=2)
@@ -188,6 +190,7 @@ def test_the_iss_study_shows_a_linear_gain(tmp_path: Path) -> None:
     assert all(0 < m / s < 100 for m, s in zip(means, scales, strict=True))  # a gain, not just a slope
 
 
+@pytest.mark.slow
 def test_resuming_skips_finished_points(tmp_path: Path) -> None:
     spec = _spec(tmp_path)
     sw = load_sweep(spec)
@@ -207,6 +210,7 @@ def test_resuming_skips_finished_points(tmp_path: Path) -> None:
     assert stamps[sw.points[0].directory] == (tmp_path / "out" / sw.points[0].directory / "run.mcap").stat().st_mtime_ns
 
 
+@pytest.mark.slow
 def test_a_failing_point_is_recorded_and_the_sweep_goes_on(tmp_path: Path) -> None:
     sw = load_sweep(_spec(tmp_path))
     out = tmp_path / "out"
@@ -224,6 +228,7 @@ def test_a_failing_point_is_recorded_and_the_sweep_goes_on(tmp_path: Path) -> No
     assert read_index(out)[1]["status"] == "completed"
 
 
+@pytest.mark.slow
 def test_the_cli_runs_a_sweep_and_draws_both_studies(tmp_path: Path) -> None:
     iss = _spec(tmp_path)
     k = _spec(tmp_path, SMALL.replace("  run.K: 3\n", "").replace(
@@ -244,6 +249,7 @@ def test_the_cli_runs_a_sweep_and_draws_both_studies(tmp_path: Path) -> None:
     assert proc.returncode == 0 and "6 points" in proc.stdout
 
 
+@pytest.mark.slow
 def test_the_cli_refuses_bad_sweeps_in_one_line(tmp_path: Path) -> None:
     bad = _spec(tmp_path, SMALL.replace("[0, 1]", "[0, -1.5]"))
     good = _spec(tmp_path, name="good.yaml")

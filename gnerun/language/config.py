@@ -26,6 +26,7 @@ from pydantic import (
     PrivateAttr,
     Tag,
     ValidationError,
+    model_validator,
 )
 from pydantic_core import PydanticCustomError
 
@@ -293,6 +294,9 @@ class RunConfig(Strict):
     certificate: bool = Field(
         True, description="solve: check the equilibrium by each agent's best response (and restart from an "
                           "improving one); false: the KKT residual alone")
+    sampling_time: float | None = Field(
+        None, gt=0, description="seconds from one sampling time t to the next: the time axis of simulate's log "
+                                "(log_time = t x sampling_time); default: dynamics.dt of an ode, else 1")
 
 
 class Config(Strict):
@@ -304,6 +308,13 @@ class Config(Strict):
     run: RunConfig = Field(default_factory=RunConfig)
 
     _source: str | None = PrivateAttr(default=None)
+
+    @model_validator(mode="after")
+    def _fill_sampling_time(self) -> Config:
+        if self.run.sampling_time is None:
+            dynamics = getattr(self.game, "dynamics", None)
+            self.run.sampling_time = dynamics.dt if isinstance(dynamics, ContinuousDynamics) else 1.0
+        return self
 
     def __eq__(self, other: object) -> bool:
         # the same experiment, wherever it was loaded from
@@ -741,4 +752,8 @@ def check_semantics(cfg: Config, smap: SourceMap) -> list[str]:
     if cfg.disturbance.kind in ("jacobian_noise", "residual") and cfg.solver.kind == "jn":
         report(("disturbance", "kind"), f"{cfg.disturbance.kind!r} perturbs semismooth Newton; with solver.kind "
                "'jn' use 'pseudogradient' (noise on F and H)")
+    dynamics = getattr(g, "dynamics", None)
+    if isinstance(dynamics, ContinuousDynamics) and cfg.run.sampling_time != dynamics.dt:
+        report(("run", "sampling_time"), f"is {cfg.run.sampling_time:g} s, but the ode is integrated over one "
+               f"sampling time of dynamics.dt = {dynamics.dt:g} s (leave it out, or make the two equal)")
     return problems

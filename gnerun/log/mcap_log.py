@@ -1,10 +1,12 @@
-"""The run log: an MCAP file that the solver loops write to (SPEC §5).
+"""The run log: an MCAP file that the solver loops write to.
 
-JSON messages with JSON Schemas generated from :mod:`gnerun.messages`, zstd-compressed chunks,
-the ``gnerun.run`` metadata record and the resolved ``config.yaml`` as an attachment. The log is a
-sink: loops call :meth:`RunLog.write` and :meth:`RunLog.flush`; nothing in the maths knows about it.
-Every flush closes the current chunk and writes it to the file, so a killed run keeps every
-message written before its last flush.
+JSON messages with JSON Schemas (:mod:`gnerun.log.messages`: the subset Foxglove and Lichtblick read),
+zstd-compressed chunks, the ``gnerun.run`` metadata record and the resolved ``config.yaml`` as an
+attachment. The log is a sink: loops call :meth:`RunLog.write` and :meth:`RunLog.flush`; nothing in the
+maths knows about it. Every flush closes the current chunk and writes it to the file, so a killed run keeps
+every message written before its last flush. Messages are stamped with the time set by
+:meth:`RunLog.set_time` (a run's own time: a closed loop's simulated time, a solve's iterations), or with
+the wall clock.
 """
 
 from __future__ import annotations
@@ -28,7 +30,7 @@ PROFILE = "gnerun"
 
 
 def json_ready(obj: Any) -> Any:
-    """numpy values to Python, NaN and Inf to None, recursively (JSON has no NaN)."""
+    """numpy values to Python, NaN and Inf to None, recursively (JSON has no NaN; for summary.json)."""
     if isinstance(obj, float | np.floating):
         v = float(obj)
         return v if math.isfinite(v) else None
@@ -52,6 +54,8 @@ class RunLog:
         self._writer = Writer(self._file, compression=CompressionType.ZSTD)
         self._writer.start(profile=PROFILE, library="gnerun")
         self._channels: dict[str, int] = {}
+        self._schemas: dict[tuple[str, bytes], int] = {}
+        self._time_ns: int | None = None  # None: the wall clock
         self._checked: dict[tuple[str, type], int] = {}
         self._sequence = 0
         self._closed = False
@@ -62,15 +66,27 @@ class RunLog:
                                     media_type="application/yaml", data=config_yaml.encode())
         self.flush()
 
-    def _channel(self, topic: str, model: type[Message]) -> int:
+    def _channel(self, topic: str, message: Message) -> int:
         channel = self._channels.get(topic)
         if channel is None:
-            schema = json.dumps(model.model_json_schema(), sort_keys=True).encode()
-            schema_id = self._writer.register_schema(name=f"gnerun.{model.__name__}", encoding="jsonschema",
-                                                     data=schema)
+            model = type(message)
+            # the first message names the keys of per-agent mappings; equal schemas are registered once
+            key = (model.channel_schema_name(), json.dumps(model.viewer_schema(message), sort_keys=True).encode())
+            schema_id = self._schemas.get(key)
+            if schema_id is None:
+                schema_id = self._schemas[key] = self._writer.register_schema(name=key[0], encoding="jsonschema",
+                                                                              data=key[1])
             channel = self._writer.register_channel(topic=topic, message_encoding="json", schema_id=schema_id)
             self._channels[topic] = channel
         return channel
+
+    def set_time(self, time_ns: int | None) -> None:
+        """Stamp the messages that follow with ``time_ns`` (None: the wall clock again)."""
+        self._time_ns = time_ns
+
+    def now(self) -> int:
+        """The log_time of a message written now."""
+        return time.time_ns() if self._time_ns is None else self._time_ns
 
     def _failed(self, e: OSError) -> WriteError:
         self._broken = e.strerror or str(e)
@@ -93,16 +109,16 @@ class RunLog:
             expected = TOPICS.get(topic) or next((m for t, m in TOPICS.items() if topic.endswith(t)), None)
             if expected is not None and expected is not model:
                 raise TypeError(f"topic {topic} carries {expected.__name__}, not {model.__name__}")
-            channel = self._checked[(topic, model)] = self._channel(topic, model)
-        t = time.time_ns() if log_time is None else log_time
-        # compact JSON, NaN and infinities as null (the models say so), serialised by pydantic's core
-        data = message.__pydantic_serializer__.to_json(message)
+            channel = self._checked[(topic, model)] = self._channel(topic, message)
+        t = self.now() if log_time is None else log_time
+        data = message.to_json()  # compact; missing and non-finite values left out (JSON has no NaN)
         self._writer.add_message(channel_id=channel, log_time=t, publish_time=t, data=data, sequence=self._sequence)
         self._sequence += 1
 
     def log(self, level: str, text: str) -> None:
-        """A ``/log`` text event."""
-        self.write("/log", LogEntry(level=level, message=text))
+        """A ``/log`` text event (a foxglove.Log; ``level``: debug, info, warning or error)."""
+        t = self.now()
+        self.write("/log", LogEntry.make(level, text, t), log_time=t)
 
     def flush(self) -> None:
         """Close the chunk in progress and write it out (a killed run keeps it)."""
@@ -234,7 +250,7 @@ def recover(path: str | Path, target: str | Path) -> RunRecord:
             model = TOPICS.get(topic) or next((m for suffix, m in TOPICS.items() if topic.endswith(suffix)), None)
             if model is None:
                 continue
-            message: Message = model.model_validate(record.messages[topic][i])
+            message: Message = model.from_logged(record.messages[topic][i], t)
             log.write(topic, message, log_time=t)
     return record
 

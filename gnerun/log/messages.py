@@ -1,61 +1,225 @@
-"""The messages of a run's MCAP log (SPEC §5). Their JSON Schemas are generated from these models."""
+"""The messages of a run's MCAP log and their JSON Schemas.
+
+The schemas are the subset of JSON Schema that Foxglove and Lichtblick read from a ``jsonschema`` channel:
+every field has one plain ``type`` (``number``, ``integer``, ``string``, ``boolean``, ``object`` with
+``properties``, ``array`` with typed ``items``), never a list of types, ``anyOf``/``oneOf`` or ``$ref``.
+A value that is missing or not a finite number (an error norm without z*, a NaN iterate) is left out of its
+message: the viewers show a gap, and every message stays valid against its schema (JSON has no NaN, and a
+``number`` field admits no ``null``). Per-agent values are named properties (``e_norm_agent.agent1``), so
+that each one is a plottable message path. ``/log`` carries the well-known ``foxglove.Log``.
+"""
 
 from __future__ import annotations
 
-from pydantic import BaseModel, ConfigDict
+import json
+import math
+import types
+import typing
+from typing import Any, ClassVar
+
+from pydantic import BaseModel, ConfigDict, Field
+
+
+def _absent(v: Any) -> bool:
+    return v is None or (isinstance(v, float) and not math.isfinite(v))
+
+
+def _present(v: Any) -> Any:
+    """``v`` without its missing parts (None marks a value to leave out)."""
+    if isinstance(v, dict):
+        out = {}
+        for key, item in v.items():
+            item = _present(item)
+            if item is not None:
+                out[key] = item
+        return out
+    if isinstance(v, list):
+        # an array with a missing entry (a NaN state or iterate) would shift every later index: left out whole
+        return None if any(_absent(x) for x in v) else v
+    return None if _absent(v) else v
+
+
+def _field_schema(annotation: Any, sample: Any) -> dict:
+    """The viewer-subset schema of one annotation (``sample``: the value logged, for a mapping's keys)."""
+    origin = typing.get_origin(annotation)
+    if origin in (typing.Union, types.UnionType):
+        (inner,) = [a for a in typing.get_args(annotation) if a is not type(None)]
+        return _field_schema(inner, sample)
+    if origin is list:
+        (item,) = typing.get_args(annotation)
+        return {"type": "array", "items": _field_schema(item, None)}
+    if origin is dict:
+        _, value = typing.get_args(annotation)
+        return {"type": "object", "properties": {str(k): _field_schema(value, None) for k in (sample or {})},
+                "additionalProperties": False}
+    return {"type": {bool: "boolean", int: "integer", float: "number", str: "string"}[annotation]}
 
 
 class Message(BaseModel):
-    model_config = ConfigDict(extra="forbid", ser_json_inf_nan="null")
+    model_config = ConfigDict(extra="forbid")
+
+    # schema name of the channel (default: gnerun.<class name>)
+    schema_name: ClassVar[str | None] = None
+
+    @classmethod
+    def viewer_schema(cls, sample: Message | None = None) -> dict:
+        """The JSON Schema of this message. Mappings (per-agent values) get one property per key of ``sample``."""
+        properties, required = {}, []
+        for name, info in cls.model_fields.items():
+            value = getattr(sample, name, None) if sample is not None else None
+            properties[name] = _field_schema(info.annotation, value)
+            if info.description:
+                properties[name]["description"] = info.description
+            if info.is_required() and not _optional(info.annotation):
+                required.append(name)
+        schema = {"title": cls.channel_schema_name(), "type": "object", "properties": properties,
+                  "additionalProperties": False}
+        if cls.__doc__:
+            schema["description"] = " ".join(cls.__doc__.split())
+        if required:
+            schema["required"] = required
+        return schema
+
+    @classmethod
+    def channel_schema_name(cls) -> str:
+        return cls.schema_name or f"gnerun.{cls.__name__}"
+
+    def to_json(self) -> bytes:
+        """Compact JSON with every missing or non-finite value left out."""
+        return json.dumps(_present(self.model_dump()), separators=(",", ":"), allow_nan=False).encode()
+
+    @classmethod
+    def from_logged(cls, data: dict, log_time: int) -> Message:
+        """The message as read back from a log (of this version or an earlier one)."""
+        return cls.model_validate(data)
+
+
+def _optional(annotation: Any) -> bool:
+    return typing.get_origin(annotation) in (typing.Union, types.UnionType) and type(None) in typing.get_args(
+        annotation)
 
 
 class SolveIterate(Message):
-    """One iterate z^k of a solve (topic ``/solve/iterate``)."""
+    """One iterate z^k of a solve (topic /solve/iterate)."""
 
     k: int
-    z: list[float | None]
-    residual_norm: float | None
-    log10_residual_norm: float | None
-    error_norm: float | None  # ||z^k - z*||, z* from a converged re-solve
-    step_norm: float | None  # ||z^k - z^{k-1}||
+    z: list[float] | None = None
+    residual_norm: float | None = Field(None, description="||Phi(z^k)||")
+    log10_residual_norm: float | None = None
+    error_norm: float | None = Field(None, description="||z^k - z*||, z* from a converged re-solve")
+    step_norm: float | None = Field(None, description="||z^k - z^(k-1)||")
     active_set_changes: int
 
 
-class LogEntry(Message):
-    """A text event (topic ``/log``): warnings, statuses."""
+class Time(BaseModel):
+    """A time as seconds and nanoseconds (foxglove.Time)."""
 
-    level: str  # debug | info | warning | error
+    model_config = ConfigDict(extra="forbid")
+
+    sec: int
+    nsec: int
+
+    @classmethod
+    def from_ns(cls, ns: int) -> Time:
+        return cls(sec=ns // 1_000_000_000, nsec=ns % 1_000_000_000)
+
+
+# foxglove.Log's levels
+LOG_LEVELS = {"unknown": 0, "debug": 1, "info": 2, "warning": 3, "error": 4, "fatal": 5}
+LEVEL_NAMES = {v: k for k, v in LOG_LEVELS.items()}
+
+# the well-known schema, as published by Foxglove (schemas/jsonschema/Log.json): the Log panel looks for it
+FOXGLOVE_LOG_SCHEMA = {
+    "title": "foxglove.Log",
+    "description": "A log message",
+    "$comment": "Generated by https://github.com/foxglove/schemas",
+    "type": "object",
+    "properties": {
+        "timestamp": {
+            "type": "object",
+            "title": "time",
+            "properties": {
+                "sec": {"type": "integer", "minimum": 0},
+                "nsec": {"type": "integer", "minimum": 0, "maximum": 999999999},
+            },
+            "description": "Timestamp of log message",
+        },
+        "level": {
+            "title": "foxglove.LogLevel",
+            "description": "Log level",
+            "oneOf": [{"title": name.upper(), "const": value} for name, value in LOG_LEVELS.items()],
+        },
+        "message": {"type": "string", "description": "Log message"},
+        "name": {"type": "string", "description": "Process or node name"},
+        "file": {"type": "string", "description": "Filename"},
+        "line": {"type": "integer", "minimum": 0, "description": "Line number in the file"},
+    },
+}
+
+
+class LogEntry(Message):
+    """A text event (topic /log): warnings, statuses; the well-known foxglove.Log."""
+
+    schema_name: ClassVar[str | None] = "foxglove.Log"
+
+    timestamp: Time
+    level: int  # LOG_LEVELS
     message: str
+    name: str = "gnerun"
+    file: str = ""
+    line: int = 0
+
+    @classmethod
+    def viewer_schema(cls, sample: Message | None = None) -> dict:
+        return FOXGLOVE_LOG_SCHEMA
+
+    @classmethod
+    def make(cls, level: str, text: str, time_ns: int) -> LogEntry:
+        return cls(timestamp=Time.from_ns(time_ns), level=LOG_LEVELS[level], message=text)
+
+    @classmethod
+    def from_logged(cls, data: dict, log_time: int) -> LogEntry:
+        if isinstance(data.get("level"), str):  # logs written before /log was a foxglove.Log: {level, message}
+            return cls.make(data["level"], data["message"], log_time)
+        return cls.model_validate(data)
+
+
+def level_name(entry: dict) -> str:
+    """debug | info | warning | error (| fatal, unknown) of a /log message, of this version or an earlier one."""
+    level = entry.get("level")
+    return level if isinstance(level, str) else LEVEL_NAMES.get(level, "unknown")
 
 
 class MpcState(Message):
-    """The plant at sampling time t and the input applied (``/K<k>/mpc/state``); u is null at the last t. With it:
-    the solver's status at t (empty at the last t), whether the applied plan was a fallback (not z^K(t)), and the
-    largest constraint violation at u(t) and the state it produced."""
+    """The plant at sampling time t and the input applied (/K<k>/mpc/state); u is left out at the last t, whose
+    state ends the loop (and whose status is empty). With it: the solver's status at t, whether the applied plan
+    was a fallback (not z^K(t)), and the largest constraint violation at u(t) and the state it produced."""
 
     t: int
-    x: list[float | None]
-    u: list[float | None] | None
-    status: str = ""
-    fallback: bool = False
-    constraint_violation: float | None = None
+    x: list[float] | None = None
+    u: list[float] | None = None
+    status: str | None = Field(None, description="the solver's status at t: converged, incomplete (K steps "
+                                                 "without reaching tol) or a failure; empty at the last t")
+    fallback: bool | None = Field(None, description="the applied plan was a fallback, not the budgeted iterate")
+    constraint_violation: float | None = Field(None, description="the largest constraint violation at the "
+                                                                 "applied input and the state it produces")
 
 
 class MpcIterate(Message):
-    """Iterate k of the K solver steps at sampling time t (``/K<k>/mpc/iterate``); k = 0 is the warm start."""
+    """Iterate k of the K solver steps at sampling time t (/K<k>/mpc/iterate); k = 0 is the warm start."""
 
     t: int
     k: int
-    residual_norm: float | None
-    error_norm: float | None  # ||z^k(t) - z*(t)||
+    residual_norm: float | None = Field(None, description="||Phi(z^k(t))||")
+    error_norm: float | None = Field(None, description="||z^k(t) - z*(t)||")
 
 
 class MpcError(Message):
-    """The tracking error e(t) = z^K(t) - z*(t) (``/K<k>/mpc/error``)."""
+    """The tracking error e(t) = z^K(t) - z*(t) (/K<k>/mpc/error), in all and per agent."""
 
     t: int
-    e_norm: float | None
-    e_norm_agent: dict[str, float | None]
+    e_norm: float | None = Field(None, description="||e(t)||")
+    e_norm_agent: dict[str, float | None] = Field(default_factory=dict, description="||e_i(t)|| by agent name")
 
 
 TOPICS: dict[str, type[Message]] = {

@@ -284,6 +284,8 @@ def closed_loop(cfg: Config, game: CompiledGame, K: int, run: RunDirectory | Non
         run.flush()
 
     for t in range(steps):
+        if run is not None:  # the log's time axis is the loop's own
+            run.at(t * cfg.run.sampling_time)
         if interrupt is not None and interrupt.requested:
             ended, completed = "interrupted", t
             if run is not None:
@@ -392,6 +394,7 @@ def closed_loop(cfg: Config, game: CompiledGame, K: int, run: RunDirectory | Non
     else:
         xs[steps] = x
         if run is not None:
+            run.at(steps * cfg.run.sampling_time)
             run.write(f"{topic}/state", MpcState(t=steps, x=x.tolist(), u=None, status="", fallback=False,
                                                  constraint_violation=None))
             run.flush()
@@ -432,6 +435,7 @@ def simulate(cfg: Config, out: str | Path | None = None, *, force: bool = False,
     interrupt = Interrupt()
     with recording(run), interrupt.installed():
         if run is not None:
+            run.at(0.0)
             run.log("info", f"simulate {cfg.name}: K = {cfg.run.K}, {cfg.run.steps} steps, warm start "
                             f"{cfg.run.warm_start}, initial {cfg.run.initial}, safeguard {cfg.run.safeguard}, "
                             f"solver {cfg.solver.kind}, solver disturbance "

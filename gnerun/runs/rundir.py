@@ -1,4 +1,4 @@
-"""Run directories (SPEC §4): config.yaml, run.mcap, summary.json."""
+"""Run directories: config.yaml, run.mcap, summary.json."""
 
 from __future__ import annotations
 
@@ -63,8 +63,12 @@ class RunDirectory:
                 "command": command,
                 "config_name": cfg.name,
                 "created_utc": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
+                # the log's time axis is the run's own: a closed loop's simulated time, a solve's iterations
+                "log_time": (f"simulated: t x run.sampling_time ({cfg.run.sampling_time:g} s)"
+                             if command == "simulate" else "iteration: k x 1 s"),
             }
             log = RunLog(path / "run.mcap", config_yaml=config_yaml, metadata=metadata)
+            log.set_time(0)  # the run's start on its own time axis
         except PermissionError as e:
             raise InputError(f"{path}: cannot write the run directory: {e.strerror or e}") from None
         except OSError as e:
@@ -72,6 +76,8 @@ class RunDirectory:
         return cls(path, log)
 
     def write_iterate(self, state, error_norm: float | None) -> None:
+        """Iterate k at log_time k seconds (and what follows, until the next iterate)."""
+        self.at(state.k)
         r = state.residual_norm
         self.log_sink.write("/solve/iterate", SolveIterate(
             k=state.k,
@@ -89,6 +95,10 @@ class RunDirectory:
 
     def flush(self) -> None:
         self.log_sink.flush()
+
+    def at(self, seconds: float) -> None:
+        """Stamp what follows (messages and /log) with this simulated time."""
+        self.log_sink.set_time(round(seconds * 1e9))
 
     def log(self, level: str, text: str) -> None:
         self.log_sink.log(level, text)

@@ -7,7 +7,7 @@
 - Games with positions (closed loops): the paths in the plane and the pairwise distances against the required
   ones (:mod:`gnerun.view.paths`).
 
-Everything plotted is read from the MCAP log (:func:`gnerun.mcap_log.read_run`), so any run from any
+Everything plotted is read from the MCAP log (:func:`gnerun.log.mcap_log.read_run`), so any run from any
 machine, finished or killed, can be drawn without solving again. Values that are null in the log, or
 zero (no point on a log axis), are left as gaps.
 """
@@ -86,7 +86,7 @@ def study1_figure(runs: list[RunRecord]):
     fig, axes = plt.subplots(1, len(runs), figsize=(3.4 * len(runs), 2.8), squeeze=False, sharey=True)
     for ax, run, label in zip(axes[0], runs, "abcdefgh", strict=False):
         its = run.messages.get("/solve/iterate", [])
-        values = [m["error_norm"] for m in its]
+        values = [m.get("error_norm") for m in its]
         ax.semilogy([m["k"] for m in its], _log_values(values), "o-", ms=3, label=disturbance(run))
         _note_zeros(ax, values)
         ax.set_xlabel("iteration k")
@@ -117,7 +117,7 @@ def study2_figure(run: RunRecord):
     ax_x.legend(loc="best")
     for K, topics in loops.items():
         errors = topics.get("error", [])
-        values = [m["e_norm"] for m in errors]
+        values = [m.get("e_norm") for m in errors]
         ax_e.semilogy([m["t"] for m in errors], _log_values(values), "o-", ms=2.5, label=f"K = {K}")
         _note_zeros(ax_e, values)
     ax_e.set_xlabel("t")
@@ -138,7 +138,7 @@ def study3_figure(run: RunRecord):
         errors = topics.get("error", [])
         agents = list(errors[0]["e_norm_agent"]) if errors else []
         for agent in agents:
-            values = [m["e_norm_agent"][agent] for m in errors]
+            values = [m["e_norm_agent"].get(agent) for m in errors]
             ax.semilogy([m["t"] for m in errors], _log_values(values), "o-", ms=2.5, label=agent)
             _note_zeros(ax, values)
         ax.set_xlabel("t")

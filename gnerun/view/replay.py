@@ -20,6 +20,7 @@ from pathlib import Path
 
 from ..errors import InputError, Unavailable
 from ..log.mcap_log import RunRecord, read_run
+from ..log.messages import level_name
 from .figures import ZERO_AT, closed_loops, disturbance, run_name, solver_kind
 
 APPLICATION_ID = "gnerun"
@@ -99,7 +100,7 @@ def log_run(rec, run: RunRecord, prefix: str, contents: Contents, several: bool 
         contents.configs.append(f"{prefix}/config")
     for msg, t in zip(run.messages.get("/log", []), run.log_times.get("/log", []), strict=True):
         rec.set_time("log_time", timestamp=t * 1e-9)
-        level = {"warning": "WARN", "error": "ERROR", "debug": "DEBUG"}.get(msg["level"], "INFO")
+        level = {"warning": "WARN", "error": "ERROR", "debug": "DEBUG"}.get(level_name(msg), "INFO")
         rec.log(f"{prefix}/log", rr.TextLog(msg["message"], level=level))
     if "/log" in run.messages:
         contents.logs.append(f"{prefix}/log")
@@ -137,16 +138,16 @@ def log_run(rec, run: RunRecord, prefix: str, contents: Contents, several: bool 
                 if x_view:
                     show(x_view, entity, f"{entity.rsplit('/', 1)[1]} (K = {K})")
                 scalar(entity, "t", m["t"], v, x_view)
-            for j, v in enumerate(m["u"] or []):
+            for j, v in enumerate(m.get("u") or []):
                 scalar(f"{base}/u/{inputs[j] if j < len(inputs) else f'u{j + 1}'}", "t", m["t"], v)
         for m in topics.get("error", []):
             for view in (e_view, agent_view, x_view):
                 if view:  # the whole loop's time span, also where e(t) = 0 has no log10
                     contents.view(view).span(m["t"])
-            scalar(f"{base}/e_norm", "t", m["t"], m["e_norm"])
+            scalar(f"{base}/e_norm", "t", m["t"], m.get("e_norm"))
             if e_view:
                 show(e_view, f"{base}/log10_e_norm", f"{name}: K = {K}" if several else f"K = {K}")
-            scalar(f"{base}/log10_e_norm", "t", m["t"], _log10(m["e_norm"]), e_view)
+            scalar(f"{base}/log10_e_norm", "t", m["t"], _log10(m.get("e_norm")), e_view)
             for agent, v in m["e_norm_agent"].items():
                 scalar(f"{base}/e_agent/{agent}", "t", m["t"], v)
                 if agent_view:
