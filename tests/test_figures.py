@@ -12,7 +12,7 @@ from gnerun.language.config import load_config
 from gnerun.log.mcap_log import read_run
 from gnerun.runs.closed_loop import simulate
 from gnerun.runs.solving import solve
-from gnerun.view.figures import make_figures, write_figures
+from gnerun.view.figures import FLOOR, make_figures, write_figures
 
 from .conftest import CONFIGS, run_cli
 
@@ -28,44 +28,153 @@ def runs(tmp_path_factory) -> dict[str, Path]:
     return out
 
 
-def _as_logged(values) -> np.ndarray:
-    return np.array([1e-17 if v == 0 else v if v is not None and v > 0 else math.nan for v in values], dtype=float)
+def _series(ax, label: str):
+    [line] = [ln for ln in ax.get_lines() if ln.get_label() == label]
+    return line
+
+
+def _check_drawn(ax, line, logged: list) -> float | None:
+    """The line shows the logged values: each one at or above the floor as it is, each one below (exact zeros
+    included) on one row of the band under the floor, within the axes; a missing one as a gap. Returns the row."""
+    y = np.asarray(line.get_ydata(), dtype=float)
+    assert len(y) == len(logged)
+    rows = set()
+    for v, drawn in zip(logged, y, strict=True):
+        if v is None:
+            assert math.isnan(drawn)
+        elif v >= FLOOR:
+            assert drawn == v
+        else:
+            assert 0 <= v and ax.get_ylim()[0] < drawn < FLOOR
+            rows.add(drawn)
+    assert len(rows) <= 1
+    return rows.pop() if rows else None
 
 
 def test_the_plotted_data_are_the_logged_data(runs) -> None:
     figures = make_figures([runs["clean"], runs["noisy"], runs["study2"], runs["study3"]])
     assert sorted(figures) == ["paper-study2-study2", "paper-study3-study3", "study1"]
-    # Study 1: one panel per solve, ||z^k - z*|| against k
-    for ax, run in zip(figures["study1"].axes, ("clean", "noisy"), strict=True):
-        [line] = ax.get_lines()
+    # Study 1: one panel per solve, ||z^k - z*|| against k, on one y range
+    axes = figures["study1"].axes
+    for ax, run, label in zip(axes, ("clean", "noisy"), ("undisturbed", "jacobian noise, scale 0.001"), strict=True):
         iterates = read_run(runs[run]).messages["/solve/iterate"]
+        line = _series(ax, label)
         np.testing.assert_array_equal(line.get_xdata(), [m["k"] for m in iterates])
-        np.testing.assert_array_equal(line.get_ydata(), _as_logged([m["error_norm"] for m in iterates]))
+        _check_drawn(ax, line, [m.get("error_norm") for m in iterates])
         assert ax.get_yscale() == "log"
+    assert axes[0].get_ylim() == axes[1].get_ylim()
     # Study 2: x(t) of the largest K, ||e(t)|| per K
     record = read_run(runs["study2"])
     ax_x, ax_e = figures["paper-study2-study2"].axes
     states = record.messages["/K7/mpc/state"]
-    for j, line in enumerate(ax_x.get_lines()):
-        np.testing.assert_array_equal(line.get_ydata(), [m["x"][j] for m in states])
-    assert [t.get_text() for t in ax_e.get_legend().get_texts()] == [f"K = {k}" for k in (1, 2, 3, 5, 7)]
-    for line, K in zip(ax_e.get_lines(), (1, 2, 3, 5, 7), strict=True):
-        np.testing.assert_array_equal(line.get_ydata(), _as_logged([m["e_norm"] for m in record.messages[
-            f"/K{K}/mpc/error"]]))
-    # Study 3: per-agent errors, one panel per K
+    for j, name in enumerate(("x1", "x2", "x3")):
+        np.testing.assert_array_equal(_series(ax_x, name).get_ydata(), [m["x"][j] for m in states])
+    rows = [_check_drawn(ax_e, _series(ax_e, f"K = {K}"), [m.get("e_norm") for m in record.messages[
+        f"/K{K}/mpc/error"]]) for K in (1, 2, 3, 5, 7)]
+    assert len({r for r in rows if r is not None}) == len([r for r in rows if r is not None])  # a row each
+    # Study 3: per-agent errors, one panel per K, on one y range
     record = read_run(runs["study3"])
-    for ax, K in zip(figures["paper-study3-study3"].axes, (2, 5), strict=True):
+    axes = figures["paper-study3-study3"].axes
+    for ax, K in zip(axes, (2, 5), strict=True):
         errors = record.messages[f"/K{K}/mpc/error"]
-        for line, agent in zip(ax.get_lines(), ("agent1", "agent2", "agent3"), strict=True):
-            assert line.get_label() == agent
-            np.testing.assert_array_equal(line.get_ydata(), _as_logged([m["e_norm_agent"][agent] for m in errors]))
+        for agent in ("agent1", "agent2", "agent3"):
+            _check_drawn(ax, _series(ax, agent), [m["e_norm_agent"].get(agent) for m in errors])
+    assert axes[0].get_ylim() == axes[1].get_ylim()
 
 
-def test_figures_are_written_as_png_and_pdf(runs, tmp_path: Path) -> None:
-    written = write_figures([runs["study2"]], tmp_path, ["png", "pdf"])
-    assert sorted(p.name for p in written) == ["paper-study2-study2.pdf", "paper-study2-study2.png"]
-    assert (tmp_path / "paper-study2-study2.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    assert (tmp_path / "paper-study2-study2.pdf").read_bytes()[:5] == b"%PDF-"
+def test_every_K_can_be_seen_where_the_errors_are_equal_or_zero(runs, tmp_path) -> None:
+    """K = 3, 5 and 7 of Study 2 solve every sampling time: their errors are equal, at rounding level or exactly 0.
+    Each is drawn on a row of its own, so that none hides another; rounding noise is not drawn as values."""
+    record = read_run(runs["study2"])
+    logged = {K: [m["e_norm"] for m in record.messages[f"/K{K}/mpc/error"]] for K in (1, 2, 3, 5, 7)}
+    assert logged[3] == logged[5] == logged[7] and max(logged[7]) < FLOOR and 0 in logged[7]
+    ax_e = make_figures([runs["study2"]])["paper-study2-study2"].axes[1]
+    last = {K: _series(ax_e, f"K = {K}").get_ydata()[-1] for K in logged}
+    assert len(set(last.values())) == len(last)  # every K at a height of its own at the last t
+    # the variational GNE: Josephy-Newton solves its affine VI in one step, the errors are rounding noise
+    simulate(load_config(CONFIGS / "variational_gne.yaml", {"run.steps": 8}), out=tmp_path / "vgne")
+    vgne = read_run(tmp_path / "vgne")
+    ax_e = make_figures([tmp_path / "vgne"])["variational-gne-study2"].axes[1]
+    for K in (1, 2, 5):
+        values = [m["e_norm"] for m in vgne.messages[f"/K{K}/mpc/error"]]
+        assert max(values) < FLOOR and len(set(values)) > 1  # noise in the log ...
+        assert len(set(_series(ax_e, f"K = {K}").get_ydata())) == 1  # ... a flat row in the figure
+
+
+def test_legends_are_outside_the_data_and_inside_the_figure(runs) -> None:
+    for stem, fig in make_figures([runs["clean"], runs["noisy"], runs["study2"], runs["study3"]]).items():
+        fig.canvas.draw()
+        renderer = fig.canvas.get_renderer()
+        page = fig.bbox
+        for ax in fig.axes:
+            legend = ax.get_legend()
+            assert legend is not None, stem
+            box, data = legend.get_window_extent(renderer), ax.get_window_extent(renderer)
+            assert box.y1 <= data.y0, stem  # below the panel
+            assert page.x0 <= box.x0 and box.x1 <= page.x1 and page.y0 <= box.y0, stem  # not cut off
+
+
+def test_figures_are_300_dpi_at_the_papers_column_width_with_embedded_fonts(runs, tmp_path: Path) -> None:
+    from PIL import Image
+
+    written = write_figures([runs["clean"], runs["study2"], runs["study3"]], tmp_path, ["png", "pdf"])
+    pngs = [p for p in written if p.suffix == ".png"]
+    assert len(pngs) == 3
+    for png in pngs:
+        image = Image.open(png)
+        assert image.size[0] == round(3.5 * 300)  # IEEEtran's column, 3.5 in, at 300 dpi
+        assert image.info["dpi"] == pytest.approx((300, 300), abs=0.01)
+    for pdf in (p for p in written if p.suffix == ".pdf"):
+        data = pdf.read_bytes()
+        assert data[:5] == b"%PDF-"
+        assert b"/FontFile2" in data  # TrueType fonts embedded (Type 42) ...
+        assert b"/Type3" not in data and b"/Subtype /Type3" not in data  # ... not Type 3 bitmaps
+
+
+def _synthetic_loop(path: Path, kind: str, marks: bool) -> None:
+    """A closed-loop log with failed and fallback sampling times, as the closed loop records them."""
+    from gnerun.log.mcap_log import RunLog
+    from gnerun.log.messages import MpcError, MpcState
+
+    config = f"name: marks\nsolver: {{kind: {kind}}}\ngame: {{kind: dynamic, states: [x1, x2], agents: [{{name: a}}, " \
+             "{name: b}]}\n"
+    status = {2: "singular_jacobian", 5: "diverged"}
+    with RunLog(path, config_yaml=config, metadata={"version": "0", "log_time": "simulated"}) as log:
+        for K in (1, 3):
+            for t in range(8):
+                extra = {"status": status.get(t, "converged"), "fallback": t == 4} if marks else {}
+                log.write(f"/K{K}/mpc/state", MpcState(t=t, x=[1.0 / (t + 1), 0.5], u=[0.1, 0.2], **extra),
+                          log_time=t * 10**9)
+                e = 10.0 ** -t if t < 6 else 0.0
+                log.write(f"/K{K}/mpc/error", MpcError(t=t, e_norm=e * K, e_norm_agent={"a": e, "b": e / 2}),
+                          log_time=t * 10**9)
+
+
+@pytest.mark.parametrize("marks", [True, False], ids=["recorded", "not recorded"])
+def test_failed_and_fallback_steps_are_marked(tmp_path: Path, marks: bool) -> None:
+    _synthetic_loop(tmp_path / "loop.mcap", "ssn", marks)
+    _synthetic_loop(tmp_path / "dist.mcap", "distributed", marks)
+    figures = make_figures([tmp_path / "loop.mcap", tmp_path / "dist.mcap"])
+    ax_x, ax_e = figures["marks-study2"].axes
+    labels = {ln.get_label(): ln for ln in ax_e.get_lines()}
+    if not marks:  # logs that do not record statuses (earlier versions): nothing is marked
+        assert "failed step" not in labels and not any(p.get_label() == "failed step" for p in ax_x.patches)
+        return
+    failed = [ln for ln in ax_e.get_lines() if ln.get_label() == "failed step"]
+    fallback = [ln for ln in ax_e.get_lines() if ln.get_label() == "fallback: iterate not applied"]
+    assert len(failed) == len(fallback) == 2  # on each K's curve
+    for ln in failed:
+        np.testing.assert_array_equal(ln.get_xdata(), [2, 5])
+    for ln, K in zip(fallback, (1, 3), strict=True):
+        np.testing.assert_array_equal(ln.get_xdata(), [4])
+        assert ln.get_ydata()[0] == pytest.approx(K * 1e-4)  # at the K's error at t = 4
+    legend = [t.get_text() for t in ax_e.get_legend().get_texts()]
+    assert "failed step" in legend and "fallback: iterate not applied" in legend
+    # the states' panel and Study 3's panels (one K each) shade the sampling times
+    for ax in (ax_x, *figures["marks-study3"].axes):
+        steps = [p for p in ax.patches if p.get_gid() != "floor band"]
+        assert sorted(round(p.get_x() + p.get_width() / 2) for p in steps) == [2, 4, 5]
+        assert {p.get_label() for p in ax.patches} >= {"failed step", "fallback: iterate not applied"}
 
 
 def _truncated(run: Path, tmp_path: Path, fraction: float) -> Path:

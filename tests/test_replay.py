@@ -18,6 +18,7 @@ from gnerun.language.config import load_config
 from gnerun.log.mcap_log import read_run
 from gnerun.runs.closed_loop import simulate
 from gnerun.runs.solving import solve
+from gnerun.view.figures import FLOOR
 from gnerun.view.replay import PALETTE, save, serve_command, vulkan_available
 
 from .conftest import CONFIGS, gnerun_command, run_cli
@@ -49,6 +50,23 @@ def _series(rrd: Path) -> dict[str, dict[str, list]]:
     return out
 
 
+def _check_log10(got: dict[str, list], timeline: str, logged: list[tuple[int, float | None]]) -> float | None:
+    """A figure view's series: log10 of each value at or above the floor, one row below it for the values under
+    the floor (exact zeros included), nothing where a value is missing. Returns the row."""
+    drawn = dict(zip(got[timeline], got["value"], strict=True))
+    rows = set()
+    for at, v in logged:
+        if v is None:
+            assert at not in drawn
+        elif v >= FLOOR:
+            assert drawn[at] == pytest.approx(math.log10(v), abs=1e-12)
+        else:
+            assert drawn[at] < math.log10(FLOOR)
+            rows.add(drawn[at])
+    assert len(rows) <= 1
+    return rows.pop() if rows else None
+
+
 def test_recording_holds_the_logged_values(runs, tmp_path: Path) -> None:
     rrd = save([runs["solve"], runs["loop"], runs["dist"]], tmp_path / "all.rrd")
     reader = RrdReader(rrd)
@@ -60,9 +78,8 @@ def test_recording_holds_the_logged_values(runs, tmp_path: Path) -> None:
     s = series["/paper-study1-disturbed/solve/error_norm"]
     assert s["iteration"] == [m["k"] for m in iterates]
     assert s["value"] == [m["error_norm"] for m in iterates]
-    lg = series["/paper-study1-disturbed/solve/log10_error_norm"]
-    np.testing.assert_allclose(lg["value"], [math.log10(m["error_norm"] or 1e-17) for m in iterates
-                                             if m["error_norm"] is not None])
+    _check_log10(series["/paper-study1-disturbed/solve/log10_error_norm"], "iteration",
+                 [(m["k"], m.get("error_norm")) for m in iterates])
     # Fig. 2: x(t) per state and e(t) per K on the t timeline
     loop = read_run(runs["loop"])
     for K in (1, 3):
@@ -74,6 +91,7 @@ def test_recording_holds_the_logged_values(runs, tmp_path: Path) -> None:
         assert u["value"] == [m["u"][1] for m in states if "u" in m]
         errors = loop.messages[f"/K{K}/mpc/error"]
         assert series[f"/paper-study2/K{K}/e_norm"]["value"] == [m["e_norm"] for m in errors]
+        _check_log10(series[f"/paper-study2/K{K}/log10_e_norm"], "t", [(m["t"], m.get("e_norm")) for m in errors])
     # Fig. 3: per-agent errors of the distributed run
     dist = read_run(runs["dist"])
     for K in (2, 5):
@@ -174,8 +192,13 @@ def _blueprint_text(rrd: Path) -> str:
 def test_blueprint_has_one_view_per_paper_figure(runs, tmp_path: Path) -> None:
     rrd = save([runs["solve"], runs["loop"], runs["dist"]], tmp_path / "all.rrd")
     text = _blueprint_text(rrd)
-    for name in ("Fig. 1: log10 ||z^k - z*|| vs k", "Fig. 2a: x(t)", "Fig. 2b: log10 ||e(t)|| per K",
-                 "Fig. 3: log10 ||e_i(t)||, paper-study3: K = 2", "Fig. 3: log10 ||e_i(t)||, paper-study3: K = 5"):
+    # Rerun's views have no axis titles: every view's name says what its y and x axes show
+    for name in ("Fig. 1: paper-study1-disturbed (jacobian noise, scale 0.001): log10 ||z^k - z*|| (y) against "
+                 "iteration k (x)",
+                 "Fig. 2a: x(t) (y) against sampling time t (x), K = 3",
+                 "Fig. 2b: log10 ||e(t)|| (y) against sampling time t (x), per K",
+                 "Fig. 3: log10 ||e_i(t)|| (y) against sampling time t (x), paper-study3: K = 2",
+                 "Fig. 3: log10 ||e_i(t)|| (y) against sampling time t (x), paper-study3: K = 5"):
         assert name in text
     assert "TimePanelBlueprint:timeline [['iteration']]" in text  # the first figure's timeline
     only_loop = _blueprint_text(save([runs["loop"]], tmp_path / "loop.rrd"))
@@ -184,25 +207,70 @@ def test_blueprint_has_one_view_per_paper_figure(runs, tmp_path: Path) -> None:
     assert "paper-study2/K3/x/x1" in only_loop and "paper-study2/K1/log10_e_norm" in only_loop
 
 
+class _Sink:  # a recording stream that keeps nothing
+    def __getattr__(self, name):
+        return lambda *a, **k: None
+
+
 def test_figure_views_fix_their_axes_to_the_data(runs) -> None:
-    """The views' ranges hold every logged value: a viewer opening the recording shows all of it."""
+    """The views' ranges hold every value drawn: a viewer opening the recording shows all of it."""
     from gnerun.view.replay import record
 
-    class Sink:  # a recording stream that keeps nothing
-        def __getattr__(self, name):
-            return lambda *a, **k: None
-
-    contents = record([runs["loop"]], Sink())
+    contents = record([runs["loop"]], _Sink())
     loop = read_run(runs["loop"])
-    # exact zeros (K = 3 reaches z* bit for bit) at log10 1e-17, as in the matplotlib figures
-    e = [math.log10(m["e_norm"] or 1e-17) for K in (1, 3) for m in loop.messages[f"/K{K}/mpc/error"]
-         if m["e_norm"] is not None]
-    fig2_e = contents.views["fig2_e"]
-    assert fig2_e.y == [min(e), max(e)]
-    assert fig2_e.t == [0, loop.messages["/K1/mpc/error"][-1]["t"]]
+    e = [m["e_norm"] for K in (1, 3) for m in loop.messages[f"/K{K}/mpc/error"]]
+    lo, hi = contents.views["fig2_e"].y
+    assert lo < math.log10(FLOOR) and hi >= math.log10(max(e))  # the band under the floor, and every value above
+    assert contents.views["fig2_e"].floor in contents.views["fig2_e"].entities  # with the floor line
+    assert contents.views["fig2_e"].t == [0, loop.messages["/K1/mpc/error"][-1]["t"]]
     x = [v for m in loop.messages["/K3/mpc/state"] for v in m["x"]]  # Fig. 2a: the largest K
     assert contents.views["fig2_x"].y == [min(x), max(x)]
     assert contents.views["fig2_x"].entities == [f"paper-study2/K3/x/{s}" for s in ("x1", "x2", "x3")]
+
+
+def test_compared_views_share_their_y_range_and_solves_stand_side_by_side(runs, tmp_path) -> None:
+    from gnerun.view.replay import figure_views, record
+
+    clean = tmp_path / "clean"
+    solve(load_config(CONFIGS / "paper_study1.yaml"), out=clean)
+    contents = record([clean, runs["solve"], runs["dist"]], _Sink())
+    fig1 = [key for key in contents.views if key.startswith("fig1:")]
+    fig3 = [key for key in contents.views if key.startswith("fig3:")]
+    assert len(fig1) == 2 and len(fig3) == 2  # a view per solve (clean, disturbed) and per K
+    for keys in (fig1, fig3):
+        assert len({tuple(contents.views[k].y) for k in keys}) == 1
+    fig_1 = figure_views(contents)[0]
+    assert fig_1.slug == "fig1" and len(fig_1.container.contents) == 2  # side by side in one container
+
+
+def test_every_K_has_a_row_of_its_own_below_the_floor(tmp_path) -> None:
+    """K = 3 and 7 solve every sampling time of Study 2 (equal errors, at rounding level or 0): neither hides."""
+    from gnerun.view.replay import save
+
+    simulate(load_config(CONFIGS / "paper_study2.yaml", {"run.steps": 6, "run.K": [3, 7]}), out=tmp_path / "s2")
+    errors = {K: read_run(tmp_path / "s2").messages[f"/K{K}/mpc/error"] for K in (3, 7)}
+    assert [m["e_norm"] for m in errors[3]] == [m["e_norm"] for m in errors[7]]
+    series = _series(save([tmp_path / "s2"], tmp_path / "s2.rrd"))
+    rows = {K: _check_log10(series[f"/paper-study2/K{K}/log10_e_norm"], "t", [(m["t"], m["e_norm"])
+                                                                              for m in errors[K]]) for K in (3, 7)}
+    assert None not in rows.values() and rows[3] != rows[7]
+
+
+def test_failed_and_fallback_steps_are_marked(tmp_path) -> None:
+    from .test_figures import _synthetic_loop
+
+    _synthetic_loop(tmp_path / "loop.mcap", "ssn", True)
+    _synthetic_loop(tmp_path / "dist.mcap", "distributed", True)
+    series = _series(save([tmp_path / "loop.mcap", tmp_path / "dist.mcap"], tmp_path / "marks.rrd"))
+    for K in (1, 3):
+        failed, fallback = series[f"/marks/K{K}/failed_steps"], series[f"/marks/K{K}/fallback_steps"]
+        assert failed["t"] == [2, 5] and fallback["t"] == [4]
+        drawn = dict(zip(series[f"/marks/K{K}/log10_e_norm"]["t"], series[f"/marks/K{K}/log10_e_norm"]["value"],
+                         strict=True))
+        assert failed["value"] == [drawn[2], drawn[5]]  # on the K's curve
+        assert series[f"/marks_2/K{K}/failed_steps"]["t"] == [2, 5]  # the distributed run: along its view's top
+    _synthetic_loop(tmp_path / "old.mcap", "ssn", False)  # a log without statuses: nothing is marked
+    assert not any(k.endswith("_steps") for k in _series(save([tmp_path / "old.mcap"], tmp_path / "old.rrd")))
 
 
 # headless screenshots -----------------------------------------------------------------------------

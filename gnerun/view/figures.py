@@ -1,21 +1,28 @@
 """Paper-style figures from run logs alone (`gnerun figures`).
 
 - Study 1 (solve runs): ||z^k - z*|| against k on a log scale, one panel per run, side by side (the clean
-  and the disturbed solve of Fig. 1).
+  and the disturbed solve of Fig. 1), on one y range.
 - Study 2 (closed loops): x(t) of the loop with the largest K, and ||e(t)|| per K on a log scale (Fig. 2).
-- Study 3 (distributed closed loops): ||e_i(t)|| per agent, one panel per K (Fig. 3).
+- Study 3 (distributed closed loops): ||e_i(t)|| per agent, one panel per K, on one y range (Fig. 3).
 - Games with positions (closed loops): the paths in the plane and the pairwise distances against the required
   ones (:mod:`gnerun.view.paths`).
 
 Everything plotted is read from the MCAP log (:func:`gnerun.log.mcap_log.read_run`), so any run from any
-machine, finished or killed, can be drawn without solving again. Values that are null in the log, or
-zero (no point on a log axis), are left as gaps.
+machine, finished or killed, written by this version or an earlier one, can be drawn without solving again.
+
+Errors below :data:`FLOOR` (rounding level, exact zeros included) are not drawn as values: a log axis would
+turn rounding noise into a zig-zag and put every exact zero on one line, hiding all but the last series.
+They are drawn in a grey band under the axis, each series on a row of its own. Missing values (z* unknown)
+are gaps. Failed sampling times (a failure status) and fallback steps (the budgeted iterate not applied)
+are marked where the log records them. Figures are one column of the paper wide (IEEEtran, 3.5 in; wider
+for more than two panels), PNGs at 300 dpi, PDFs with embedded TrueType fonts.
 """
 
 from __future__ import annotations
 
 import math
 import re
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..log.mcap_log import RunRecord, read_run
@@ -23,23 +30,17 @@ from .paths import has_positions, paths_figure
 
 _K_TOPIC = re.compile(r"^/K(\d+)/mpc/(state|error|iterate)$")
 
-
-# An error of exactly 0 (the iterate is z* to the last bit) has no logarithm: it is drawn at this value,
-# below any rounding-level error, and the axes say so.
-ZERO_AT = 1e-17
-
-
-def _log_values(values: list[float | None]) -> list[float]:
-    return [ZERO_AT if v == 0 else v if v is not None and v > 0 and math.isfinite(v) else math.nan for v in values]
-
-
-def _note_zeros(ax, values: list[float | None]) -> None:
-    if any(v == 0 for v in values) and not getattr(ax, "_gnerun_zero_note", False):
-        # room below the zeros' line for the note
-        ax.set_ylim(bottom=ZERO_AT / 30)
-        ax.text(0.99, 0.01, f"exact 0 drawn at {ZERO_AT:.0e}", transform=ax.transAxes, ha="right", va="bottom",
-                fontsize=6, color="0.4")
-        ax._gnerun_zero_note = True
+FLOOR = 1e-13  # errors below this are rounding level (about 500 machine epsilons): drawn in the band
+ROW_DECADES = 0.5  # the band's rows are this far apart (in decades)
+COLUMN_WIDTH = 3.5  # inches: the paper's column (IEEEtran \columnwidth)
+TEXT_WIDTH = 7.16  # inches: both columns (\textwidth)
+PANEL_HEIGHT = 1.6  # inches, without the legend
+DPI = 300
+MARKERS = "osD^vPX*ph"
+# statuses of a sampling time that are not failures; anything else (singular_jacobian, diverged, ...) is one
+NOT_FAILED = frozenset({"converged", "incomplete", "max_iter", "running"})
+FAILED_LABEL, FALLBACK_LABEL = "failed step", "fallback: iterate not applied"
+MARK_LABELS = (FAILED_LABEL, FALLBACK_LABEL)
 
 
 def run_name(run: RunRecord) -> str:
@@ -58,6 +59,15 @@ def disturbance(run: RunRecord) -> str:
     return "undisturbed" if kind == "none" else f"{kind.replace('_', ' ')}, scale {d.get('scale', 0):g}"
 
 
+def final_status(run: RunRecord) -> str | None:
+    """The status a solve ended with, from its last ``status ...`` entry in /log (None if it has none)."""
+    for entry in reversed(run.messages.get("/log", [])):
+        text = entry.get("message", "")
+        if text.startswith("status "):
+            return text.split()[1].rstrip(":")
+    return None
+
+
 def closed_loops(run: RunRecord) -> dict[int, dict[str, list[dict]]]:
     """Per K: the messages of /K<k>/mpc/state, /error, /iterate."""
     out: dict[int, dict[str, list[dict]]] = {}
@@ -68,84 +78,329 @@ def closed_loops(run: RunRecord) -> dict[int, dict[str, list[dict]]]:
     return dict(sorted(out.items()))
 
 
+def failed_steps(states: list[dict]) -> list[int]:
+    """Sampling times whose status is a failure (logs that do not record statuses have none; the last state, which
+    no solver step produced, has an empty one)."""
+    return [m["t"] for m in states if m.get("status") and m["status"] not in NOT_FAILED]
+
+
+def fallback_steps(states: list[dict]) -> list[int]:
+    """Sampling times whose budgeted iterate was not applied (the closed-loop safeguard)."""
+    return [m["t"] for m in states if m.get("fallback")]
+
+
+def agent_names(run: RunRecord, errors: list[dict]) -> list[str]:
+    """The agents of a closed loop's per-agent errors, in the config's order (a missing value is left out of a
+    message, so no single message need name them all)."""
+    seen = dict.fromkeys(k for m in errors for k in (m.get("e_norm_agent") or {}))
+    configured = [a.get("name") for a in (run.config.get("game") or {}).get("agents") or []]
+    return [a for a in configured if a in seen] + [a for a in seen if a not in configured]
+
+
+def number(v: object) -> float:
+    """A logged value as a float (NaN where it is missing)."""
+    return float(v) if isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) else math.nan
+
+
+def below_floor(v: float) -> bool:
+    return 0 <= v < FLOOR
+
+
+# ---------------------------------------------------------------------------------------------
+# Log axes with a floor band
+# ---------------------------------------------------------------------------------------------
+
+
+@dataclass
+class _Series:
+    x: list[float]
+    y: list[float]  # as logged (NaN where missing)
+    style: dict
+    failed: list[int] = field(default_factory=list)  # x values marked as failed steps
+    fallback: list[int] = field(default_factory=list)
+
+
+@dataclass(frozen=True)
+class Band:
+    """The y range of a log axis with the floor band: ``bottom`` .. ``top``, rows ``spacing`` decades apart."""
+
+    bottom: float
+    top: float
+    spacing: float
+    rows: int
+
+    def row(self, i: int) -> float:
+        return FLOOR * 10 ** (-(i + 1) * self.spacing)
+
+
+def band_for(top: float, rows: int) -> Band:
+    """A band a fixed share of the axis high (more for more rows), so that its rows stay apart."""
+    above = max(math.log10(top / FLOOR), 1.0)
+    share = min(0.35, 0.1 + 0.045 * rows)
+    decades = above * share / (1 - share)
+    return Band(FLOOR * 10 ** -decades, top, decades / (rows + 1), rows)
+
+
+class FloorAxis:
+    """Series on a log y axis whose values below :data:`FLOOR` are drawn in a band under the floor, one row per
+    series, with a legend entry that says so."""
+
+    def __init__(self, ax, what: str = "series") -> None:
+        self.ax = ax
+        self.what = what  # the legend's note: "below 1e-13: a row per <what>"
+        self.series: list[_Series] = []
+        self.band: Band | None = None
+
+    def add(self, x: list[float], y: list[float], *, failed: list[int] = (), fallback: list[int] = (),
+            **style) -> None:
+        self.series.append(_Series(list(x), [number(v) for v in y], style, list(failed), list(fallback)))
+
+    def has_band(self) -> bool:
+        return any(below_floor(v) for s in self.series for v in s.y)
+
+    def top(self) -> float | None:
+        ys = [v for s in self.series for v in s.y if v >= FLOOR]
+        return max(ys) * 10 if ys else None
+
+    def bottom(self) -> float | None:
+        ys = [v for s in self.series for v in s.y if v >= FLOOR]
+        return min(ys) / 3 if ys else None
+
+    def plotted(self, i: int) -> list[float]:
+        """Series i as drawn: values, its row for values below the floor, NaN where missing or negative."""
+        row = self.band.row(i) if self.band else math.nan
+        return [v if v >= FLOOR else row if below_floor(v) else math.nan for v in self.series[i].y]
+
+    def draw(self, band: Band | None | bool = True, limits: tuple[float, float] | None = None) -> None:
+        """Draw the series. ``band``: the shared band of panels on one y range (True: this axis' own, when it
+        has values below the floor); ``limits``: the shared y range without a band."""
+        from matplotlib.ticker import FixedLocator, FuncFormatter, NullLocator
+
+        ax = self.ax
+        if band is True:
+            band = band_for(self.top() or FLOOR * 30, len(self.series)) if self.has_band() else None
+        self.band = band or None
+        if self.band is None and limits is None and self.top() is not None:
+            limits = (self.bottom(), self.top())
+        if self.band is not None:
+            limits = (self.band.bottom, self.band.top)
+        ax.set_yscale("log")
+        for i, s in enumerate(self.series):
+            y = self.plotted(i)
+            ax.plot(s.x, y, marker=MARKERS[i % len(MARKERS)], mfc="none", **s.style)
+            top = limits[1] / 1.6 if limits else FLOOR
+            for marks, marker, label in ((s.failed, "x", FAILED_LABEL), (s.fallback, "v", FALLBACK_LABEL)):
+                if marks:
+                    at = dict(zip(s.x, y, strict=True))
+                    where = [at.get(t, math.nan) for t in marks]
+                    ax.plot(marks, [v if v == v else top for v in where], linestyle="none", marker=marker, ms=5,
+                            mew=1.0, color="black", mfc="none" if marker == "v" else "black", label=label, zorder=5)
+        if limits:
+            ax.set_ylim(*limits)
+        if self.band is None:
+            return
+        b = self.band
+        ax.axhspan(b.bottom, FLOOR, color="0.9", zorder=0, lw=0, gid="floor band")
+        ax.axhline(FLOOR, color="0.55", lw=0.6, ls="--", zorder=1)
+        # ticks: decades from the floor up (at most 5 labels), and the band labelled as a band
+        lo, hi = round(math.log10(FLOOR)), math.floor(math.log10(b.top))
+        stride = max(1, math.ceil((hi - lo) / 4))
+        decades = [10.0 ** e for e in range(lo, hi + 1, stride)]
+        middle = math.sqrt(b.bottom * FLOOR)
+        ax.yaxis.set_major_locator(FixedLocator([middle, *decades]))
+        ax.yaxis.set_major_formatter(FuncFormatter(
+            lambda v, _: f"<$10^{{{lo}}}$" if v == middle else f"$10^{{{round(math.log10(v))}}}$"))
+        ax.yaxis.set_minor_locator(NullLocator())
+
+
+    def notes(self) -> list:
+        """The band's legend entry (the note that says what the band holds), if it has one."""
+        from matplotlib.patches import Patch
+
+        if self.band is None:
+            return []
+        text = f"< {FLOOR:.0e}" + (f": a row per {self.what}" if len(self.series) > 1 else " (rounding level)")
+        return [Patch(facecolor="0.9", edgecolor="0.55", lw=0.5, ls="--", label=text)]
+
+
+def share_floor(axes: list[FloorAxis]) -> None:
+    """Draw panels on one y range (the same band and limits)."""
+    tops = [t for a in axes if (t := a.top()) is not None]
+    bottoms = [b for a in axes if (b := a.bottom()) is not None]
+    if any(a.has_band() for a in axes):
+        band = band_for(max(tops, default=FLOOR * 30), max(len(a.series) for a in axes))
+        for a in axes:
+            a.draw(band)
+    else:
+        limits = (min(bottoms), max(tops)) if tops else None
+        for a in axes:
+            a.draw(None, limits)
+
+
+# ---------------------------------------------------------------------------------------------
+# Layout
+# ---------------------------------------------------------------------------------------------
+
+
 def _style() -> None:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    plt.rcParams.update({"font.size": 9, "axes.grid": True, "grid.alpha": 0.3, "lines.linewidth": 1.4,
-                         "legend.fontsize": 8, "figure.dpi": 110, "savefig.bbox": "tight"})
+    plt.rcParams.update({
+        "font.size": 7, "axes.titlesize": 7, "axes.labelsize": 7, "xtick.labelsize": 6, "ytick.labelsize": 6,
+        "legend.fontsize": 6, "axes.grid": True, "grid.alpha": 0.3, "grid.linewidth": 0.4, "axes.linewidth": 0.6,
+        "lines.linewidth": 1.0, "lines.markersize": 3.0, "lines.markeredgewidth": 0.7, "xtick.major.width": 0.6,
+        "ytick.major.width": 0.6, "figure.dpi": DPI, "savefig.dpi": DPI,
+        # fonts embedded as TrueType (Type 42), not Type 3: what journals ask for
+        "pdf.fonttype": 42, "ps.fonttype": 42,
+    })
+
+
+def _panels(n: int):
+    """A figure of n panels, one column of the paper wide for up to two panels, both columns for more (four per
+    row); the legends go below the panels (:func:`_legend`)."""
+    import matplotlib.pyplot as plt
+
+    cols = min(n, 4) if n > 2 else n
+    rows = math.ceil(n / cols)
+    width = COLUMN_WIDTH if cols <= 2 else TEXT_WIDTH
+    fig, grid = plt.subplots(rows, cols, figsize=(width, (PANEL_HEIGHT + 0.75) * rows), squeeze=False,
+                             layout="constrained")
+    axes = [grid[i // cols][i % cols] for i in range(n)]
+    for ax in grid.flat[n:]:
+        ax.set_visible(False)
+    return fig, axes, width / cols
+
+
+def _legend(ax, width: float, notes: list = ()) -> None:
+    """The legend of ``ax`` below it (under its x label: outside the data), in as many columns as fit its
+    panel's ``width`` (inches); ``notes`` (the floor band's entry) last."""
+    from matplotlib.transforms import offset_copy
+
+    handles, labels = ax.get_legend_handles_labels()
+    found = dict(zip(labels, handles, strict=True))
+    # the series first, then the marks of failed and fallback steps, then the notes
+    entries = {k: v for k, v in found.items() if k not in MARK_LABELS}
+    entries.update({k: found[k] for k in MARK_LABELS if k in found})
+    entries.update({h.get_label(): h for h in notes})
+    if not entries:
+        return
+    # below the tick labels and the x label (in points, whatever the panel's height)
+    anchor = offset_copy(ax.transAxes, fig=ax.figure, y=-24, units="points")
+    renderer = ax.figure.canvas.get_renderer()
+    for column in range(len(entries), 0, -1):
+        legend = ax.legend(list(entries.values()), list(entries), loc="upper center", bbox_to_anchor=(0.5, 0),
+                           bbox_transform=anchor, ncol=column, frameon=False, handlelength=1.6, handletextpad=0.4,
+                           columnspacing=0.9, borderaxespad=0)
+        if column == 1 or legend.get_window_extent(renderer).width <= 0.97 * width * ax.figure.dpi:
+            return
+        legend.remove()
+
+
+def _integer_ticks(ax) -> None:
+    from matplotlib.ticker import MaxNLocator
+
+    ax.xaxis.set_major_locator(MaxNLocator(nbins=5, integer=True))
+
+
+def _mark_steps(ax, failed: list[int], fallback: list[int]) -> None:
+    """Failed and fallback sampling times of a panel of one K, as shaded columns."""
+    for i, t in enumerate(failed):
+        ax.axvspan(t - 0.5, t + 0.5, color="0.6", alpha=0.35, lw=0, zorder=0, label=FAILED_LABEL if i == 0 else None)
+    for i, t in enumerate(fallback):
+        ax.axvspan(t - 0.5, t + 0.5, facecolor="none", edgecolor="0.4", hatch="////", lw=0, zorder=0,
+                   label=FALLBACK_LABEL if i == 0 else None)
+
+
+# ---------------------------------------------------------------------------------------------
+# The paper's figures
+# ---------------------------------------------------------------------------------------------
 
 
 def study1_figure(runs: list[RunRecord]):
-    """||z^k - z*|| vs k, one panel per solve run."""
-    import matplotlib.pyplot as plt
-    from matplotlib.ticker import MaxNLocator
-
-    fig, axes = plt.subplots(1, len(runs), figsize=(3.4 * len(runs), 2.8), squeeze=False, sharey=True)
-    for ax, run, label in zip(axes[0], runs, "abcdefgh", strict=False):
+    """||z^k - z*|| vs k, one panel per solve run, on one y range."""
+    fig, axes, width = _panels(len(runs))
+    floors = []
+    for ax, run, label in zip(axes, runs, "abcdefghijklmnop", strict=False):
         its = run.messages.get("/solve/iterate", [])
-        values = [m.get("error_norm") for m in its]
-        ax.semilogy([m["k"] for m in its], _log_values(values), "o-", ms=3, label=disturbance(run))
-        _note_zeros(ax, values)
+        status = final_status(run)
+        text = disturbance(run) + (f"; {status}" if status and status != "converged" else "")
+        floor = FloorAxis(ax, "run")
+        floor.add([m["k"] for m in its], [m.get("error_norm") for m in its], label=text or run_name(run),
+                   color="C0")
+        floors.append(floor)
         ax.set_xlabel("iteration k")
-        ax.xaxis.set_major_locator(MaxNLocator(integer=True))
-        ax.set_title(f"({label}) {run_name(run)}", fontsize=9)
-        ax.legend(loc="upper right")
-    axes[0][0].set_ylabel(r"$\|z^k - z^*\|$")
-    fig.tight_layout()
+        _integer_ticks(ax)
+        ax.set_title(f"({label}) {run_name(run)}")
+    share_floor(floors)
+    for ax in axes[1:]:
+        ax.sharey(axes[0])
+        ax.tick_params(labelleft=False)
+    axes[0].set_ylabel(r"$\|z^k - z^*\|$")
+    for ax, floor in zip(axes, floors, strict=True):
+        _legend(ax, width, floor.notes())
     return fig
 
 
 def study2_figure(run: RunRecord):
     """x(t) of the loop with the largest K, and ||e(t)|| per K."""
-    import matplotlib.pyplot as plt
-
     loops = closed_loops(run)
-    fig, (ax_x, ax_e) = plt.subplots(1, 2, figsize=(7.0, 2.8), sharex=True)  # e(t) = 0 leaves no point
+    fig, (ax_x, ax_e), width = _panels(2)
     K_max = max(loops)
     states = loops[K_max].get("state", [])
     names = (run.config.get("game") or {}).get("states") or []
-    nx = len(states[0]["x"]) if states else 0
+    nx = max((len(m.get("x") or []) for m in states), default=0)
+    t = [m["t"] for m in states]
     for j in range(nx):
-        ax_x.plot([m["t"] for m in states], [m["x"][j] if m["x"][j] is not None else math.nan for m in states],
+        ax_x.plot(t, [number((m.get("x") or [math.nan] * nx)[j]) for m in states],
                   label=names[j] if j < len(names) else f"x{j + 1}")
+    _mark_steps(ax_x, failed_steps(states), fallback_steps(states))
     ax_x.set_xlabel("t")
     ax_x.set_ylabel("x(t)")
-    ax_x.set_title(f"(a) x(t), K = {K_max}", fontsize=9)
-    ax_x.legend(loc="best")
-    for K, topics in loops.items():
+    ax_x.set_title(f"(a) x(t), K = {K_max}")
+    _integer_ticks(ax_x)
+    floor = FloorAxis(ax_e, "K")
+    for i, (K, topics) in enumerate(loops.items()):
         errors = topics.get("error", [])
-        values = [m.get("e_norm") for m in errors]
-        ax_e.semilogy([m["t"] for m in errors], _log_values(values), "o-", ms=2.5, label=f"K = {K}")
-        _note_zeros(ax_e, values)
+        states_K = topics.get("state", [])
+        floor.add([m["t"] for m in errors], [m.get("e_norm") for m in errors], failed=failed_steps(states_K),
+                  fallback=fallback_steps(states_K), label=f"K = {K}", color=f"C{i % 10}")
+    floor.draw()
     ax_e.set_xlabel("t")
     ax_e.set_ylabel(r"$\|e(t)\|$")
-    ax_e.set_title("(b) tracking error", fontsize=9)
-    ax_e.legend(loc="best")
-    fig.tight_layout()
+    ax_e.set_title("(b) tracking error")
+    _integer_ticks(ax_e)
+    _legend(ax_x, width)
+    _legend(ax_e, width, floor.notes())
     return fig
 
 
 def study3_figure(run: RunRecord):
-    """||e_i(t)|| per agent, one panel per K."""
-    import matplotlib.pyplot as plt
-
+    """||e_i(t)|| per agent, one panel per K, on one y range."""
     loops = closed_loops(run)
-    fig, axes = plt.subplots(1, len(loops), figsize=(3.4 * len(loops), 2.8), squeeze=False, sharey=True)
-    for ax, (K, topics), label in zip(axes[0], loops.items(), "abcdefgh", strict=False):
+    fig, axes, width = _panels(len(loops))
+    floors = []
+    for ax, (K, topics), label in zip(axes, loops.items(), "abcdefghijklmnop", strict=False):
         errors = topics.get("error", [])
-        agents = list(errors[0]["e_norm_agent"]) if errors else []
-        for agent in agents:
-            values = [m["e_norm_agent"].get(agent) for m in errors]
-            ax.semilogy([m["t"] for m in errors], _log_values(values), "o-", ms=2.5, label=agent)
-            _note_zeros(ax, values)
+        states = topics.get("state", [])
+        floor = FloorAxis(ax, "agent")
+        for i, agent in enumerate(agent_names(run, errors)):
+            floor.add([m["t"] for m in errors], [(m.get("e_norm_agent") or {}).get(agent) for m in errors],
+                      label=agent, color=f"C{i % 10}")
+        _mark_steps(ax, failed_steps(states), fallback_steps(states))
+        floors.append(floor)
         ax.set_xlabel("t")
-        ax.set_title(f"({label}) K = {K}", fontsize=9)
-        ax.legend(loc="best")
-    axes[0][0].set_ylabel(r"$\|e_i(t)\|$")
-    fig.tight_layout()
+        ax.set_title(f"({label}) K = {K}")
+        _integer_ticks(ax)
+    share_floor(floors)
+    for ax in axes[1:]:
+        ax.sharey(axes[0])
+        ax.tick_params(labelleft=False)
+    axes[0].set_ylabel(r"$\|e_i(t)\|$")
+    for ax, floor in zip(axes, floors, strict=True):
+        _legend(ax, width, floor.notes())
     return fig
 
 
@@ -202,44 +457,47 @@ def _seed_means(rows: list[dict], x_of, y_key: str) -> tuple[list[float], list[f
 def iss_figure(name: str, rows: list[dict], axes: list[str], scale_axis: str):
     """Asymptotic ||e|| against the disturbance scale on log-log axes, seeds as dots, their mean as a
     line, and the fitted slope (the ISS gain's order) in the legend."""
-    import matplotlib.pyplot as plt
-
     from ..runs.sweep import loglog_slope
 
-    fig, ax = plt.subplots(figsize=(4.2, 3.2))
-    for label, group in _groups(rows, axes, (scale_axis,)).items():
-        xs = [r[scale_axis] for r in group if r.get("status") != "error"]
-        ys = [r.get("asymptotic_e") for r in group if r.get("status") != "error"]
+    fig, (ax,), width = _panels(1)
+    floor = FloorAxis(ax, "group")
+    dots = []
+    for i, (label, group) in enumerate(_groups(rows, axes, (scale_axis,)).items()):
+        ok = [r for r in group if r.get("status") != "error"]
         mx, my = _seed_means(group, lambda r: r[scale_axis], "asymptotic_e")
         slope = loglog_slope(mx, my)
-        line, = ax.loglog(mx, _log_values(my), "o-", ms=3,
-                          label=(f"{label}: " if label else "mean over seeds: ")
-                          + (f"slope {slope:.3f}" if slope is not None else "no fit"))
-        ax.loglog(xs, _log_values(ys), ".", ms=3, alpha=0.35, color=line.get_color())
+        floor.add(mx, my, color=f"C{i % 10}", label=(f"{label}: " if label else "mean over seeds: ")
+                  + (f"slope {slope:.3f}" if slope is not None else "no fit"))
+        dots.append(([r[scale_axis] for r in ok], [number(r.get("asymptotic_e")) for r in ok], f"C{i % 10}"))
+    floor.draw()
+    for xs, ys, colour in dots:  # the seeds, where they are above the floor
+        ax.plot(xs, [y if y >= FLOOR else math.nan for y in ys], ".", ms=2.5, alpha=0.35, color=colour)
+    ax.set_xscale("log")
     ax.set_xlabel(f"disturbance scale ({scale_axis})")
     ax.set_ylabel(r"asymptotic $\|e(t)\|$ (mean, 2nd half)")
-    ax.set_title(f"{name}: error against disturbance", fontsize=9)
-    ax.legend(loc="upper left")
-    fig.tight_layout()
+    ax.set_title(f"{name}: error against disturbance")
+    _legend(ax, width, floor.notes())
     return fig
 
 
 def k_figure(name: str, rows: list[dict], axes: list[str]):
     """max_t ||e(t)|| against K (Theorem "bounded error"), mean over seeds."""
-    import matplotlib.pyplot as plt
-    from matplotlib.ticker import MaxNLocator
-
-    fig, ax = plt.subplots(figsize=(4.2, 3.2))
-    for label, group in _groups(rows, axes, ("run.K",)).items():
+    fig, (ax,), width = _panels(1)
+    floor = FloorAxis(ax, "line")
+    budgets = set()
+    for i, (label, group) in enumerate(_groups(rows, axes, ("run.K",)).items()):
         ks, ys = _seed_means(group, lambda r: r["K"], "max_e")
-        ax.semilogy(ks, _log_values(ys), "o-", ms=3, label=label or "max e")
-        _note_zeros(ax, ys)
+        budgets.update(ks)
+        floor.add(ks, ys, label=label or "max e", color=f"C{i % 10}")
+    floor.draw()
     ax.set_xlabel("K (solver iterations per sampling time)")
-    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+    if 0 < len(budgets) <= 12:  # every K of the sweep
+        ax.set_xticks(sorted(budgets))
+    else:
+        _integer_ticks(ax)
     ax.set_ylabel(r"$\max_t \|e(t)\|$")
-    ax.set_title(f"{name}: tracking error against K", fontsize=9)
-    ax.legend(loc="best")
-    fig.tight_layout()
+    ax.set_title(f"{name}: tracking error against K")
+    _legend(ax, width, floor.notes())
     return fig
 
 
@@ -277,7 +535,7 @@ def write_figures(paths: list[str | Path], out: str | Path, formats: list[str],
     for stem, fig in drawn.items():
         for fmt in formats:
             target = out / f"{stem}.{fmt}"
-            fig.savefig(target)
+            fig.savefig(target, dpi=DPI)
             written.append(target)
         plt.close(fig)
     return written

@@ -3,10 +3,15 @@
 Every run becomes a subtree named after its config: solves on the timeline ``iteration``
 (``<run>/solve/error_norm`` ...), closed loops on the timeline ``t`` (``<run>/K<k>/x/<state>``,
 ``<run>/K<k>/u/<input>``, ``<run>/K<k>/e_norm``, ``<run>/K<k>/e_agent/<agent>``), the ``/log`` text on the
-timeline ``log_time``, and the resolved config as a text document. Rerun's time-series view has no
-log axis, so every error and residual also has a ``log10_`` series. The blueprint has one tab per
-figure of the paper that the runs contain: Fig. 1 (||z^k - z*|| against k), Fig. 2 (x(t); ||e(t)|| per
-K), Fig. 3 (||e_i(t)|| per agent, per K), and tabs for the log and the configs.
+timeline of its run (``t`` or ``iteration``; ``log_time`` for logs of earlier versions, stamped with the wall
+clock), and the resolved config as a text document. Rerun's time-series view has no log axis, so every
+error and residual also has a ``log10_`` series; as in `gnerun figures`, values below
+:data:`figures.FLOOR` are drawn in a band under a floor line, one row per series. Failed and fallback
+sampling times are marked (``<run>/K<k>/failed_steps``, ``fallback_steps``). The blueprint has one tab per
+figure of the paper that the runs contain: Fig. 1 (||z^k - z*|| against k, one view per solve, side by
+side), Fig. 2 (x(t); ||e(t)|| per K), Fig. 3 (||e_i(t)|| per agent, one view per K), and tabs for the log
+and the configs. Rerun's views have no axis titles: each view's name says what its axes show, and views
+that the paper compares share their y range.
 
 rerun-sdk is imported here only, so that ``gnerun --help`` stays fast.
 """
@@ -21,20 +26,33 @@ from pathlib import Path
 from ..errors import InputError, Unavailable
 from ..log.mcap_log import RunRecord, read_run
 from ..log.messages import level_name
-from .figures import ZERO_AT, closed_loops, disturbance, run_name, solver_kind
+from .figures import (
+    FLOOR,
+    band_for,
+    below_floor,
+    closed_loops,
+    disturbance,
+    failed_steps,
+    fallback_steps,
+    final_status,
+    number,
+    run_name,
+    solver_kind,
+)
 
 APPLICATION_ID = "gnerun"
 
 # matplotlib's tab10, so that the Rerun views and `gnerun figures` colour alike
 PALETTE = [(31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40), (148, 103, 189), (140, 86, 75),
            (227, 119, 194), (127, 127, 127), (188, 189, 34), (23, 190, 207)]
+MARK_COLOUR = (235, 235, 235)  # failed and fallback markers: light on the viewer's dark background
+FLOOR_COLOUR = (150, 150, 150)
 
 
 def _log10(v: float | None) -> float | None:
-    """log10 of an error or residual; an exact 0 at log10 of figures.ZERO_AT, as in `gnerun figures`."""
-    if v == 0:
-        return math.log10(ZERO_AT)
-    return math.log10(v) if v is not None and v > 0 and math.isfinite(v) else None
+    """log10 of a positive error or residual (None for zeros and missing values: see the floor band)."""
+    v = number(v)
+    return math.log10(v) if v > 0 else None
 
 
 def _entity_name(text: str) -> str:
@@ -42,12 +60,29 @@ def _entity_name(text: str) -> str:
 
 
 @dataclass
+class Trace:
+    """A series of a log view: its values as logged; what is drawn (log10, or a row of the band) is decided
+    once every run is read."""
+
+    entity: str
+    timeline: str
+    points: list[tuple[int, float]] = field(default_factory=list)  # (time, value; NaN where missing)
+    failed: list[int] = field(default_factory=list)  # times marked as failed steps
+    fallback: list[int] = field(default_factory=list)
+    marks: str = ""  # the entity prefix of its markers ("<run>/K<k>/"), "" for none
+    on_trace: bool = True  # markers at the trace's values (else along the view's top)
+
+
+@dataclass
 class Series:
-    """The entities of one figure view, with the range of the data they hold (for fixed axes)."""
+    """The entities of one figure view, with the range of the data they show (for fixed axes)."""
 
     entities: list[str] = field(default_factory=list)
     t: list[int] = field(default_factory=list)  # [first, last] time
-    y: list[float] = field(default_factory=list)  # [lowest, highest] value
+    y: list[float] = field(default_factory=list)  # [lowest, highest] value as drawn
+    traces: list[Trace] = field(default_factory=list)  # log views: the series to draw
+    group: str = ""  # views of one group share their y range (and band)
+    floor: str | None = None  # the floor line's entity, when the view has a band
 
     def span(self, time: int) -> None:
         self.t = [min(self.t[0], time), max(self.t[1], time)] if self.t else [time, time]
@@ -59,9 +94,10 @@ class Series:
 
 @dataclass
 class Contents:
-    """What the blueprint's figure views show: ``fig1``, ``fig2_x``, ``fig2_e``, ``fig3:<run>: K = <k>``."""
+    """What the blueprint's figure views show: ``fig1:<run>``, ``fig2_x``, ``fig2_e``, ``fig3:<run>: K = <k>``."""
 
     views: dict[str, Series] = field(default_factory=dict)
+    titles: dict[str, str] = field(default_factory=dict)  # view key -> its name in the viewer
     logs: list[str] = field(default_factory=list)
     configs: list[str] = field(default_factory=list)
     ends: dict[str, int] = field(default_factory=dict)  # timeline -> last time logged on it
@@ -80,31 +116,33 @@ def _names(run: RunRecord) -> tuple[str, list[str], list[str], str]:
     return run_name(run), states, inputs, solver_kind(run)
 
 
+def _time_base(run: RunRecord) -> tuple[str, float] | None:
+    """The timeline and seconds per step of a log whose log_time is the run's own time (a closed loop's simulated
+    time: ``t``; a solve's iterations: ``iteration``), None for the wall clock of earlier logs."""
+    base = run.metadata.get("log_time", "")
+    if base.startswith("simulated"):
+        return "t", float((run.config.get("run") or {}).get("sampling_time") or 1.0)
+    if base.startswith("iteration"):
+        return "iteration", 1.0
+    return None
+
+
 def log_run(rec, run: RunRecord, prefix: str, contents: Contents, several: bool = False) -> None:
-    """Log one run's messages into the recording ``rec`` under ``prefix`` (``several``: legends name the run)."""
+    """Log one run's messages into the recording ``rec`` under ``prefix`` (``several``: legends name the run).
+    The log views' series are collected in ``contents`` and drawn by :func:`draw_log_views`."""
     import rerun as rr
 
     name, states, inputs, kind = _names(run)
 
     def scalar(entity: str, timeline: str, time: int, value: float | None, view: str | None = None) -> None:
-        if value is None or not math.isfinite(value):
+        value = number(value)
+        if not math.isfinite(value):
             return
         rec.set_time(timeline, sequence=time)
         contents.reach(timeline, time)
         rec.log(entity, rr.Scalars(value))
         if view is not None:
             contents.view(view).add(time, value)
-
-    if run.config_yaml:
-        rec.log(f"{prefix}/config", rr.TextDocument(run.config_yaml, media_type="text/plain"), static=True)
-        contents.configs.append(f"{prefix}/config")
-    for msg, t in zip(run.messages.get("/log", []), run.log_times.get("/log", []), strict=True):
-        rec.set_time("log_time", timestamp=t * 1e-9)
-        level = {"warning": "WARN", "error": "ERROR", "debug": "DEBUG"}.get(level_name(msg), "INFO")
-        rec.log(f"{prefix}/log", rr.TextLog(msg["message"], level=level))
-    if "/log" in run.messages:
-        contents.logs.append(f"{prefix}/log")
-    rec.reset_time()
 
     def show(view: str, entity: str, label: str) -> None:
         """Put ``entity`` into a figure view, with its legend label and a colour of its own there."""
@@ -115,44 +153,151 @@ def log_run(rec, run: RunRecord, prefix: str, contents: Contents, several: bool 
         series.entities.append(entity)
         rec.log(entity, rr.SeriesLines(names=label, colors=color, widths=2.0), static=True)
 
+    def trace(view: str, group: str, entity: str, label: str, timeline: str) -> Trace:
+        """A series of a log view (drawn once every run is read)."""
+        show(view, entity, label)
+        series = contents.view(view)
+        series.group = group
+        found = next((tr for tr in series.traces if tr.entity == entity), None)
+        if found is None:
+            found = Trace(entity, timeline)
+            series.traces.append(found)
+        return found
+
+    if run.config_yaml:
+        rec.log(f"{prefix}/config", rr.TextDocument(run.config_yaml, media_type="text/plain"), static=True)
+        contents.configs.append(f"{prefix}/config")
+    base = _time_base(run)
+    for msg, t in zip(run.messages.get("/log", []), run.log_times.get("/log", []), strict=True):
+        if base is None:  # (Rerun stamps everything with the wall clock on its own timeline log_time)
+            rec.set_time("log_time", timestamp=t * 1e-9)
+        else:  # at the run's own time: the sampling time t or the iteration k, beside the figures
+            rec.set_time(base[0], sequence=round(t * 1e-9 / base[1]))
+        level = {"warning": "WARN", "error": "ERROR", "debug": "DEBUG", "fatal": "CRITICAL"}.get(level_name(msg),
+                                                                                                  "INFO")
+        rec.log(f"{prefix}/log", rr.TextLog(msg.get("message", ""), level=level))
+    if "/log" in run.messages:
+        contents.logs.append(f"{prefix}/log")
+    rec.reset_time()
+
     iterates = run.messages.get("/solve/iterate", [])
     for m in iterates:
         for key in ("error_norm", "residual_norm", "step_norm"):
             scalar(f"{prefix}/solve/{key}", "iteration", m["k"], m.get(key))
-            if key != "step_norm":
-                scalar(f"{prefix}/solve/log10_{key}", "iteration", m["k"], _log10(m.get(key)),
-                       "fig1" if key == "error_norm" else None)
+            if key == "residual_norm":
+                scalar(f"{prefix}/solve/log10_{key}", "iteration", m["k"], _log10(m.get(key)))
     if iterates:
-        show("fig1", f"{prefix}/solve/log10_error_norm", f"{name} ({disturbance(run)})")
+        status = final_status(run)
+        view = f"fig1:{prefix}"
+        contents.titles[view] = (f"Fig. 1: {name} ({disturbance(run) or 'solve'}"
+                                 + (f"; {status}" if status and status != "converged" else "")
+                                 + "): log10 ||z^k - z*|| (y) against iteration k (x)")
+        tr = trace(view, "fig1", f"{prefix}/solve/log10_error_norm", name if several else "||z^k - z*||",
+                   "iteration")
+        tr.points = [(m["k"], number(m.get("error_norm"))) for m in iterates]
     rec.reset_time()
 
     loops = closed_loops(run)
     for K, topics in loops.items():
         base = f"{prefix}/K{K}"
         x_view = "fig2_x" if K == max(loops) and kind != "distributed" else None
-        e_view = "fig2_e" if kind != "distributed" else None
-        agent_view = f"fig3:{name}: K = {K}" if kind == "distributed" else None
-        for m in topics.get("state", []):
-            for j, v in enumerate(m["x"]):
+        states_K = topics.get("state", [])
+        failed, fallback = failed_steps(states_K), fallback_steps(states_K)
+        for m in states_K:
+            for j, v in enumerate(m.get("x") or []):
                 entity = f"{base}/x/{states[j] if j < len(states) else f'x{j + 1}'}"
                 if x_view:
                     show(x_view, entity, f"{entity.rsplit('/', 1)[1]} (K = {K})")
                 scalar(entity, "t", m["t"], v, x_view)
             for j, v in enumerate(m.get("u") or []):
                 scalar(f"{base}/u/{inputs[j] if j < len(inputs) else f'u{j + 1}'}", "t", m["t"], v)
-        for m in topics.get("error", []):
-            for view in (e_view, agent_view, x_view):
-                if view:  # the whole loop's time span, also where e(t) = 0 has no log10
-                    contents.view(view).span(m["t"])
+            if m.get("constraint_violation") is not None:
+                scalar(f"{base}/constraint_violation", "t", m["t"], m["constraint_violation"])
+        if x_view:
+            contents.titles[x_view] = f"Fig. 2a: x(t) (y) against sampling time t (x), K = {K}"
+            for t in failed + fallback:
+                contents.view(x_view).span(t)
+        errors = topics.get("error", [])
+        for m in errors:
             scalar(f"{base}/e_norm", "t", m["t"], m.get("e_norm"))
-            if e_view:
-                show(e_view, f"{base}/log10_e_norm", f"{name}: K = {K}" if several else f"K = {K}")
-            scalar(f"{base}/log10_e_norm", "t", m["t"], _log10(m.get("e_norm")), e_view)
-            for agent, v in m["e_norm_agent"].items():
+            for agent, v in (m.get("e_norm_agent") or {}).items():
                 scalar(f"{base}/e_agent/{agent}", "t", m["t"], v)
-                if agent_view:
-                    show(agent_view, f"{base}/log10_e_agent/{agent}", agent)
-                scalar(f"{base}/log10_e_agent/{agent}", "t", m["t"], _log10(v), agent_view)
+        if kind != "distributed":
+            contents.titles["fig2_e"] = "Fig. 2b: log10 ||e(t)|| (y) against sampling time t (x), per K"
+            tr = trace("fig2_e", "fig2_e", f"{base}/log10_e_norm", f"{name}: K = {K}" if several else f"K = {K}",
+                       "t")
+            tr.points = [(m["t"], number(m.get("e_norm"))) for m in errors]
+            tr.failed, tr.fallback, tr.marks = failed, fallback, base
+        else:
+            view = f"fig3:{name}: K = {K}"
+            contents.titles[view] = f"Fig. 3: log10 ||e_i(t)|| (y) against sampling time t (x), {name}: K = {K}"
+            agents = dict.fromkeys(a for m in errors for a in (m.get("e_norm_agent") or {}))
+            for i, agent in enumerate(agents):
+                tr = trace(view, "fig3", f"{base}/log10_e_agent/{agent}", agent, "t")
+                tr.points = [(m["t"], number((m.get("e_norm_agent") or {}).get(agent))) for m in errors]
+                if i == 0:  # the K's failures, along the top of its view
+                    tr.failed, tr.fallback, tr.marks, tr.on_trace = failed, fallback, base, False
+    rec.reset_time()
+
+
+def draw_log_views(rec, contents: Contents) -> None:
+    """Log the series of the log views: log10 of each value at or above the floor, the series' row of the
+    band below it (exact zeros included), nothing where it is missing; the floor line, and the markers of
+    failed and fallback steps. Views of one group share one y range."""
+    import rerun as rr
+
+    groups: dict[str, list[tuple[str, Series]]] = {}
+    for key, series in contents.views.items():
+        if series.traces:
+            groups.setdefault(series.group, []).append((key, series))
+    for members in groups.values():
+        values = [v for _, s in members for tr in s.traces for _, v in tr.points]
+        above = [v for v in values if v >= FLOOR]
+        has_band = any(below_floor(v) for v in values)
+        rows = max(len(s.traces) for _, s in members)
+        band = band_for(max(above) * 10 if above else FLOOR * 30, rows) if has_band else None
+        if band is not None:
+            lo, hi = math.log10(band.bottom), math.log10(band.top)
+        elif above:
+            lo, hi = math.log10(min(above)) - 0.3, math.log10(max(above)) + 0.3
+        else:
+            lo, hi = math.log10(FLOOR) - 1, math.log10(FLOOR) + 1
+        for key, series in members:
+            for i, tr in enumerate(series.traces):
+                drawn = {}
+                for time, v in tr.points:
+                    y = math.log10(v) if v >= FLOOR else math.log10(band.row(i)) if band and below_floor(v) else None
+                    series.span(time)
+                    if y is None:
+                        continue
+                    drawn[time] = y
+                    rec.set_time(tr.timeline, sequence=time)
+                    contents.reach(tr.timeline, time)
+                    rec.log(tr.entity, rr.Scalars(y))
+                for what, times, marker in (("failed_steps", tr.failed, "cross"),
+                                            ("fallback_steps", tr.fallback, "down")):
+                    if not times:
+                        continue
+                    entity = f"{tr.marks}/{what}"
+                    label = f"{tr.marks.rsplit('/', 1)[-1].replace('K', 'K = ')}: {what.replace('_', ' ')}"
+                    series.entities.append(entity)
+                    rec.log(entity, rr.SeriesPoints(names=label, colors=MARK_COLOUR, markers=marker,
+                                                    marker_sizes=6.0), static=True)
+                    for time in times:
+                        series.span(time)
+                        rec.set_time(tr.timeline, sequence=time)
+                        contents.reach(tr.timeline, time)
+                        rec.log(entity, rr.Scalars(drawn.get(time, hi - 0.05 * (hi - lo)) if tr.on_trace
+                                                   else hi - 0.05 * (hi - lo)))
+            series.y = [lo, hi]
+            if band is not None and series.t:
+                series.floor = f"floor/{_entity_name(key)}"
+                series.entities.append(series.floor)
+                rec.log(series.floor, rr.SeriesLines(names=f"floor {FLOOR:.0e}: below it, a row per series",
+                                                     colors=FLOOR_COLOUR, widths=1.0), static=True)
+                for time in series.t:
+                    rec.set_time(series.traces[0].timeline, sequence=time)
+                    rec.log(series.floor, rr.Scalars(math.log10(FLOOR)))
     rec.reset_time()
 
 
@@ -166,7 +311,7 @@ class FigureView:
     container: object  # a rerun.blueprint container
 
 
-def _series_view(name: str, series: Series):
+def _series_view(name: str, series: Series, margin: bool = True):
     """A time-series view whose axes are fixed to its data (with a margin), so that every viewer and every
     screenshot shows all of it."""
     import rerun as rr
@@ -175,7 +320,7 @@ def _series_view(name: str, series: Series):
     kwargs = {}
     if series.t and series.y:
         lo, hi = series.y
-        pad = 0.05 * (hi - lo) if hi > lo else 0.5
+        pad = (0.05 * (hi - lo) if hi > lo else 0.5) if margin else 0.0
         kwargs["axis_y"] = rrb.ScalarAxis(range=(lo - pad, hi + pad))
         t0, t1 = series.t
         kwargs["axis_x"] = rrb.archetypes.TimeAxis(view_range=rr.TimeRange(
@@ -189,20 +334,21 @@ def figure_views(contents: Contents) -> list[FigureView]:
     """The paper figures that the runs contain, in the paper's order."""
     import rerun.blueprint as rrb
 
-    views = contents.views
+    views, titles = contents.views, contents.titles
     out = []
-    if views.get("fig1") and views["fig1"].entities:
+    fig1 = [key for key, s in views.items() if key.startswith("fig1:") and s.entities]
+    if fig1:
         out.append(FigureView("fig1", "Fig. 1: solves", "iteration", rrb.Horizontal(
-            _series_view("Fig. 1: log10 ||z^k - z*|| vs k", views["fig1"]), name="Fig. 1: solves")))
+            *[_series_view(titles[key], views[key], margin=False) for key in fig1], name="Fig. 1: solves")))
     if views.get("fig2_e") and views["fig2_e"].entities:
         out.append(FigureView("fig2", "Fig. 2: closed loop", "t", rrb.Horizontal(
-            _series_view("Fig. 2a: x(t)", views.get("fig2_x", Series())),
-            _series_view("Fig. 2b: log10 ||e(t)|| per K", views["fig2_e"]), name="Fig. 2: closed loop")))
-    fig3 = {key.removeprefix("fig3:"): s for key, s in views.items() if key.startswith("fig3:") and s.entities}
+            _series_view(titles.get("fig2_x", "Fig. 2a: x(t) (y) against sampling time t (x)"),
+                         views.get("fig2_x", Series())),
+            _series_view(titles["fig2_e"], views["fig2_e"], margin=False), name="Fig. 2: closed loop")))
+    fig3 = [key for key, s in views.items() if key.startswith("fig3:") and s.entities]
     if fig3:
-        out.append(FigureView("fig3", "Fig. 3: per agent", "t", rrb.Grid(
-            *[_series_view(f"Fig. 3: log10 ||e_i(t)||, {title}", s) for title, s in fig3.items()],
-            name="Fig. 3: per agent")))
+        out.append(FigureView("fig3", "Fig. 3: per agent", "t", (rrb.Horizontal if len(fig3) <= 3 else rrb.Grid)(
+            *[_series_view(titles[key], views[key], margin=False) for key in fig3], name="Fig. 3: per agent")))
     return out
 
 
@@ -235,6 +381,7 @@ def record(paths: list[str | Path], rec) -> Contents:
             prefix, i = f"{base}_{i}", i + 1
         used.add(prefix)
         log_run(rec, run, prefix, contents, several=len(paths) > 1)
+    draw_log_views(rec, contents)
     return contents
 
 
