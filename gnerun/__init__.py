@@ -1,12 +1,7 @@
 """gnerun: Newton-type equilibrium seeking in games and game-theoretic MPC.
 
-The public API (SPEC §7) is loaded lazily, so that ``gnerun --help`` does not import numpy or CasADi.
+The public API is loaded lazily, so that ``gnerun --help`` does not import numpy or CasADi.
 """
-
-from __future__ import annotations
-
-from importlib import import_module
-from typing import Any
 
 __version__ = "0.1.0"
 
@@ -30,10 +25,17 @@ _API = {
 __all__ = ["__version__", *_API]
 
 
-def __getattr__(name: str) -> Any:
+def __getattr__(name: str) -> object:
     module = _API.get(name)
     if module is None:
         raise AttributeError(f"module 'gnerun' has no attribute {name!r}")
-    value = getattr(import_module(module), name)
+    import importlib
+
+    value = getattr(importlib.import_module(module), name)
     globals()[name] = value
     return value
+
+
+def __dir__() -> list[str]:
+    # the public API only (not the subpackages, which importing the API adds as attributes)
+    return sorted(__all__)

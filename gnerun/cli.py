@@ -1,4 +1,4 @@
-"""The `gnerun` command line: thin commands over the library (SPEC §2).
+"""The `gnerun` command line: thin commands over the library.
 
 Exit codes: 0 success (a run that ended without converging is still a success: its status says so),
 2 bad input (config, arguments, unreadable file), 1 anything else. Errors are one line on stderr;
@@ -16,10 +16,24 @@ from pathlib import Path
 from typing import Annotated, NoReturn
 
 import typer
+from typer.core import TyperCommand
 
 from . import __version__
 from .errors import InputError, Unavailable, one_line
 from .threads import single_threaded_blas
+
+EXAMPLES = """Examples:
+
+\b
+  gnerun solve configs/harker.yaml               (prints the equilibrium x)
+  gnerun solve configs/paper_study1.yaml --set solver.tol=1e-12
+  gnerun simulate configs/paper_study2.yaml --out runs/s2
+  gnerun figures runs/s2 --out figures           (PNG at 300 dpi, and PDF)
+  gnerun replay runs/s2 --save runs/s2/replay.rrd
+  gnerun inspect runs/s2
+
+Run logs (run.mcap) also open in Foxglove and Lichtblick as they are.
+Run `gnerun COMMAND --help` for a command's options."""
 
 app = typer.Typer(
     add_completion=False,
@@ -28,19 +42,39 @@ app = typer.Typer(
     rich_markup_mode=None,
     help="Newton-type equilibrium seeking in games and game-theoretic MPC (semismooth Newton on the "
     "KKT system of generalized Nash games). Every iterate is logged to MCAP.",
+    epilog=EXAMPLES,
 )
 
 _options = {"debug": False}
 
-ConfigArg = Annotated[Path, typer.Argument(help="Experiment config (YAML).", show_default=False)]
+
+class _Command(TyperCommand):
+    """A command whose help names its arguments plainly (``CONFIG``, ``RUN...``), as its usage line does."""
+
+    def collect_usage_pieces(self, ctx) -> list[str]:
+        pieces = [self.options_metavar] if self.options_metavar else []
+        return pieces + [p.metavar or p.name.upper() for p in self.get_params(ctx) if p.param_type_name == "argument"]
+
+    def format_options(self, ctx, formatter) -> None:
+        params = self.get_params(ctx)
+        arguments = [(p.metavar or p.name.upper(), p.help or "") for p in params if p.param_type_name == "argument"]
+        options = [r for p in params if p.param_type_name == "option" and (r := p.get_help_record(ctx))]
+        for title, rows in (("Arguments", arguments), ("Options", options)):
+            if rows:
+                with formatter.section(title):
+                    formatter.write_dl(rows)
+
+ConfigArg = Annotated[Path, typer.Argument(help="Experiment config (YAML).", show_default=False,
+                                            metavar="CONFIG")]
 SetOpt = Annotated[
     list[str] | None,
-    typer.Option("--set", help="Override a config field: key.path=value (value read as YAML, e.g. run.K=[1,7]).",
-                 show_default=False),
+    typer.Option("--set", help="Override a config field (the value is read as YAML, e.g. --set run.K=[1,7]); "
+                 "repeat it for several fields.", show_default=False, metavar="KEY.PATH=VALUE"),
 ]
 OutOpt = Annotated[
     Path | None,
-    typer.Option("--out", help="Run directory (default: runs/<config name>-<UTC timestamp>/).", show_default=False),
+    typer.Option("--out", help="Run directory (default: runs/<config name>-<UTC timestamp>/).", show_default=False,
+                 metavar="DIR"),
 ]
 QuietOpt = Annotated[bool, typer.Option("--quiet", "-q", help="Print nothing but errors.")]
 ForceOpt = Annotated[bool, typer.Option("--force", help="Write into an existing, non-empty run directory.")]
@@ -97,11 +131,62 @@ def _fmt(v: float | None, spec: str = ".3e") -> str:
     return format(v, spec)
 
 
+def _plural(n: int, noun: str) -> str:
+    return f"{n} {noun}{'s' if n != 1 else ''}"
+
+
+def _method(cfg) -> str:
+    """The configured method as a header says it: the complementarity map only where semismooth Newton runs."""
+    s = cfg.solver
+    ssn_map = "min map" if s.complementarity == "min" else "Fischer-Burmeister map"
+    if s.kind == "ssn":
+        return f"ssn ({ssn_map})"
+    if s.kind == "jn":
+        return "jn (Josephy-Newton)"
+    inner = f"inner ssn, {ssn_map}" if s.inner == "ssn" else "inner jn"
+    return f"distributed ({s.scheme.replace('_', '-')}, {inner})"
+
+
+SOLUTION_ROWS = 24  # rows of the solution table before it is cut short (summary.json holds everything)
+SOLUTION_STAGES = 7  # values per row before a horizon is summarised by its first and last stages
+
+
+def _solution_lines(solution: dict) -> list[str]:
+    """The solution as a compact table: one row per agent and variable (a static game's value, or a dynamic
+    game's inputs by stage; a long horizon as its first three and last two stages)."""
+    def value(v: float | None) -> str:
+        return "-" if v is None or v != v else f"{v:.4g}"
+
+    def shorten(items: list[str]) -> list[str]:
+        return [*items[:3], "...", *items[-2:]] if len(items) > SOLUTION_STAGES else items
+
+    rows = [(agent, name, [value(x) for x in v] if isinstance(v, list) else [value(v)])
+            for agent, variables in solution.items() for name, v in variables.items()]
+    if not rows:
+        return []
+    stages = max((len(v) for variables in solution.values() for v in variables.values() if isinstance(v, list)),
+                 default=0)
+    wa, wv = max(len(r[0]) for r in rows), max(len(r[1]) for r in rows)
+    if not stages:  # a static game
+        lines = ["solution:"] + [f"  {a:<{wa}}  {v:<{wv}} = {values[0]}" for a, v, values in rows[:SOLUTION_ROWS]]
+    else:
+        header = shorten([str(tau) for tau in range(stages)])
+        wn = max(len(x) for r in rows for x in [*r[2], *header])
+        wa, wv = max(wa, len("agent")), max(wv, len("input"))
+        lines = [f"solution (inputs by stage tau = 0..{stages - 1}):",
+                 f"  {'agent':<{wa}}  {'input':<{wv}}  " + " ".join(f"{x:>{wn}}" for x in header)]
+        lines += [f"  {a:<{wa}}  {v:<{wv}}  " + " ".join(f"{x:>{wn}}" for x in shorten(values))
+                  for a, v, values in rows[:SOLUTION_ROWS]]
+    if len(rows) > SOLUTION_ROWS:
+        lines.append(f"  ... {len(rows) - SOLUTION_ROWS} more (summary.json holds the whole solution)")
+    return lines
+
+
 ExpandOpt = Annotated[bool, typer.Option("--expand", help="Print the config as it runs: families, templates, "
                                                          "sums and definitions written out, every default filled in.")]
 
 
-@app.command()
+@app.command(cls=_Command, short_help="Check a config or a sweep spec without running it.")
 def validate(config: ConfigArg, set_: SetOpt = None, quiet: QuietOpt = False, expand: ExpandOpt = False) -> None:
     """Check a config (or a sweep spec and every point of it) without running it; print every problem found."""
     from .errors import ConfigError
@@ -139,7 +224,7 @@ def validate(config: ConfigArg, set_: SetOpt = None, quiet: QuietOpt = False, ex
                    f"{game.n} decisions, {game.m} multipliers)")
 
 
-@app.command()
+@app.command(cls=_Command, short_help="Solve one equilibrium problem and print the solution.")
 def solve(config: ConfigArg, out: OutOpt = None, set_: SetOpt = None, quiet: QuietOpt = False,
           force: ForceOpt = False) -> None:
     """Solve one equilibrium problem (a static game, or a dynamic game at its x0)."""
@@ -154,8 +239,8 @@ def solve(config: ConfigArg, out: OutOpt = None, set_: SetOpt = None, quiet: Qui
             if quiet:
                 return
             if state.k == 0:
-                typer.echo(f"gnerun solve {config}: {cfg.solver.kind} ({cfg.solver.complementarity} map), "
-                           f"tol {cfg.solver.tol:.0e}, disturbance {cfg.disturbance.kind}")
+                typer.echo(f"gnerun solve {config}: {_method(cfg)}, tol {cfg.solver.tol:.0e}, disturbance "
+                           f"{cfg.disturbance.kind}")
                 typer.echo(f"{'k':>4}  {'||Phi||':>10}  {'||z-z*||':>10}  {'||dz||':>10}  {'changes':>7}")
             typer.echo(f"{state.k:>4}  {_fmt(state.residual_norm):>10}  {_fmt(error_norm):>10}  "
                        f"{_fmt(state.step_norm):>10}  {state.active_set_changes:>7}")
@@ -171,31 +256,36 @@ def solve(config: ConfigArg, out: OutOpt = None, set_: SetOpt = None, quiet: Qui
         return
     cert = result.certificate
     typer.echo(f"status: {result.status}: {result.message}")
+    for line in _solution_lines(result.solution):
+        typer.echo(line)
     if "best_response_gap" in cert:
         gaps = ", ".join(f"{k} {_fmt(v, '.1e')}" for k, v in cert["best_response_gap"].items())
         checked = f"best-response gaps: {gaps}"
     else:
         checked = "best responses not checked (run.certificate: false)"
     typer.echo(f"certificate: KKT residual {_fmt(cert['kkt_residual'], '.1e')}; {checked}")
-    typer.echo(f"solver time {result.time_s * 1e3:.2f} ms ({result.iterations} iterations); "
+    typer.echo(f"solver time {result.time_s * 1e3:.2f} ms ({_plural(result.iterations, 'iteration')}); "
                f"compile {result.compile_time_s * 1e3:.0f} ms")
     typer.echo(f"run directory: {result.run_dir}")
 
 
-@app.command()
+@app.command(cls=_Command, short_help="Run the closed loop (time-distributed CG-MPC) once per K.")
 def simulate(config: ConfigArg, out: OutOpt = None, set_: SetOpt = None, quiet: QuietOpt = False,
              force: ForceOpt = False) -> None:
     """Run the closed loop (time-distributed CG-MPC) for every K in run.K."""
     with _reported():
         cfg = _load(config, set_)
+        if cfg.game.kind != "dynamic":  # before the header: nothing runs
+            raise InputError(f"{config}: simulate needs a dynamic game (game.kind: dynamic); use `gnerun solve` "
+                             "for a static game")
         from .runs.closed_loop import simulate as run_simulate
         from .runs.rundir import default_run_dir
 
         out_dir = out if out is not None else default_run_dir(cfg)
         if not quiet:
-            typer.echo(f"gnerun simulate {config}: K = {cfg.run.K}, {cfg.run.steps} steps, {cfg.solver.kind} "
-                       f"({cfg.solver.complementarity} map), warm start {cfg.run.warm_start}, solver disturbance "
-                       f"{cfg.disturbance.kind}, plant {cfg.disturbance.plant.kind}")
+            typer.echo(f"gnerun simulate {config}: K = {cfg.run.K}, {_plural(cfg.run.steps, 'step')}, "
+                       f"{_method(cfg)}, warm start {cfg.run.warm_start}, solver disturbance {cfg.disturbance.kind}, "
+                       f"plant {cfg.disturbance.plant.kind}")
         try:
             with _progress(cfg, enabled=not quiet and sys.stdout.isatty()) as progress:
                 sim = run_simulate(cfg, out=out_dir, force=force, progress=progress)
@@ -223,16 +313,19 @@ def simulate(config: ConfigArg, out: OutOpt = None, set_: SetOpt = None, quiet: 
     typer.echo(f"run directory: {sim.run_dir}")
 
 
-@app.command()
+@app.command(cls=_Command, short_help="Run a grid of runs and write their index table (resumable).")
 def sweep(
-    spec: Annotated[Path, typer.Argument(help="Sweep spec (YAML): base config, set, grid.", show_default=False)],
+    spec: Annotated[Path, typer.Argument(help="Sweep spec (YAML): base config, set, grid.", show_default=False,
+                                         metavar="SWEEP")],
     out: Annotated[Path | None, typer.Option("--out", help="Sweep directory (default: runs/<sweep name>/; "
-                                             "running again resumes it).", show_default=False)] = None,
-    executor: Annotated[str, typer.Option("--executor", help="local (process pool) or dask.")] = "local",
-    workers: Annotated[int, typer.Option("--workers", help="Worker processes (local, and a dask LocalCluster).")] = 2,
+                                             "running again resumes it).", show_default=False, metavar="DIR")] = None,
+    executor: Annotated[str, typer.Option("--executor", help="local (process pool) or dask.",
+                                          metavar="local|dask")] = "local",
+    workers: Annotated[int, typer.Option("--workers", help="Worker processes (local, and a dask LocalCluster).",
+                                         metavar="N")] = 2,
     address: Annotated[str | None, typer.Option("--address", help="A running Dask scheduler: tcp://host:8786 or "
                                                 "its scheduler file (default: a LocalCluster).",
-                                                show_default=False)] = None,
+                                                show_default=False, metavar="ADDRESS")] = None,
     quiet: QuietOpt = False,
     force: Annotated[bool, typer.Option("--force", help="Write into an existing non-sweep directory.")] = False,
 ) -> None:
@@ -271,10 +364,6 @@ def sweep(
         typer.echo("index: " + ", ".join(str(p) for p in result.index_files))
 
 
-RunArgs = Annotated[list[Path], typer.Argument(
-    help="Run directories or their run.mcap files (figures: also sweep directories).", show_default=False)]
-
-
 def _existing_logs(runs: list[Path]) -> list[Path]:
     from .errors import InputError
     from .log.mcap_log import run_log_path
@@ -285,11 +374,13 @@ def _existing_logs(runs: list[Path]) -> list[Path]:
     return runs
 
 
-@app.command()
+@app.command(cls=_Command, short_help="Draw the paper's figures from run logs and sweep directories.")
 def figures(
-    runs: RunArgs,
-    out: Annotated[Path, typer.Option("--out", help="Folder for the figures.")] = Path("figures"),
-    format_: Annotated[str, typer.Option("--format", help="Comma-separated: png, pdf, svg.")] = "png,pdf",
+    runs: Annotated[list[Path], typer.Argument(
+        help="Run directories or their run.mcap files, and sweep directories.", show_default=False, metavar="RUN...")],
+    out: Annotated[Path, typer.Option("--out", help="Folder for the figures.", metavar="DIR")] = Path("figures"),
+    format_: Annotated[str, typer.Option("--format", help="Comma-separated: png, pdf, svg.",
+                                         metavar="FORMATS")] = "png,pdf",
     quiet: QuietOpt = False,
 ) -> None:
     """Paper-style figures (Studies 1-3) from run logs, and sweep figures from sweep directories."""
@@ -312,8 +403,9 @@ def figures(
             typer.echo(str(path))
 
 
-@app.command()
-def inspect(run: Annotated[Path, typer.Argument(help="A run directory or its run.mcap.", show_default=False)]) -> None:
+@app.command(cls=_Command, short_help="Show a run log's topics, counts, time range, status and config.")
+def inspect(run: Annotated[Path, typer.Argument(help="A run directory or its run.mcap.", show_default=False,
+                                                metavar="RUN")]) -> None:
     """Topics, message counts, time range, status and config of a run, finished or not."""
     with _reported():
         import datetime as dt
@@ -354,19 +446,23 @@ def inspect(run: Annotated[Path, typer.Argument(help="A run directory or its run
             typer.echo(f"  {line}")
 
 
-@app.command()
+@app.command(cls=_Command, short_help="Open runs in Rerun: viewer, .rrd file, web viewer or screenshots.")
 def replay(
-    runs: RunArgs,
+    runs: Annotated[list[Path], typer.Argument(help="Run directories or their run.mcap files.", show_default=False,
+                                               metavar="RUN...")],
     save: Annotated[Path | None, typer.Option("--save", help="Write the recording to FILE.rrd.",
-                                              show_default=False)] = None,
+                                              show_default=False, metavar="FILE.rrd")] = None,
     spawn: Annotated[bool, typer.Option("--spawn", help="Open the native viewer (needs a display).")] = False,
     serve: Annotated[bool, typer.Option("--serve", help="Serve the web viewer on 127.0.0.1, print its URL.")] = False,
     screenshot: Annotated[Path | None, typer.Option(
         "--screenshot", help="Write one PNG per paper figure to DIR, taken by a headless viewer (needs a Vulkan "
-        "driver, e.g. Debian's mesa-vulkan-drivers).", show_default=False)] = None,
-    size: Annotated[str, typer.Option("--size", help="Screenshot size in points (--screenshot).")] = "1600x900",
-    web_port: Annotated[int, typer.Option("--web-port", help="Port of the web viewer (--serve).")] = 9090,
-    grpc_port: Annotated[int, typer.Option("--grpc-port", help="Port of its data server (--serve).")] = 9876,
+        "driver, e.g. Debian's mesa-vulkan-drivers).", show_default=False, metavar="DIR")] = None,
+    size: Annotated[str, typer.Option("--size", help="Screenshot size in points (--screenshot).",
+                                      metavar="WIDTHxHEIGHT")] = "1600x900",
+    web_port: Annotated[int, typer.Option("--web-port", help="Port of the web viewer (--serve).",
+                                          metavar="PORT")] = 9090,
+    grpc_port: Annotated[int, typer.Option("--grpc-port", help="Port of its data server (--serve).",
+                                           metavar="PORT")] = 9876,
     quiet: QuietOpt = False,
 ) -> None:
     """Open runs in Rerun: one timeline per kind of run, one view per paper figure (built from the logs only)."""
@@ -402,11 +498,11 @@ def replay(
             rp.serve(rrd, web_port, grpc_port)
 
 
-@app.command()
+@app.command(cls=_Command, short_help="Write a finished, indexed copy of a killed run's log.")
 def recover(
-    run: Annotated[Path, typer.Argument(help="A run directory or its run.mcap.", show_default=False)],
+    run: Annotated[Path, typer.Argument(help="A run directory or its run.mcap.", show_default=False, metavar="RUN")],
     out: Annotated[Path | None, typer.Option("--out", help="The repaired copy (default: run.recovered.mcap beside "
-                                                          "the log).", show_default=False)] = None,
+                                                          "the log).", show_default=False, metavar="FILE")] = None,
     quiet: QuietOpt = False,
 ) -> None:
     """Write a finished, indexed copy of a run log whose writer was killed."""

@@ -6,6 +6,7 @@ import json
 import re
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from gnerun.log.mcap_log import read_messages
@@ -164,3 +165,108 @@ def test_debug_shows_the_traceback(tmp_path: Path) -> None:
     proc = run_cli("--debug", "solve", "does/not/exist.yaml")
     assert proc.returncode == 2
     assert "Traceback" in proc.stderr
+
+
+def test_solve_prints_the_solution(tmp_path: Path) -> None:
+    # Harker's game: its variational equilibrium is x = (5, 9) (Harker 1991; Facchinei & Kanzow 2010)
+    proc = run_cli("solve", str(CONFIGS / "harker.yaml"), "--out", str(tmp_path / "h"))
+    assert proc.returncode == 0, proc.stderr
+    lines = proc.stdout.splitlines()
+    i = lines.index("solution:")
+    assert lines[i + 1].split() == ["p1", "x1", "=", "5"] and lines[i + 2].split() == ["p2", "x2", "=", "9"]
+    assert "(1 iteration)" in proc.stdout and "1 iterations" not in proc.stdout
+
+
+def test_solve_summarises_a_long_horizon(tmp_path: Path) -> None:
+    proc = run_cli("solve", str(CONFIGS / "paper_study1.yaml"), "--out", str(tmp_path / "s"))
+    assert proc.returncode == 0, proc.stderr
+    solution = json.loads((tmp_path / "s" / "summary.json").read_text())["solution"]
+    lines = proc.stdout.splitlines()
+    i = lines.index("solution (inputs by stage tau = 0..10):")
+    assert lines[i + 1].split() == ["agent", "input", "0", "1", "2", "...", "9", "10"]
+    for line, (agent, inputs) in zip(lines[i + 2: i + 5], solution.items(), strict=True):
+        [(name, values)] = inputs.items()
+        shown = [float(v) for v in line.split()[2:] if v != "..."]
+        assert line.split()[:2] == [agent, name] and len(line) <= 100
+        np.testing.assert_allclose(shown, values[:3] + values[-2:], rtol=1e-3, atol=1e-12)  # 4 digits
+
+
+def test_headers_name_the_method_as_configured(tmp_path: Path) -> None:
+    proc = run_cli("solve", str(CONFIGS / "variational_gne.yaml"), "--out", str(tmp_path / "jn"))
+    assert proc.returncode == 0, proc.stderr
+    header = proc.stdout.splitlines()[0]
+    assert "jn (Josephy-Newton)" in header and "map" not in header  # no complementarity map in Josephy-Newton
+    proc = run_cli("solve", str(CONFIGS / "harker.yaml"), "--out", str(tmp_path / "fb"), "--set",
+                   "solver.complementarity=fischer_burmeister")
+    assert "ssn (Fischer-Burmeister map)" in proc.stdout.splitlines()[0]
+
+
+def test_simulate_refuses_a_static_game_before_anything_runs(tmp_path: Path) -> None:
+    proc = run_cli("simulate", str(CONFIGS / "harker.yaml"), "--out", str(tmp_path / "run"))
+    assert proc.returncode == 2 and proc.stdout == ""
+    _no_traceback(proc)
+    assert len(proc.stderr.strip().splitlines()) == 1 and "simulate needs a dynamic game" in proc.stderr
+    assert not (tmp_path / "run").exists()
+
+
+COMMANDS = ("validate", "solve", "simulate", "sweep", "figures", "inspect", "replay", "recover")
+
+
+def test_help_says_everything_plainly() -> None:
+    top = run_cli("--help").stdout
+    listed = top.split("Commands:")[1].split("Examples:")[0].strip().splitlines()
+    assert [line.split()[0] for line in listed] == list(COMMANDS)  # one line each: nothing wraps
+    for line in listed:
+        assert line.rstrip().endswith(".") and "…" not in line and "..." not in line, line
+    assert "gnerun solve configs/harker.yaml" in top.split("Examples:")[1]
+    for command in COMMANDS:
+        text = run_cli(command, "--help").stdout
+        assert not re.search(r"\{\w+\}|<(path|str|int|float|bool|list\[\w+\])>", text), (command, text)
+        assert text.splitlines()[0].startswith(f"Usage: gnerun {command} [OPTIONS] ")
+    solve_help = run_cli("solve", "--help").stdout
+    assert "--set KEY.PATH=VALUE" in solve_help and "repeat it" in solve_help
+    assert "CONFIG  Experiment config" in solve_help
+    assert "sweep" not in run_cli("replay", "--help").stdout
+    assert "sweep directories" in run_cli("figures", "--help").stdout
+
+
+def test_python_callers_get_python_in_error_messages() -> None:
+    from gnerun import ConfigError, InputError, load_config
+
+    with pytest.raises(ConfigError) as err:
+        load_config(CONFIGS / "fk_a12.yaml", overrides={"solver.tl": 1})
+    assert str(err.value).startswith("overrides['solver.tl'] = 1: solver.tl: unknown key")
+    with pytest.raises(InputError) as err:
+        load_config(CONFIGS / "fk_a12.yaml", overrides={"game.agents.5.cost": "x1"})
+    assert "--set" not in str(err.value) and "overrides['game.agents.5.cost'] = 'x1'" in str(err.value)
+    with pytest.raises(ConfigError) as err:  # the same as CLI text
+        load_config(CONFIGS / "fk_a12.yaml", ["solver.tl=1"])
+    assert str(err.value).startswith("--set solver.tl=1: solver.tl: unknown key")
+
+
+def test_the_public_namespace_is_the_api() -> None:
+    import subprocess
+    import sys
+
+    import gnerun
+
+    api = sorted(gnerun.__all__)
+    assert dir(gnerun) == api and {"Any", "annotations", "import_module"}.isdisjoint(dir(gnerun))
+    # also in a fresh interpreter, after the API was used (its subpackages are loaded then)
+    out = subprocess.run([sys.executable, "-c", "import gnerun; gnerun.load_config; gnerun.solve; print(dir(gnerun))"],
+                         capture_output=True, text=True, check=True).stdout
+    assert out.strip() == str(api)
+
+
+def test_no_docstring_cites_the_specification() -> None:
+    """Users have the README and the docstrings, not the project's specification."""
+    import ast
+
+    package = Path(__file__).resolve().parent.parent / "gnerun"
+    for path in package.rglob("*.py"):
+        tree = ast.parse(path.read_text())
+        for node in [tree, *ast.walk(tree)]:
+            if isinstance(node, ast.Module | ast.ClassDef | ast.FunctionDef | ast.AsyncFunctionDef):
+                doc = ast.get_docstring(node) or ""
+                assert "SPEC" not in doc, (path, getattr(node, "name", "module"))
+        assert "SPEC §" not in path.read_text(), path

@@ -4,7 +4,7 @@
 syntax trees (never from Python source), differentiates them by automatic differentiation and wraps
 the result in CasADi Functions that the solvers evaluate at every iterate. Build once, solve many.
 
-Notation (paper §III, SPEC §1): the primal variable a = (a_1, ..., a_N); agent i's constraints
+Notation (paper §III): the primal variable a = (a_1, ..., a_N); agent i's constraints
 g_i(a) <= 0 (equalities h_i(a) = 0 are allowed too) with multipliers lambda_i; z = (a, lambda) with
 lambda = (lambda_1, ..., lambda_N[, lambda_shared]). The parts the Newton methods need are
 
@@ -14,7 +14,7 @@ lambda = (lambda_1, ..., lambda_N[, lambda_shared]). The parts the Newton method
 - the pseudogradient ``F(a)`` = (grad_{a_i} J_i)_i [P_gradient] and game Hessian ``H(a)`` [Hessian].
 
 Dynamic games (CG-MPC, [MPC_1]) are condensed: xi(0) = x, xi(tau+1) = f(xi(tau), a(tau)), and
-agent i's cost is sum_{tau=0..T} l_i(xi(tau+1), a(tau)) + Psi_i(xi(T+1)) (SPEC §3: each stage cost
+agent i's cost is sum_{tau=0..T} l_i(xi(tau+1), a(tau)) + Psi_i(xi(T+1)) (gnerun's convention: each stage cost
 is charged on the state its input produces). Constraints are imposed at every stage tau = 0..T on
 (xi(tau+1), a(tau)). Every function then takes the current plant state x as a parameter. Within an
 agent, inputs are time-major: a_i = (u_i(0), u_i(1), ..., u_i(T)) with u_i(tau) the agent's inputs.
@@ -192,7 +192,7 @@ class CompiledGame:
     def zero_gradient_rows(self) -> np.ndarray:
         """Rows of c that depend on no decision variable (structurally): at a stage where the decisions cannot
         reach a constraint (a position one step after an input that drives its second derivative), the row is a
-        condition on the plant state alone, not a Newton row (SPEC §3b)."""
+        condition on the plant state alone, not a Newton row."""
         rows = np.zeros(self.m, dtype=bool)
         if self.m:
             sym = self._symbolic

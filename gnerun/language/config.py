@@ -1,6 +1,6 @@
-"""Experiment configs (SPEC §3): strict pydantic models, loading, overrides, resolved YAML.
+"""Experiment configs: strict pydantic models, loading, overrides, resolved YAML.
 
-``load_config`` reads a YAML file, applies ``--set`` style overrides, validates the document
+``load_config`` reads a YAML file (or a dict), applies overrides, validates the document
 against the models below (unknown keys are errors), then checks what a schema cannot: names,
 expressions (parsed, never evaluated as Python), shapes. Every problem becomes one line
 ``file:line:column: field.path: message``.
@@ -381,7 +381,13 @@ def parse_override(text: str) -> tuple[str, Any]:
     return key, value
 
 
+def override_label(key: str, value: Any) -> str:
+    """How an override given as Python data is named in messages: ``overrides['solver.tol'] = -1``."""
+    return f"overrides[{key!r}] = {value!r}"
+
+
 def _apply_override(data: dict, key: str, value: Any, smap: SourceMap, shown: str) -> None:
+    """Set ``key`` (a dotted path) to ``value``; ``shown`` names the override in messages (``--set a.b=1``)."""
     parts: list[str | int] = [int(p) if p.isdigit() else p for p in key.split(".")]
     node: Any = data
     for i, part in enumerate(parts):
@@ -397,13 +403,13 @@ def _apply_override(data: dict, key: str, value: Any, smap: SourceMap, shown: st
                 node = node[part]
         elif isinstance(node, list):
             if not isinstance(part, int) or not 0 <= part < len(node):
-                raise InputError(f"--set {shown}: {'.'.join(map(str, parts[: i + 1]))}: no such list element")
+                raise InputError(f"{shown}: {'.'.join(map(str, parts[: i + 1]))}: no such list element")
             if last:
                 node[part] = value
             else:
                 node = node[part]
         else:
-            raise InputError(f"--set {shown}: {'.'.join(map(str, parts[:i]))} is not a mapping")
+            raise InputError(f"{shown}: {'.'.join(map(str, parts[:i]))} is not a mapping")
     smap.overridden[tuple(parts)] = shown
 
 
@@ -419,7 +425,7 @@ def load_config(
     text: str | None = None,
 ) -> Config:
     """Load and validate a config file (or ``text``, or a dict: the YAML document as Python data), applying
-    ``overrides``; families, templates, sums and definitions (SPEC §3b) are expanded before validation.
+    ``overrides``; families, templates, sums and definitions are expanded before validation.
 
     ``overrides`` maps dotted field paths to values (``{"solver.tol": 1e-12}``), or is a list of
     ``"a.b=value"`` strings as given to ``--set``. Raises :class:`ConfigError` with every problem.
@@ -439,11 +445,11 @@ def load_config(
         raise ConfigError([f"{smap.locate(())}: a sweep spec, not a config: run it with `gnerun sweep`"])
     items: list[tuple[str, Any, str]] = []
     if isinstance(overrides, dict):
-        items = [(k, v, f"{k}={v!r}") for k, v in overrides.items()]
+        items = [(k, v, override_label(k, v)) for k, v in overrides.items()]
     elif overrides:
         for o in overrides:
             k, v = parse_override(o)
-            items.append((k, v, o))
+            items.append((k, v, f"--set {o}"))
     for key, value, shown in items:
         _apply_override(data, key, value, smap, shown)
     if "name" not in data and path is not None:

@@ -1,4 +1,4 @@
-"""Families, templates, sums and definitions (SPEC §3b): a config's game section expanded before validation.
+"""Families, templates, sums and definitions: a config's game section expanded before validation.
 
 Everything here rewrites the YAML document as plain data, so the game that is validated, compiled and
 recorded in a run directory's ``config.yaml`` is the expanded one. What is expanded:

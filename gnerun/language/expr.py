@@ -2,7 +2,7 @@
 
 Expressions are parsed into a small syntax tree by a hand-written recursive-descent parser and
 interpreted over our own node types: nothing is ever evaluated as Python (no eval, exec, compile,
-or sympify of raw strings). The grammar (SPEC §3):
+or sympify of raw strings). The grammar:
 
     constraint := expr ("<=" | ">=" | "==") expr
     expr       := term (("+" | "-") term)*

@@ -42,7 +42,7 @@ class SourceMap:
     file: str
     values: dict[PathKey, Position] = field(default_factory=dict)
     keys: dict[PathKey, Position] = field(default_factory=dict)
-    overridden: dict[PathKey, str] = field(default_factory=dict)  # path -> the --set text
+    overridden: dict[PathKey, str] = field(default_factory=dict)  # path -> its override (`--set a.b=1`)
     notes: dict[PathKey, str] = field(default_factory=dict)  # path -> e.g. "for i = 2" (a family's copy)
 
     def locate(self, path: PathKey, *, key: bool = False) -> str:
@@ -50,7 +50,7 @@ class SourceMap:
         p = tuple(path)
         for n in range(len(p), 0, -1):
             if p[:n] in self.overridden:
-                return f"--set {self.overridden[p[:n]]}"
+                return self.overridden[p[:n]]
         if not self.values and not self.keys:  # data without a text (a config given as a dict)
             return f"{self.file}, at {dotted(p)}"
         if key and p in self.keys:

@@ -289,7 +289,7 @@ def closed_loop(cfg: Config, game: CompiledGame, K: int, run: RunDirectory | Non
         if interrupt is not None and interrupt.requested:
             ended, completed = "interrupted", t
             if run is not None:
-                run.log("warning", f"K={K}: interrupted (Ctrl-C) after {t} sampling times")
+                run.log("warning", f"K={K}: interrupted (Ctrl-C) after {t} sampling time{'s' * (t != 1)}")
             break
         xs[t] = x
         # z*(t): the solution the solver reaches from the same warm start with an unlimited budget (so that e(t)
@@ -420,7 +420,7 @@ def _safeguarded(game: CompiledGame, solver, stage: StageConstraints, x: np.ndar
 
 def simulate(cfg: Config, out: str | Path | None = None, *, force: bool = False,
              progress: Progress | None = None) -> Simulation:
-    """One closed loop per K in ``cfg.run.K`` (SPEC §7); ``out`` as in :func:`gnerun.solve`."""
+    """One closed loop per K in ``cfg.run.K``; ``out`` as in :func:`gnerun.solve`."""
     if cfg.game.kind != "dynamic":
         raise InputError(f"{cfg.source or cfg.name}: simulate needs a dynamic game (game.kind: dynamic); "
                          "use `gnerun solve` for a static game")
@@ -446,7 +446,7 @@ def simulate(cfg: Config, out: str | Path | None = None, *, force: bool = False,
                 break
             sim[K] = r = closed_loop(cfg, game, K, run, progress, interrupt, stage)
             if run is not None:
-                run.log("info", f"K={K}: {r.ended} after {r.done} sampling times, max e "
+                run.log("info", f"K={K}: {r.ended} after {r.done} sampling time{'s' * (r.done != 1)}, max e "
                                 f"{_nanmax(r.e_norm):.3e}, final e {r.final_e_norm}, failed steps {r.failed_steps}, "
                                 f"fallback steps {r.fallback_steps}, max constraint violation "
                                 f"{r.max_constraint_violation:.3e}")

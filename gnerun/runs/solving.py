@@ -241,7 +241,7 @@ class SolveResult:
         return labels
 
     def summary(self) -> dict:
-        """summary.json (SPEC §4)."""
+        """summary.json."""
         return json_ready({
             "status": self.status,
             "message": self.message,
@@ -269,7 +269,7 @@ def solve(cfg: Config, out: str | Path | None = None, *, force: bool = False,
           on_stage: Callable[[str], None] | None = None) -> SolveResult:
     """Solve the config's game (a static game, or a dynamic game at its x0).
 
-    ``out=None`` writes nothing; otherwise ``out`` becomes a run directory (SPEC §4) with
+    ``out=None`` writes nothing; otherwise ``out`` becomes a run directory with
     ``config.yaml``, ``run.mcap`` (every iterate, flushed as it is made) and ``summary.json``.
     ``on_iterate(state, error_norm)`` sees every iterate as it is made (error_norm = ||z^k - z*||);
     ``on_stage(text)`` is told what a long solve is doing besides iterating (the exact solution, the certificate).
@@ -332,10 +332,10 @@ def _solve(cfg: Config, game: CompiledGame, solver: SemismoothNewton, run: RunDi
     if outcome.improving:
         status = str(Status.NOT_AN_EQUILIBRIUM)
         who = ", ".join(f"{name} by {gap:.2e}" for name, gap in outcome.improving.items())
-        message = (f"a KKT point (||Phi|| = {state.residual_norm:.2e} after {state.k} iterations) that is not an "
-                   f"equilibrium: alone, {who} (best response found by the certificate), after {outcome.restarts} "
-                   "restart(s) from the players' best responses; a nonconvex player's stationary point, not its "
-                   "minimum (try other start values)")
+        message = (f"a KKT point (||Phi|| = {state.residual_norm:.2e} after {state.k} "
+                   f"iteration{'s' * (state.k != 1)}) that is not an equilibrium: alone, {who} (best response "
+                   f"found by the certificate), after {outcome.restarts} restart(s) from the players' best "
+                   "responses; a nonconvex player's stationary point, not its minimum (try other start values)")
     elif outcome.restarts:
         message += (f" (after {outcome.restarts} restart(s) from the best responses of players who could improve "
                     "alone at a KKT point)")

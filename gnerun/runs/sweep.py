@@ -30,7 +30,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from ..errors import ConfigError, InputError, Unavailable
-from ..language.config import CONFIG_VERSION, Config, document_path, load_config
+from ..language.config import CONFIG_VERSION, Config, document_path, load_config, override_label
 from ..language.yaml_source import SourceMap, dotted, read_yaml
 
 MAX_POINTS = 10_000  # every point's config is checked before the sweep starts
@@ -211,7 +211,7 @@ def _point_config(base: Path, overrides: dict[str, Any], params: dict[str, Any],
         shown = ", ".join(f"{k}={v!r}" for k, v in params.items())
         for p in e.problems:
             for k, v in overrides.items():
-                prefix = f"--set {k}={v!r}: "
+                prefix = f"{override_label(k, v)}: "
                 if p.startswith(prefix):
                     where = smap.locate(("grid", k) if k in params else ("set", k))
                     p = f"{where}: {p[len(prefix):]} (point {i}: {shown})"

@@ -39,7 +39,7 @@ nonzero, such as bounds, add to the diagonal) and sparse (the full-space system 
 multiplier block, factorised by SuperLU; the players' blocks of its Schur complement made positive definite in the
 same way, so that both forms take the same direction).
 
-Rows that no decision variable reaches (SPEC §3b) take no part: their multipliers stay zero.
+Rows that no decision variable reaches (a condition on the plant state alone) take no part: their multipliers stay zero.
 """
 
 from __future__ import annotations

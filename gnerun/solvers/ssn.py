@@ -20,7 +20,7 @@ norm ``scale`` in a random direction.
 
 Constraint rows that depend on no decision variable (a condition on the plant state alone, e.g. a
 position one step after an input that drives its acceleration) are not Newton rows: their multipliers are
-held at zero, and a violated one ends the solve as ``infeasible_stage_constraint`` (SPEC §3b).
+held at zero, and a violated one ends the solve as ``infeasible_stage_constraint``.
 
 This class is the paper's local method (``solver.globalization: none``), optionally with Armijo
 backtracking on 1/2||Phi||^2 along its direction (``line_search``). The default, globalized method
@@ -608,7 +608,8 @@ class SemismoothNewton:
             msg = (f"converged in {state.k} iteration{'s' if state.k != 1 else ''}: ||Phi|| = "
                    f"{state.residual_norm:.2e} <= tol {self.options.tol:.0e}")
         elif status == Status.MAX_ITER:
-            msg = (f"stopped after max_iter = {self.options.max_iter} iterations without convergence: "
+            n = self.options.max_iter
+            msg = (f"stopped after max_iter = {n} iteration{'s' if n != 1 else ''} without convergence: "
                    f"||Phi|| = {state.residual_norm:.2e} > tol {self.options.tol:.0e}")
         else:
             msg = state.message
