@@ -235,3 +235,22 @@ def test_recover_writes_an_indexed_copy(runs, tmp_path: Path) -> None:
     assert repaired.complete  # readable through its index again
     assert repaired.messages == cut.messages and repaired.log_times == cut.log_times
     assert repaired.config_yaml == cut.config_yaml and repaired.metadata == cut.metadata
+
+
+def test_a_real_loop_with_failed_steps_is_marked_where_it_failed(tmp_path: Path) -> None:
+    """Large noise on JPhi makes some sampling times fail (diverged, singular): the figure marks those of
+    summary.json, on the K's curve, and the fallback steps the safeguard took."""
+    import json
+
+    noisy = {"disturbance.kind": "jacobian_noise", "disturbance.scale": 3.0, "solver.divergence_limit": 1e4,
+             "run.K": [3], "run.steps": 20}
+    simulate(load_config(CONFIGS / "paper_study2.yaml", noisy), out=tmp_path / "run")
+    by_K = json.loads((tmp_path / "run" / "summary.json").read_text())["by_K"]["3"]
+    assert by_K["failed_steps"]
+    ax_x, ax_e = make_figures([tmp_path / "run"])["paper-study2-study2"].axes
+    [failed] = [ln for ln in ax_e.get_lines() if ln.get_label() == "failed step"]
+    np.testing.assert_array_equal(failed.get_xdata(), by_K["failed_steps"])
+    fallback = [ln for ln in ax_e.get_lines() if ln.get_label() == "fallback: iterate not applied"]
+    assert [list(ln.get_xdata()) for ln in fallback] == ([by_K["fallback_steps"]] if by_K["fallback_steps"] else [])
+    shaded = sorted(round(p.get_x() + p.get_width() / 2) for p in ax_x.patches if p.get_gid() != "floor band")
+    assert shaded == sorted(by_K["failed_steps"] + by_K["fallback_steps"])  # a failed step is often a fallback too

@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..log.mcap_log import RunRecord, read_run
-from .paths import has_positions, paths_figure
+from .paths import FAILED, has_positions, paths_figure
 
 _K_TOPIC = re.compile(r"^/K(\d+)/mpc/(state|error|iterate)$")
 
@@ -37,8 +37,6 @@ TEXT_WIDTH = 7.16  # inches: both columns (\textwidth)
 PANEL_HEIGHT = 1.6  # inches, without the legend
 DPI = 300
 MARKERS = "osD^vPX*ph"
-# statuses of a sampling time that are not failures; anything else (singular_jacobian, diverged, ...) is one
-NOT_FAILED = frozenset({"converged", "incomplete", "max_iter", "running"})
 FAILED_LABEL, FALLBACK_LABEL = "failed step", "fallback: iterate not applied"
 MARK_LABELS = (FAILED_LABEL, FALLBACK_LABEL)
 
@@ -81,7 +79,7 @@ def closed_loops(run: RunRecord) -> dict[int, dict[str, list[dict]]]:
 def failed_steps(states: list[dict]) -> list[int]:
     """Sampling times whose status is a failure (logs that do not record statuses have none; the last state, which
     no solver step produced, has an empty one)."""
-    return [m["t"] for m in states if m.get("status") and m["status"] not in NOT_FAILED]
+    return [m["t"] for m in states if m.get("status") in FAILED]
 
 
 def fallback_steps(states: list[dict]) -> list[int]:

@@ -17,6 +17,7 @@ from ..log.mcap_log import RunRecord
 
 _X = re.compile(r"^p?x(\d+)$")
 _DISTANCE = re.compile(r"^\(\s*(\w+)\s*-\s*(\w+)\s*\)\s*\*\*\s*2\s*\+\s*\(\s*(\w+)\s*-\s*(\w+)\s*\)\s*\*\*\s*2\s*>=")
+# the failure statuses of a sampling time (the solvers' FAILURES, which view does not import)
 FAILED = {"singular_jacobian", "diverged", "nan", "subproblem_failed", "line_search_failed",
           "infeasible_stage_constraint", "stalled"}
 
@@ -65,16 +66,19 @@ def paths_figure(run: RunRecord, loops: dict[int, dict[str, list[dict]]]):
     """Panel (a): every vehicle's path per K; panel (b): pairwise distances per K against the required ones."""
     import matplotlib.pyplot as plt
 
+    from .figures import _legend, _panels, failed_steps, fallback_steps
+
     names = list((run.config.get("game") or {}).get("states") or [])
     cars = vehicles(names)
     required = required_distances(run.config)
-    fig, (ax_p, ax_d) = plt.subplots(1, 2, figsize=(7.0, 3.0))
+    fig, (ax_p, ax_d), width = _panels(2)
     colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     styles = ["-", "--", ":", "-."]
     for n, (K, topics) in enumerate(loops.items()):
         states = [m for m in topics.get("state", []) if m.get("x") is not None]
         ls = styles[n % len(styles)]
-        marked = [m for m in states if m.get("fallback") or m.get("status") in FAILED]
+        steps = set(failed_steps(states)) | set(fallback_steps(states))
+        marked = [m for m in states if m["t"] in steps]
         for c, (label, ix, iy) in enumerate(cars):
             xs = [_num(m["x"][ix]) for m in states]
             ys = [_num(m["x"][iy]) for m in states]
@@ -103,13 +107,12 @@ def paths_figure(run: RunRecord, loops: dict[int, dict[str, list[dict]]]):
     ylo, yhi = ax_p.get_ylim()
     if 1 / 3 <= (yhi - ylo) / max(xhi - xlo, 1e-12) <= 3:  # true proportions, unless a road squeezes them flat
         ax_p.set_aspect("equal", adjustable="datalim")
-    ax_p.set_title("(a) paths", fontsize=9)
+    ax_p.set_title("(a) paths")
     ax_d.set_xlabel("t")
     ax_d.set_ylabel("distance")
-    ax_d.set_title("(b) pairwise distances", fontsize=9)
+    ax_d.set_title("(b) pairwise distances")
     for ax in (ax_p, ax_d):
-        ax.legend(loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize=6, frameon=False)
-    fig.tight_layout()
+        _legend(ax, width)
     return fig
 
 

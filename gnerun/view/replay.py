@@ -45,7 +45,8 @@ APPLICATION_ID = "gnerun"
 # matplotlib's tab10, so that the Rerun views and `gnerun figures` colour alike
 PALETTE = [(31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40), (148, 103, 189), (140, 86, 75),
            (227, 119, 194), (127, 127, 127), (188, 189, 34), (23, 190, 207)]
-MARK_COLOUR = (235, 235, 235)  # failed and fallback markers: light on the viewer's dark background
+MARK_COLOUR = (235, 235, 235)  # failed steps: light on the viewer's dark background
+FALLBACK_COLOUR = (255, 221, 87)  # fallback steps (a colour no series has)
 FLOOR_COLOUR = (150, 150, 150)
 
 
@@ -274,15 +275,15 @@ def draw_log_views(rec, contents: Contents) -> None:
                     rec.set_time(tr.timeline, sequence=time)
                     contents.reach(tr.timeline, time)
                     rec.log(tr.entity, rr.Scalars(y))
-                for what, times, marker in (("failed_steps", tr.failed, "cross"),
-                                            ("fallback_steps", tr.fallback, "down")):
+                for what, times, marker, colour in (("failed_steps", tr.failed, "cross", MARK_COLOUR),
+                                                    ("fallback_steps", tr.fallback, "down", FALLBACK_COLOUR)):
                     if not times:
                         continue
                     entity = f"{tr.marks}/{what}"
                     label = f"{tr.marks.rsplit('/', 1)[-1].replace('K', 'K = ')}: {what.replace('_', ' ')}"
                     series.entities.append(entity)
-                    rec.log(entity, rr.SeriesPoints(names=label, colors=MARK_COLOUR, markers=marker,
-                                                    marker_sizes=6.0), static=True)
+                    rec.log(entity, rr.SeriesPoints(names=label, colors=colour, markers=marker,
+                                                    marker_sizes=8.0), static=True)
                     for time in times:
                         series.span(time)
                         rec.set_time(tr.timeline, sequence=time)
@@ -488,7 +489,7 @@ def web_url(web_port: int, grpc_port: int) -> str:
 VULKAN_HINT = ("headless screenshots need a Vulkan driver and none was found; on Debian or Ubuntu install "
                "one with `apt-get install mesa-vulkan-drivers` (a software rasteriser is enough)")
 
-TOAST_SECONDS = 4.0
+TOAST_SECONDS = 8.0  # how long the viewer's start-up notification stays, from its first answer (5-7 s)
 _ICD_DIRS = ("/usr/share/vulkan/icd.d", "/etc/vulkan/icd.d", "/usr/local/share/vulkan/icd.d")
 
 
@@ -541,6 +542,7 @@ class _HeadlessViewer:
             try:
                 self.client = ViewerClient.connect(self.url)
                 self.client.get_state()
+                self.started = time.monotonic()  # its start-up notification appears about now
                 return
             except Exception:  # noqa: BLE001 - not listening yet
                 if time.monotonic() > deadline:
