@@ -471,6 +471,7 @@ def replay(
         import tempfile
 
         from .errors import InputError
+        from .files import output_directory, output_file
         from .view import replay as rp
 
         runs = _existing_logs(runs)
@@ -479,6 +480,13 @@ def replay(
             if not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
                 raise InputError("no display for the viewer: use --save FILE.rrd, --serve or --screenshot DIR")
             spawn = True
+        # every target is checked before any work: a recording, a folder, the ports
+        if save is not None:
+            output_file(save, "recording (--save)")
+        if screenshot is not None:
+            output_directory(screenshot, "screenshot folder (--screenshot)", create=False)
+        if serve:
+            rp.check_ports(web_port, grpc_port)
         if save is not None:
             rp.save(runs, save)
             if not quiet:
@@ -490,12 +498,13 @@ def replay(
         if spawn:
             rp.spawn(runs)
         if serve:
-            rrd = save if save is not None else Path(tempfile.mkdtemp(prefix="gnerun-replay-")) / "replay.rrd"
-            if save is None:
-                rp.save(runs, rrd)
-            typer.echo(f"web viewer: {rp.web_url(web_port, grpc_port)} (Ctrl-C stops it)")
-            sys.stdout.flush()
-            rp.serve(rrd, web_port, grpc_port)
+            with tempfile.TemporaryDirectory(prefix="gnerun-replay-") as tmp:
+                rrd = save if save is not None else Path(tmp) / "replay.rrd"
+                if save is None:
+                    rp.save(runs, rrd)
+                rp.serve(rrd, web_port, grpc_port,
+                         ready=lambda: (typer.echo(f"web viewer: {rp.web_url(web_port, grpc_port)} (Ctrl-C stops it)"),
+                                        sys.stdout.flush()))
 
 
 @app.command(cls=_Command, short_help="Write a finished, indexed copy of a killed run's log.")
@@ -504,18 +513,29 @@ def recover(
     out: Annotated[Path | None, typer.Option("--out", help="The repaired copy (default: run.recovered.mcap beside "
                                                           "the log).", show_default=False, metavar="FILE")] = None,
     quiet: QuietOpt = False,
+    force: Annotated[bool, typer.Option("--force", help="Overwrite an existing copy.")] = False,
 ) -> None:
-    """Write a finished, indexed copy of a run log whose writer was killed."""
+    """Write a finished, indexed copy of a run log whose writer was killed (or of a damaged one: every record
+    that can be read)."""
     with _reported():
+        import contextlib
+
         from .errors import InputError
         from .log.mcap_log import recover as recover_log
         from .log.mcap_log import run_log_path
+        from .runs.lock import locked
 
         source = run_log_path(_existing_logs([run])[0])
         target = out if out is not None else source.with_name("run.recovered.mcap")
         if target.resolve() == source.resolve():
             raise InputError(f"{target}: the copy must not overwrite the log it repairs")
-        record = recover_log(source, target)
+        if target.is_symlink() or target.exists() and not force:
+            raise InputError(f"{target}: exists (use --force to overwrite it)" if not target.is_symlink() else
+                             f"{target}: is a symbolic link; gnerun does not write through one (remove it)")
+        # beside the log, the copy is written into the run directory: not while a run writes there
+        beside = target.parent.resolve() == source.parent.resolve()
+        with locked(source.parent) if beside else contextlib.nullcontext():
+            record = recover_log(source, target)
     if not quiet:
         typer.echo(f"{target}: {record.message_count} messages recovered ({record.note})")
 

@@ -11,17 +11,36 @@ def one_line(text: str) -> str:
     return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
 
 
+MAX_MESSAGE = 600  # characters of one error line; longer ones quote a huge value and are shortened
+
+
+def shorten(text: str, limit: int = 60) -> str:
+    """``text`` cut to about ``limit`` characters, saying how long it was (for echoing a user's value)."""
+    if len(text) <= limit:
+        return text
+    keep = max(limit - 20, 10)
+    return f"{text[:keep]}...{text[-8:]} ({len(text)} characters)"
+
+
+def _bounded(text: str) -> str:
+    text = one_line(text)
+    if len(text) <= MAX_MESSAGE:
+        return text
+    return f"{text[:MAX_MESSAGE - 120]} ...[{len(text) - MAX_MESSAGE + 40} characters left out]... {text[-80:]}"
+
+
 class InputError(Exception):
     """Bad input from the user: a config, an argument, an unreadable file.
 
     ``str(err)`` is the complete one-line message, e.g.
     ``configs/x.yaml:12:7: game.agents.0.cost: unknown name 'y' at column 5 of expression 'x + y'``.
-    Control characters quoted from the input are escaped (:func:`one_line`).
+    Control characters quoted from the input are escaped (:func:`one_line`), and a message that quotes a huge
+    value is shortened to about ``MAX_MESSAGE`` characters.
     """
 
     def __init__(self, *args: object):
         if len(args) == 1 and isinstance(args[0], str):
-            args = (one_line(args[0]),)
+            args = (_bounded(args[0]),)
         super().__init__(*args)
 
 
@@ -33,7 +52,7 @@ class ConfigError(InputError):
     """
 
     def __init__(self, problems: list[str]):
-        self.problems = [one_line(p) for p in problems]
+        self.problems = [_bounded(p) for p in problems]
         first = self.problems[0] if self.problems else "invalid config"
         more = len(self.problems) - 1
         suffix = f" (and {more} more problem{'s' if more > 1 else ''}: run `gnerun validate` for all)" if more else ""

@@ -275,7 +275,7 @@ def test_ctrl_c_stops_the_sweep_and_its_workers_and_the_sweep_resumes(tmp_path: 
     once, no worker left, the finished point in the index; the next run skips it."""
     spec = _spec(tmp_path, SMALL.replace("  run.steps: 12\n", "").replace(
         "  disturbance.scale: {logspace: [-6, -2, 3]}\n  disturbance.seed: [0, 1]\n",
-        "  run.steps: [4, 200000, 200000]\n"))
+        "  run.steps: [4, 200000, 300000]\n"))
     out = tmp_path / "out"
     proc = subprocess.Popen([*gnerun_command(), "sweep", str(spec), "--out", str(out), "--workers", "2"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, stdin=subprocess.DEVNULL,
@@ -299,6 +299,6 @@ def test_ctrl_c_stops_the_sweep_and_its_workers_and_the_sweep_resumes(tmp_path: 
     sw = load_sweep(spec)
     assert json.loads((out / "sweep.json").read_text())["finished"] == 1
     assert [p.params["run.steps"] for p in sw.points if (out / p.directory / "summary.json").is_file()] == [4]
-    short = load_sweep(_spec(tmp_path, spec.read_text().replace("[4, 200000, 200000]", "[4, 6]"), "short.yaml"))
+    short = load_sweep(_spec(tmp_path, spec.read_text().replace("[4, 200000, 300000]", "[4, 6]"), "short.yaml"))
     again = run_sweep(short, out)
     assert (again.ran, again.skipped) == (1, 1)

@@ -30,7 +30,7 @@ from pydantic import (
 )
 from pydantic_core import PydanticCustomError
 
-from ..errors import ConfigError, InputError
+from ..errors import ConfigError, InputError, shorten
 from .expand import Expander, expands
 from .expr import (
     CONSTANTS,
@@ -237,7 +237,7 @@ class SolverConfig(Strict):
     scheme: Literal["jacobi", "gauss_seidel"] = "jacobi"
     tau: float = Field(1.0, ge=0, description="proximal weight: tau/2 ||a_i - abar_i||^2")
     inner: Literal["ssn", "jn"] = "ssn"
-    inner_max_iter: int = Field(20, ge=1, description="inner Newton iterations per proximal response")
+    inner_max_iter: int = Field(20, ge=1, le=1_000_000, description="inner Newton iterations per proximal response")
 
     @property
     def method(self) -> str:
@@ -254,13 +254,13 @@ class PlantDisturbance(Strict):
 
     kind: Literal["none", "gaussian", "uniform", "constant"] = "none"
     scale: float | list[float] = 0.0
-    seed: int = 0
+    seed: Seed = 0
 
 
 class DisturbanceConfig(Strict):
     kind: Literal["none", "jacobian_noise", "residual", "pseudogradient"] = "none"
     scale: float = Field(0.0, ge=0)
-    seed: int = 0
+    seed: Seed = 0
     distribution: Literal["normal", "uniform"] = "normal"
     plant: PlantDisturbance = Field(default_factory=PlantDisturbance)
 
@@ -299,9 +299,36 @@ class RunConfig(Strict):
                                 "(log_time = t x sampling_time); default: dynamics.dt of an ode, else 1")
 
 
+MAX_NAME_BYTES = 100  # runs/<name>-<UTC timestamp>/ stays well inside a file name's 255 bytes
+
+
+def _safe_name(name: str) -> str:
+    """A config's name is one plain path component: it names the run directory runs/<name>-<time>/."""
+    shown = repr(name) if len(name) <= 40 else repr(name[:37] + "...")
+    if not name:
+        raise ValueError("the name is empty; it names the run directory runs/<name>-<time>/")
+    if "\x00" in name:
+        raise ValueError(f"{shown} contains a NUL character; a name is one file name")
+    if "/" in name or "\\" in name:
+        raise ValueError(f"{shown} is not one path component (no / or \\): it names the run directory "
+                         "runs/<name>-<time>/")
+    if name.startswith("."):
+        raise ValueError(f"{shown} starts with '.'; a name is a visible file name (not . or .. or hidden)")
+    if not name.isprintable():
+        raise ValueError(f"{shown} contains control characters; a name is one printable file name")
+    size = len(name.encode())
+    if size > MAX_NAME_BYTES:
+        raise ValueError(f"{shown} is {size} bytes long; a name is at most {MAX_NAME_BYTES} (it names the run "
+                         "directory runs/<name>-<time>/)")
+    return name
+
+
+Seed = Annotated[int, Field(ge=0, le=2**64 - 1, description="seed of numpy's random generator (0 .. 2**64 - 1)")]
+
+
 class Config(Strict):
     version: Literal[1] = CONFIG_VERSION
-    name: str = "run"
+    name: Annotated[str, AfterValidator(_safe_name)] = "run"
     game: Game
     solver: SolverConfig = Field(default_factory=SolverConfig)
     disturbance: DisturbanceConfig = Field(default_factory=DisturbanceConfig)
@@ -366,18 +393,18 @@ def dump_yaml(data: Any) -> str:
 def parse_override(text: str) -> tuple[str, Any]:
     """``"a.b=value"`` -> ``("a.b", value)``, the value read as YAML (``run.K=[1,7]``)."""
     if "=" not in text:
-        raise InputError(f"--set {text}: expected key.path=value")
+        raise InputError(f"--set {shorten(text, 100)}: expected key.path=value")
     key, _, raw = text.partition("=")
     key = key.strip()
     if not key or any(not part for part in key.split(".")):
-        raise InputError(f"--set {text}: expected key.path=value")
+        raise InputError(f"--set {shorten(text, 100)}: expected key.path=value")
     if not raw.strip():
         return key, ""
     try:  # the same reader as config files: plain data only, bounded depth and size
         value, _ = parse_yaml(raw, "--set")
     except ConfigError as e:
         problem = re.sub(r"^--set(:\d+:\d+)?: ", "", e.problems[0])
-        raise InputError(f"--set {text}: the value is not valid: {problem}") from None
+        raise InputError(f"--set {shorten(text, 100)}: the value is not valid: {problem}") from None
     return key, value
 
 
@@ -403,13 +430,13 @@ def _apply_override(data: dict, key: str, value: Any, smap: SourceMap, shown: st
                 node = node[part]
         elif isinstance(node, list):
             if not isinstance(part, int) or not 0 <= part < len(node):
-                raise InputError(f"{shown}: {'.'.join(map(str, parts[: i + 1]))}: no such list element")
+                raise InputError(f"{shorten(shown, 100)}: {'.'.join(map(str, parts[: i + 1]))}: no such list element")
             if last:
                 node[part] = value
             else:
                 node = node[part]
         else:
-            raise InputError(f"{shown}: {'.'.join(map(str, parts[:i]))} is not a mapping")
+            raise InputError(f"{shorten(shown, 100)}: {'.'.join(map(str, parts[:i]))} is not a mapping")
     smap.overridden[tuple(parts)] = shown
 
 

@@ -14,7 +14,7 @@ from typing import Any
 
 import yaml
 
-from ..errors import ConfigError
+from ..errors import ConfigError, shorten
 
 MAX_CONFIG_BYTES = 1_000_000
 MAX_NODES = 200_000
@@ -50,7 +50,7 @@ class SourceMap:
         p = tuple(path)
         for n in range(len(p), 0, -1):
             if p[:n] in self.overridden:
-                return self.overridden[p[:n]]
+                return shorten(self.overridden[p[:n]], 100)
         if not self.values and not self.keys:  # data without a text (a config given as a dict)
             return f"{self.file}, at {dotted(p)}"
         if key and p in self.keys:

@@ -24,6 +24,7 @@ import numpy as np
 from mcap.writer import CompressionType, Writer
 
 from ..errors import WriteError
+from ..files import open_for_writing
 from .messages import TOPICS, LogEntry, Message
 
 PROFILE = "gnerun"
@@ -50,7 +51,7 @@ class RunLog:
 
     def __init__(self, path: str | Path, *, config_yaml: str, metadata: dict[str, str]):
         self.path = Path(path)
-        self._file: IO[bytes] = open(self.path, "wb")  # noqa: SIM115 - closed in close()
+        self._file: IO[bytes] = open_for_writing(self.path)  # closed in close(); never through a link
         self._writer = Writer(self._file, compression=CompressionType.ZSTD)
         self._writer.start(profile=PROFILE, library="gnerun")
         self._channels: dict[str, int] = {}

@@ -13,9 +13,11 @@ from pathlib import Path
 
 from .. import __version__
 from ..errors import InputError, WriteError
+from ..files import replace_text, write_text
 from ..language.config import Config
 from ..log.mcap_log import RunLog, json_ready
 from ..log.messages import Message, SolveIterate
+from .lock import DirectoryLock, contents
 
 
 def default_run_dir(cfg: Config, root: str | Path = "runs") -> Path:
@@ -36,25 +38,33 @@ def git_describe() -> str:
 
 
 class RunDirectory:
-    """An open run directory and its MCAP log."""
+    """An open run directory and its MCAP log; it holds the directory's lock until :meth:`close`."""
 
-    def __init__(self, path: Path, log: RunLog):
+    def __init__(self, path: Path, log: RunLog, lock: DirectoryLock | None = None):
         self.path = path
         self.log_sink = log
+        self._lock = lock
 
     @classmethod
     def create(cls, out: str | Path, cfg: Config, *, command: str, force: bool = False) -> RunDirectory:
         path = Path(out)
         if path.exists() and not path.is_dir():
             raise InputError(f"{path}: exists and is not a directory")
-        if path.is_dir() and any(path.iterdir()) and not force:
-            raise InputError(f"{path}: the run directory exists and is not empty (use --force to overwrite)")
         try:
             path.mkdir(parents=True, exist_ok=True)
+        except OSError as e:
+            raise InputError(f"{path}: cannot write the run directory: {e.strerror or e}") from None
+        try:
+            lock = DirectoryLock.acquire(path)
+        except OSError as e:
+            raise InputError(f"{path}: cannot write the run directory: {e.strerror or e}") from None
+        try:
+            if contents(path) and not force:
+                raise InputError(f"{path}: the run directory exists and is not empty (use --force to overwrite)")
             config_yaml = cfg.resolved_yaml()
-            (path / "config.yaml").write_text(config_yaml)
-            for stale in ("summary.json",):
+            for stale in ("summary.json", "summary.json.tmp"):  # unlink never follows a link
                 (path / stale).unlink(missing_ok=True)
+            write_text(path / "config.yaml", config_yaml)
             metadata = {
                 "version": __version__,
                 "config_hash": cfg.config_hash(),
@@ -69,11 +79,13 @@ class RunDirectory:
             }
             log = RunLog(path / "run.mcap", config_yaml=config_yaml, metadata=metadata)
             log.set_time(0)  # the run's start on its own time axis
-        except PermissionError as e:
-            raise InputError(f"{path}: cannot write the run directory: {e.strerror or e}") from None
         except OSError as e:
+            lock.release()
             raise InputError(f"{path}: cannot write the run directory: {e.strerror or e}") from None
-        return cls(path, log)
+        except BaseException:
+            lock.release()
+            raise
+        return cls(path, log, lock)
 
     def write_iterate(self, state, error_norm: float | None) -> None:
         """Iterate k at log_time k seconds (and what follows, until the next iterate)."""
@@ -105,17 +117,18 @@ class RunDirectory:
         self.log_sink.flush()
 
     def write_summary(self, summary: dict) -> None:
-        tmp = self.path / "summary.json.tmp"
         try:
-            tmp.write_text(json.dumps(json_ready(summary), indent=2, allow_nan=False) + "\n")
-            tmp.replace(self.path / "summary.json")
+            replace_text(self.path / "summary.json", json.dumps(json_ready(summary), indent=2, allow_nan=False) + "\n")
         except OSError as e:
-            tmp.unlink(missing_ok=True)
             raise WriteError(f"{self.path / 'summary.json'}: cannot write the summary: {e.strerror or e} "
                              "(is the disk full?); the run log holds every flushed step") from None
 
     def close(self) -> None:
-        self.log_sink.close()
+        try:
+            self.log_sink.close()
+        finally:
+            if self._lock is not None:
+                self._lock.release()
 
 
 @contextlib.contextmanager

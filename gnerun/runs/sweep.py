@@ -16,6 +16,7 @@ message; the sweep goes on.
 from __future__ import annotations
 
 import csv
+import io
 import itertools
 import json
 import math
@@ -29,9 +30,11 @@ from typing import Annotated, Any, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-from ..errors import ConfigError, InputError, Unavailable
+from ..errors import ConfigError, InputError, Unavailable, shorten
+from ..files import read_json_object, replace_text, replacing, write_text
 from ..language.config import CONFIG_VERSION, Config, document_path, load_config, override_label
 from ..language.yaml_source import SourceMap, dotted, read_yaml
+from .lock import DirectoryLock, contents, locked
 
 MAX_POINTS = 10_000  # every point's config is checked before the sweep starts
 INDEX_CSV = "index.csv"
@@ -190,8 +193,14 @@ def load_sweep(path: str | Path) -> Sweep:
             raise ConfigError([f"{smap.locate(('grid',))}: grid: {count} points; the limit is {MAX_POINTS}"])
         combos = list(itertools.product(*axes.values()))
     points = []
+    seen: dict[str, int] = {}
     for i, combo in enumerate(combos):
         params = dict(zip(axes, combo, strict=True))
+        same = seen.setdefault(json.dumps(params, sort_keys=True, default=str), i)
+        if same != i:  # one run directory per point: the same parameters twice would share one
+            shown = shorten(", ".join(f"{k}={v!r}" for k, v in params.items()), 200)
+            raise ConfigError([f"{smap.locate(('grid',))}: grid: points {same} and {i} have the same parameters "
+                               f"({shown}): an axis lists a value twice"])
         overrides = {**spec.set, **params}
         cfg = _point_config(base, overrides, params, i, smap)
         if spec.command == "simulate" and cfg.game.kind != "dynamic":
@@ -231,11 +240,26 @@ def run_point(task: dict[str, Any]) -> list[dict[str, Any]]:
     ``task``: base (config path), overrides, out (the point's run directory), command, params, index,
     directory, config_hash. Module-level and plain-data in and out, so that any executor can ship it.
     """
+    out = Path(task["out"])
+    t0 = time.perf_counter()
+    try:  # the point's directory is written by this point alone
+        if out.exists() and not out.is_dir():
+            raise InputError(f"{out}: exists and is not a directory")
+        out.mkdir(parents=True, exist_ok=True)
+        lock = DirectoryLock.acquire(out)
+    except (InputError, OSError) as e:
+        message = str(e) if isinstance(e, InputError) else f"{out}: cannot write the point: {e.strerror or e}"
+        return [_row(task, K=None, status="error", message=message, wall=time.perf_counter() - t0)]
+    try:
+        return _run_point(task, out, t0)
+    finally:
+        lock.release()
+
+
+def _run_point(task: dict[str, Any], out: Path, t0: float) -> list[dict[str, Any]]:
     from .closed_loop import simulate
     from .solving import solve
 
-    out = Path(task["out"])
-    t0 = time.perf_counter()
     try:
         cfg = load_config(task["base"], task["overrides"])
         if task["command"] == "simulate":
@@ -243,19 +267,18 @@ def run_point(task: dict[str, Any]) -> list[dict[str, Any]]:
         else:
             solve(cfg, out=out, force=True)
         wall = time.perf_counter() - t0
-        (out / POINT_JSON).write_text(json.dumps({"index": task["index"], "params": task["params"],
-                                                  "config_hash": task["config_hash"], "wall_s": wall}) + "\n")
+        replace_text(out / POINT_JSON, json.dumps({"index": task["index"], "params": task["params"],
+                                                   "config_hash": task["config_hash"], "wall_s": wall}) + "\n")
         # from the written summary, as for a point skipped on resume: the same rows either way
-        return rows_from_summary(task, json.loads((out / "summary.json").read_text()), wall)
+        return rows_from_summary(task, read_json_object(out / "summary.json"), wall)
     except Exception as e:  # noqa: BLE001 - a failed point is a row, never the end of the sweep
         message = f"{type(e).__name__}: {e}" if not isinstance(e, InputError | Unavailable) else str(e)
         try:
-            out.mkdir(parents=True, exist_ok=True)
-            (out / POINT_JSON).write_text(json.dumps({"index": task["index"], "params": task["params"],
-                                                      "config_hash": task["config_hash"], "status": "error",
-                                                      "message": message,
-                                                      "traceback": traceback.format_exc()}) + "\n")
-        except OSError:
+            replace_text(out / POINT_JSON, json.dumps({"index": task["index"], "params": task["params"],
+                                                       "config_hash": task["config_hash"], "status": "error",
+                                                       "message": message,
+                                                       "traceback": traceback.format_exc()}) + "\n")
+        except (OSError, InputError):
             pass
         return [_row(task, K=None, status="error", message=message.splitlines()[0] if message else "",
                      wall=time.perf_counter() - t0)]
@@ -409,10 +432,10 @@ class SweepResult(BaseModel):
 def _finished(sweep_dir: Path, point: Point) -> tuple[dict[str, Any], dict[str, Any]] | None:
     """(point.json, summary.json) of a point finished with this config, or None: it has to run."""
     out = sweep_dir / point.directory
-    try:
-        meta = json.loads((out / POINT_JSON).read_text())
-        summary = json.loads((out / "summary.json").read_text())
-    except (OSError, ValueError):
+    try:  # a point whose files are missing or damaged runs again
+        meta = read_json_object(out / POINT_JSON)
+        summary = read_json_object(out / "summary.json")
+    except InputError:
         return None
     if (meta.get("config_hash") == point.config_hash and meta.get("status") != "error"
             and summary.get("status") != "interrupted"):
@@ -443,11 +466,21 @@ def run_sweep(sweep: Sweep, out: str | Path, *, executor: str = "local", workers
     sweep_dir = Path(out)
     if sweep_dir.exists() and not sweep_dir.is_dir():
         raise InputError(f"{sweep_dir}: exists and is not a directory")
-    if sweep_dir.is_dir() and any(sweep_dir.iterdir()) and not (sweep_dir / SPEC_FILE).is_file() and not force:
-        raise InputError(f"{sweep_dir}: exists, is not empty and holds no sweep (use --force to write into it)")
     try:
         sweep_dir.mkdir(parents=True, exist_ok=True)
-        (sweep_dir / SPEC_FILE).write_text(Path(sweep.source).read_text())
+    except OSError as e:
+        raise InputError(f"{sweep_dir}: cannot write the sweep directory: {e.strerror or e}") from None
+    with locked(sweep_dir, "sweep directory"):
+        return _run_sweep(sweep, sweep_dir, executor, workers, address, force, progress)
+
+
+def _run_sweep(sweep: Sweep, sweep_dir: Path, executor: str, workers: int, address: str | None, force: bool,
+               progress: Callable[[int, int, dict[str, Any], list[dict[str, Any]]], None] | None) -> SweepResult:
+    """run_sweep's work, with the sweep directory locked: no other process writes into it meanwhile."""
+    if contents(sweep_dir) and not (sweep_dir / SPEC_FILE).is_file() and not force:
+        raise InputError(f"{sweep_dir}: exists, is not empty and holds no sweep (use --force to write into it)")
+    try:
+        write_text(sweep_dir / SPEC_FILE, Path(sweep.source).read_text())
     except OSError as e:
         raise InputError(f"{sweep_dir}: cannot write the sweep directory: {e.strerror or e}") from None
     t0 = time.perf_counter()
@@ -456,11 +489,14 @@ def run_sweep(sweep: Sweep, out: str | Path, *, executor: str = "local", workers
     for p in sweep.points:
         task = _task(sweep, sweep_dir, p)
         finished = _finished(sweep_dir, p)
-        if finished is not None:
-            meta, summary = finished
-            rows[p.index] = rows_from_summary(task, summary, meta.get("wall_s"))
-        else:
-            tasks.append(task)
+        try:
+            if finished is not None:
+                meta, summary = finished
+                rows[p.index] = rows_from_summary(task, summary, meta.get("wall_s"))
+                continue
+        except (KeyError, TypeError, ValueError, AttributeError):  # a summary.json edited by hand: run it again
+            pass
+        tasks.append(task)
     skipped = len(rows)
     failed = 0
     done = skipped
@@ -477,7 +513,7 @@ def run_sweep(sweep: Sweep, out: str | Path, *, executor: str = "local", workers
     finally:
         files = write_index(sweep, sweep_dir, rows)
         wall = time.perf_counter() - t0
-        (sweep_dir / SWEEP_JSON).write_text(json.dumps({
+        replace_text(sweep_dir / SWEEP_JSON, json.dumps({
             "name": sweep.spec.name, "source": sweep.source, "base": str(sweep.base), "axes": sweep.axes,
             "mode": sweep.spec.mode, "command": sweep.spec.command, "points": len(sweep.points),
             "finished": len(rows), "ran": len(rows) - skipped, "skipped": skipped, "failed": failed,
@@ -508,13 +544,12 @@ def write_index(sweep: Sweep, sweep_dir: Path, rows: dict[int, list[dict[str, An
     cols = columns(sweep)
     ordered = [r for i in sorted(rows) for r in rows[i]]
     target = sweep_dir / INDEX_CSV
-    tmp = target.with_suffix(".csv.tmp")
-    with tmp.open("w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(cols)
-        for r in ordered:
-            w.writerow([_cell(r.get(c)) for c in cols])
-    tmp.replace(target)
+    text = io.StringIO(newline="")
+    w = csv.writer(text)
+    w.writerow(cols)
+    for r in ordered:
+        w.writerow([_cell(r.get(c)) for c in cols])
+    replace_text(target, text.getvalue())
     written = [target]
     if not parquet:
         return written
@@ -524,9 +559,8 @@ def write_index(sweep: Sweep, sweep_dir: Path, rows: dict[int, list[dict[str, An
     except ImportError:
         return written
     table = pa.table({c: [_parquet_value(r.get(c)) for r in ordered] for c in cols})
-    tmp = sweep_dir / (INDEX_PARQUET + ".tmp")
-    pq.write_table(table, tmp)
-    tmp.replace(sweep_dir / INDEX_PARQUET)
+    with replacing(sweep_dir / INDEX_PARQUET) as f:
+        pq.write_table(table, f)
     written.append(sweep_dir / INDEX_PARQUET)
     return written
 

@@ -25,6 +25,7 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from ..files import open_for_writing, output_directory
 from ..log.mcap_log import RunRecord, read_run
 from .paths import FAILED, has_positions, paths_figure
 
@@ -501,14 +502,16 @@ def k_figure(name: str, rows: list[dict], axes: list[str]):
 
 def sweep_figures(sweep_dir: str | Path) -> dict[str, object]:
     """The figures a sweep's index supports: <name>-iss (a disturbance-scale axis), <name>-k (a run.K axis)."""
-    import json
-
+    from ..errors import InputError
+    from ..files import read_json_object
     from ..runs.sweep import SWEEP_JSON, read_index
 
     _style()
-    meta = json.loads((Path(sweep_dir) / SWEEP_JSON).read_text())
+    meta = read_json_object(Path(sweep_dir) / SWEEP_JSON)
+    axes, name = meta.get("axes"), meta.get("name")
+    if not isinstance(axes, list) or not all(isinstance(a, str) for a in axes) or not isinstance(name, str):
+        raise InputError(f"{Path(sweep_dir) / SWEEP_JSON}: damaged {SWEEP_JSON}: no sweep name and axes in it")
     rows = read_index(sweep_dir)
-    axes, name = list(meta["axes"]), str(meta["name"])
     figures: dict[str, object] = {}
     for scale_axis in SCALE_AXES:
         if scale_axis in axes:
@@ -519,21 +522,27 @@ def sweep_figures(sweep_dir: str | Path) -> dict[str, object]:
     return figures
 
 
+def file_stem(name: str) -> str:
+    """A figure's file name from a name read in a log (which may have been edited): one plain path component."""
+    stem = re.sub(r"[^A-Za-z0-9._=+-]+", "_", name).lstrip(".")[:120]
+    return stem or "figure"
+
+
 def write_figures(paths: list[str | Path], out: str | Path, formats: list[str],
                   sweeps: list[str | Path] = ()) -> list[Path]:
     """Draw and save; returns the files written."""
     import matplotlib.pyplot as plt
 
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = output_directory(out, "figures folder")
     written = []
     drawn = make_figures(paths) if paths else {}
     for s in sweeps:
         drawn.update(sweep_figures(s))
     for stem, fig in drawn.items():
         for fmt in formats:
-            target = out / f"{stem}.{fmt}"
-            fig.savefig(target, dpi=DPI)
+            target = out / f"{file_stem(stem)}.{fmt}"
+            with open_for_writing(target) as f:
+                fig.savefig(f, format=fmt, dpi=DPI)
             written.append(target)
         plt.close(fig)
     return written

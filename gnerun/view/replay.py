@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import InputError, Unavailable
+from ..files import output_directory, output_file, write_bytes
 from ..log.mcap_log import RunRecord, read_run
 from ..log.messages import level_name
 from .figures import (
@@ -394,8 +395,7 @@ def _stream():
 
 def save(paths: list[str | Path], target: str | Path) -> Path:
     """Write a Rerun recording (.rrd) of the runs, with the figure blueprint."""
-    target = Path(target)
-    target.parent.mkdir(parents=True, exist_ok=True)
+    target = output_file(target, "recording")
     rec = _stream()
     rec.save(target)
     rec.send_blueprint(blueprint(record(paths, rec)))
@@ -460,24 +460,72 @@ def _stop(proc, grace: float = 10.0) -> None:
         pass
 
 
-def serve(rrd: Path, web_port: int, grpc_port: int) -> int:
-    """Run the web viewer until it stops, or until we are interrupted or terminated (then stop it too)."""
+def check_ports(*ports: int) -> None:
+    """Each port is a TCP port number, the ports differ, and none is taken on 127.0.0.1 (bad input, exit 2)."""
+    import socket
+
+    for port in ports:
+        if not 1 <= port <= 65535:
+            raise InputError(f"port {port}: a TCP port is a number in 1..65535")
+    if len(set(ports)) != len(ports):
+        raise InputError(f"the web viewer and its data server need two ports, not {ports[0]} twice")
+    for port in ports:
+        with socket.socket() as s:
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as the viewer binds
+            try:
+                s.bind(("127.0.0.1", port))
+            except OSError as e:
+                raise InputError(f"port {port} on 127.0.0.1 cannot be used: {e.strerror or e} (choose another with "
+                                 "--web-port or --grpc-port)") from None
+
+
+def _listening(port: int) -> bool:
+    import socket
+
+    with socket.socket() as s:
+        s.settimeout(0.5)
+        return s.connect_ex(("127.0.0.1", port)) == 0
+
+
+def serve(rrd: Path, web_port: int, grpc_port: int, ready=None, timeout: float = 60.0) -> int:
+    """Run the web viewer until it stops, or until we are interrupted or terminated (then stop it too).
+    ``ready()`` is called once both ports answer; a viewer that stops before is an error with its last words."""
     import os
     import signal
+    import subprocess
+    import tempfile
+    import time
 
-    proc = _start(serve_command(rrd, web_port, grpc_port), env=dict(os.environ, RERUN_APP_ONLY="true"))
+    output = tempfile.TemporaryFile()
+    proc = _start(serve_command(rrd, web_port, grpc_port), env=dict(os.environ, RERUN_APP_ONLY="true"),
+                  stdout=output, stderr=subprocess.STDOUT)
 
     def stop(signum, frame):  # SIGTERM: take the viewer down with us
         raise KeyboardInterrupt
 
-    previous = signal.signal(signal.SIGTERM, stop)
+    previous = {sig: signal.signal(sig, stop) for sig in (signal.SIGTERM, signal.SIGHUP)}
     try:
+        deadline = time.monotonic() + timeout
+        while not (_listening(web_port) and _listening(grpc_port)):
+            if proc.poll() is not None:
+                output.seek(0)
+                lines = [ln for ln in output.read().decode(errors="replace").splitlines() if ln.strip()]
+                raise Unavailable("the web viewer stopped before it served: " + (lines[-1][:200] if lines
+                                                                                 else f"exit code {proc.returncode}"))
+            if time.monotonic() > deadline:
+                raise Unavailable(f"the web viewer did not answer on ports {web_port} and {grpc_port} within "
+                                  f"{timeout:g} s")
+            time.sleep(0.2)
+        if ready is not None:
+            ready()
         return proc.wait()
     except KeyboardInterrupt:
         return 0
     finally:
-        signal.signal(signal.SIGTERM, previous)
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
         _stop(proc)
+        output.close()
 
 
 def web_url(web_port: int, grpc_port: int) -> str:
@@ -617,8 +665,7 @@ def screenshots(paths: list[str | Path], out_dir: str | Path, size: str = "1600x
     check_size(size)
     if not vulkan_available():
         raise Unavailable(VULKAN_HINT)
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    out_dir = output_directory(out_dir, "screenshot folder")
     viewer = _HeadlessViewer(size, timeout)
     written = []
     try:
@@ -635,7 +682,7 @@ def screenshots(paths: list[str | Path], out_dir: str | Path, size: str = "1600x
             time.sleep(max(0.0, viewer.started + TOAST_SECONDS - time.monotonic()))
             png = _settled_screenshot(viewer.client)
             target = out_dir / f"{fig.slug}.png"
-            target.write_bytes(png)
+            write_bytes(target, png)
             written.append(target)
         rec.disconnect()
     finally:
