@@ -249,8 +249,7 @@ def solve(config: ConfigArg, out: OutOpt = None, set_: SetOpt = None, quiet: Qui
             stage = (lambda text: typer.echo(f"... {text}", err=True)) if not quiet and sys.stderr.isatty() else None
             result = run_solve(cfg, out=out_dir, force=force, on_iterate=show, on_stage=stage)
         except KeyboardInterrupt:
-            typer.echo(f"interrupted: {out_dir} holds the log of the iterates made"
-                       if (out_dir / "run.mcap").is_file() else "interrupted", err=True)
+            typer.echo(_interrupted(out_dir), err=True)
             raise typer.Exit(130) from None
     if quiet:
         return
@@ -290,9 +289,7 @@ def simulate(config: ConfigArg, out: OutOpt = None, set_: SetOpt = None, quiet: 
             with _progress(cfg, enabled=not quiet and sys.stdout.isatty()) as progress:
                 sim = run_simulate(cfg, out=out_dir, force=force, progress=progress)
         except KeyboardInterrupt:
-            done = out_dir / "summary.json"
-            typer.echo(f"interrupted: {out_dir} holds a finished log and a summary with status interrupted"
-                       if done.is_file() else "interrupted", err=True)
+            typer.echo(_interrupted(out_dir), err=True)
             raise typer.Exit(130) from None
     if quiet:
         return
@@ -321,8 +318,10 @@ def sweep(
                                              "running again resumes it).", show_default=False, metavar="DIR")] = None,
     executor: Annotated[str, typer.Option("--executor", help="local (process pool) or dask.",
                                           metavar="local|dask")] = "local",
-    workers: Annotated[int, typer.Option("--workers", help="Worker processes (local, and a dask LocalCluster).",
+    workers: Annotated[int, typer.Option("--workers", help="Worker processes (local, and a dask LocalCluster); at "
+                                         "most the CPUs of this machine, unless --force-workers.",
                                          metavar="N")] = 2,
+    force_workers: Annotated[bool, typer.Option("--force-workers", help="Allow more --workers than CPUs.")] = False,
     address: Annotated[str | None, typer.Option("--address", help="A running Dask scheduler: tcp://host:8786 or "
                                                 "its scheduler file (default: a LocalCluster).",
                                                 show_default=False, metavar="ADDRESS")] = None,
@@ -333,7 +332,7 @@ def sweep(
     with _reported():
         from .runs.sweep import check_executor, default_sweep_dir, load_sweep, run_sweep
 
-        check_executor(executor, workers, address)  # before the points are loaded
+        check_executor(executor, workers, address, force_workers)  # before the points are loaded
         sw = load_sweep(spec)
         out_dir = out if out is not None else default_sweep_dir(sw)
         if not quiet:
@@ -540,6 +539,15 @@ def recover(
         typer.echo(f"{target}: {record.message_count} messages recovered ({record.note})")
 
 
+def _interrupted(out_dir: Path) -> str:
+    """What an interrupted solve or simulate left behind, in one line."""
+    if (out_dir / "summary.json").is_file():
+        return f"interrupted: {out_dir} holds a finished log and a summary with status interrupted"
+    if (out_dir / "run.mcap").is_file():
+        return f"interrupted: {out_dir} holds the log of what was done"
+    return "interrupted"
+
+
 def _ms(seconds: float) -> str:
     return f"{seconds * 1e3:.3f} ms"
 
@@ -576,6 +584,9 @@ class _progress:
 def main() -> None:
     """Entry point of the `gnerun` console script."""
     single_threaded_blas()
+    from .runs.interrupt import terminate_like_ctrl_c
+
+    terminate_like_ctrl_c()
     try:
         app(standalone_mode=True)
     except KeyboardInterrupt:

@@ -14,7 +14,8 @@ from typing import Any
 
 import yaml
 
-from ..errors import ConfigError, shorten
+from ..errors import ConfigError, InputError, shorten
+from ..files import read_regular
 
 MAX_CONFIG_BYTES = 1_000_000
 MAX_NODES = 200_000
@@ -212,18 +213,11 @@ def dotted(path: PathKey, empty: str = "<document>") -> str:
 
 def read_yaml(path: str | Path) -> tuple[Any, SourceMap]:
     """Read a YAML file into plain data and its :class:`SourceMap`; every problem is a ConfigError."""
-    p = Path(path)
     file = str(path)
-    try:
-        raw = p.read_bytes()
-    except FileNotFoundError:
-        raise ConfigError([f"{file}: no such file"]) from None
-    except IsADirectoryError:
-        raise ConfigError([f"{file}: is a directory, not a config file"]) from None
-    except OSError as e:
-        raise ConfigError([f"{file}: cannot read: {e.strerror or e}"]) from None
-    if len(raw) > MAX_CONFIG_BYTES:
-        raise ConfigError([f"{file}: config is {len(raw)} bytes; the limit is {MAX_CONFIG_BYTES}"])
+    try:  # a regular file only (a device or a FIFO is refused unread), read up to the limit
+        raw = read_regular(path, MAX_CONFIG_BYTES, "config file")
+    except InputError as e:
+        raise ConfigError([str(e)]) from None
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as e:

@@ -14,12 +14,9 @@ is a fixed point of the Newton step.
 
 from __future__ import annotations
 
-import contextlib
 import math
-import signal
-import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -31,6 +28,7 @@ from ..language.config import Config, PlantDisturbance
 from ..log.mcap_log import json_ready
 from ..log.messages import MpcError, MpcIterate, MpcState
 from ..solvers.ssn import FAILURES, Status
+from .interrupt import Interrupt
 from .rundir import RunDirectory, recording
 from .safeguard import Plan, choose, finite_or_inf, first_step_violation
 from .solving import make_solver, reference_solution
@@ -38,35 +36,39 @@ from .solving import make_solver, reference_solution
 
 @dataclass
 class ClosedLoopResult:
-    """One closed loop (one K). Arrays are indexed by sampling time t."""
+    """One closed loop (one K). Arrays are indexed by sampling time t and hold the times run (``done`` of the
+    ``steps`` planned: fewer if the loop stopped or was interrupted); they grow as the loop runs, so a loop of
+    10^7 planned steps takes memory for the steps it makes only."""
 
     K: int
-    x: np.ndarray  # (steps + 1, nx): x(0) .. x(steps)
-    u: np.ndarray  # (steps, nu): the inputs applied
-    w: np.ndarray  # (steps, nx): the plant disturbances
-    e_norm: np.ndarray  # (steps,): ||z^K(t) - z*(t)|| (nan where z* is unknown)
+    x: np.ndarray  # (done + 1, nx): x(0) .. x(steps) for a completed loop; (done, nx): the states reached otherwise
+    u: np.ndarray  # (done, nu): the inputs applied (NaN at a time where the loop stopped)
+    w: np.ndarray  # (done, nx): the plant disturbances
+    e_norm: np.ndarray  # (done,): ||z^K(t) - z*(t)|| (nan where z* is unknown)
     e_norm_agent: dict[str, np.ndarray]  # ||z_i^K(t) - z_i^*(t)||, z_i = (a_i, lambda_i)
-    residual_norm: np.ndarray  # (steps,): ||Phi(z^K(t); x(t))||
-    iterations: np.ndarray  # (steps,): solver steps taken (<= K)
-    solve_time_s: np.ndarray  # (steps,): time of the solver steps alone
+    residual_norm: np.ndarray  # (done,): ||Phi(z^K(t); x(t))||
+    iterations: np.ndarray  # (done,): solver steps taken (<= K)
+    solve_time_s: np.ndarray  # (done,): time of the solver steps alone
     status: list[str]  # per t: converged | incomplete (K steps, tol not met) | a failure status
     reference_status: list[str]  # per t: the status of the z*(t) solve
-    constraint_violation: np.ndarray  # (steps,): the largest violation of a stage-0 row at u(t) and x(t + 1)
+    constraint_violation: np.ndarray  # (done,): the largest violation of a stage-0 row at u(t) and x(t + 1)
     worst_constraint: list[str | None]  # per t: that row's label (None when every row holds)
-    fallback: np.ndarray  # (steps,): True where the applied plan was not z^K(t) (run.safeguard)
-    z: np.ndarray = field(repr=False)  # (steps, size): z^K(t)
-    z_star: np.ndarray = field(repr=False)  # (steps, size): z*(t)
+    fallback: np.ndarray  # (done,): True where the applied plan was not z^K(t) (run.safeguard)
+    z: np.ndarray = field(repr=False)  # (done, size): z^K(t)
+    z_star: np.ndarray = field(repr=False)  # (done, size): z*(t)
     completed: int | None = None  # sampling times done; fewer than steps if the loop stopped or was interrupted
     ended: str = "completed"  # completed | stopped (on_failure: stop) | interrupted
+    planned: int | None = None  # run.steps
 
     @property
     def steps(self) -> int:
-        return int(self.u.shape[0])
+        """Sampling times planned (run.steps)."""
+        return int(self.u.shape[0]) if self.planned is None else self.planned
 
     @property
     def done(self) -> int:
         """Sampling times run."""
-        return self.steps if self.completed is None else self.completed
+        return int(self.u.shape[0]) if self.completed is None else self.completed
 
     @property
     def failed_steps(self) -> list[int]:
@@ -190,37 +192,6 @@ class StepReport:
 Progress = Callable[[StepReport], None]
 
 
-class Interrupt:
-    """Ctrl-C (SIGINT) as a request: the closed loop finishes the sampling time in progress, then ends.
-
-    A second Ctrl-C interrupts at once. Outside the main thread (where signals cannot be handled) this does
-    nothing and Ctrl-C raises KeyboardInterrupt as usual; in a process that ignores Ctrl-C (a sweep's worker,
-    which the sweep stops itself) it does nothing either, so the worker does not race the sweep to write a
-    summary of an interrupted point.
-    """
-
-    def __init__(self) -> None:
-        self.requested = False
-
-    @contextlib.contextmanager
-    def installed(self) -> Iterator[Interrupt]:
-        if threading.current_thread() is not threading.main_thread() \
-                or signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
-            yield self
-            return
-
-        def handler(signum, frame) -> None:
-            if self.requested:
-                raise KeyboardInterrupt
-            self.requested = True
-
-        previous = signal.signal(signal.SIGINT, handler)
-        try:
-            yield self
-        finally:
-            signal.signal(signal.SIGINT, previous)
-
-
 def closed_loop(cfg: Config, game: CompiledGame, K: int, run: RunDirectory | None = None,
                 progress: Progress | None = None, interrupt: Interrupt | None = None,
                 stage: StageConstraints | None = None) -> ClosedLoopResult:
@@ -233,7 +204,7 @@ def closed_loop(cfg: Config, game: CompiledGame, K: int, run: RunDirectory | Non
     last iterate before the failed step (safeguard: none) and goes on, ``stop`` ends this loop at that step. Every
     sampling time reports the largest violation of a stage-0 constraint row at the inputs applied and the state they
     produced (plant disturbance included).
-    Arrays keep their length; the sampling times not run are NaN (``completed`` says how many ran).
+    Nothing is allocated by the number of steps planned: the result's arrays hold the sampling times run.
     """
     solver = make_solver(cfg, game)
     stage = stage if stage is not None else compile_stage_constraints(cfg)
@@ -247,22 +218,23 @@ def closed_loop(cfg: Config, game: CompiledGame, K: int, run: RunDirectory | Non
     shift = cfg.run.warm_start == "shift"
 
     x = np.array(game.x0, dtype=float)
-    xs = np.full((steps + 1, nx), np.nan)
-    us = np.full((steps, nu), np.nan)
-    ws = np.zeros((steps, nx))
-    e = np.full(steps, np.nan)
-    e_agent = {a: np.full(steps, np.nan) for a in agents}
-    res = np.full(steps, np.nan)
-    its = np.zeros(steps, dtype=int)
-    times = np.zeros(steps)
-    viol = np.full(steps, np.nan)
+    xs: list[np.ndarray] = []
+    us: list[np.ndarray] = []
+    ws: list[np.ndarray] = []
+    e: list[float] = []
+    e_agent: dict[str, list[float]] = {a: [] for a in agents}
+    res: list[float] = []
+    its: list[int] = []
+    times: list[float] = []
+    viol: list[float] = []
     worst: list[str | None] = []
-    fallback = np.zeros(steps, dtype=bool)
+    fallback: list[bool] = []
     status: list[str] = []
     ref_status: list[str] = []
     exact = cfg.run.reference == "exact"  # z*(t) and e(t), or neither (run.reference: none)
-    zs = np.full((steps, size), np.nan)
-    zstars = np.full((steps, size), np.nan)
+    zs: list[np.ndarray] = []
+    zstars: list[np.ndarray] = []
+    unknown = np.full(size, np.nan)
 
     z_warm = game.z_start()
     applied = z_warm  # the plan applied at the last sampling time
@@ -279,8 +251,7 @@ def closed_loop(cfg: Config, game: CompiledGame, K: int, run: RunDirectory | Non
         run.write(f"{topic}/state", MpcState(t=t, x=x.tolist(), u=None if u is None else u.tolist(),
                                              status=status[t], fallback=bool(fallback[t]),
                                              constraint_violation=float(viol[t])))
-        run.write(f"{topic}/error", MpcError(t=t, e_norm=float(e[t]),
-                                              e_norm_agent={a: float(v[t]) for a, v in e_agent.items()}))
+        run.write(f"{topic}/error", MpcError(t=t, e_norm=e[t], e_norm_agent={a: v[t] for a, v in e_agent.items()}))
         run.flush()
 
     for t in range(steps):
@@ -289,9 +260,9 @@ def closed_loop(cfg: Config, game: CompiledGame, K: int, run: RunDirectory | Non
         if interrupt is not None and interrupt.requested:
             ended, completed = "interrupted", t
             if run is not None:
-                run.log("warning", f"K={K}: interrupted (Ctrl-C) after {t} sampling time{'s' * (t != 1)}")
+                run.log("warning", f"K={K}: interrupted ({interrupt.reason}) after {t} sampling time{'s' * (t != 1)}")
             break
-        xs[t] = x
+        xs.append(x)
         # z*(t): the solution the solver reaches from the same warm start with an unlimited budget (so that e(t)
         # measures the effect of the budget K, on the branch the loop follows when equilibria are not unique);
         # then from z*(t-1), then cold
@@ -338,29 +309,33 @@ def closed_loop(cfg: Config, game: CompiledGame, K: int, run: RunDirectory | Non
             status.append("incomplete")
 
         z = state.z
-        zs[t] = z
-        res[t] = state.residual_norm
-        its[t] = state.k
-        times[t] = elapsed
-        if z_star is not None:
-            zstars[t] = z_star
-            e[t] = np.linalg.norm(z - z_star)
-            for a, idx in zip(agents, agent_idx, strict=True):
-                e_agent[a][t] = np.linalg.norm(z[idx] - z_star[idx])
+        zs.append(z)
+        res.append(state.residual_norm)
+        its.append(state.k)
+        times.append(elapsed)
+        zstars.append(unknown if z_star is None else z_star)
+        e.append(math.nan if z_star is None else float(np.linalg.norm(z - z_star)))
+        for a, idx in zip(agents, agent_idx, strict=True):
+            e_agent[a].append(math.nan if z_star is None else float(np.linalg.norm(z[idx] - z_star[idx])))
         if failed and run is not None:
             action = ("the closed loop stops here (on_failure: stop)" if cfg.run.on_failure == "stop" else
                       "the plant gets the best plan at hand (safeguard: fallback)" if guard else
                       "the plant gets the inputs of the last iterate before it (on_failure: continue)")
             run.log("warning", f"K={K} t={t}: {final}: {state.message}; {action}")
         if failed and cfg.run.on_failure == "stop":
+            us.append(np.full(nu, np.nan))
+            ws.append(np.zeros(nx))
+            viol.append(math.nan)
             worst.append(None)
+            fallback.append(False)
             if run is not None:
                 record(t, trace, z_star, x, None)
             ended, completed = "stopped", t + 1
             break
         if guard and final != Status.CONVERGED:
             plan = _safeguarded(game, solver, stage, x, trace, plan_prev=None if t == 0 else applied)
-            applied, fallback[t] = plan.z, failed or plan.k != state.k
+            applied = plan.z
+            fallback.append(failed or plan.k != state.k)
             if fallback[t] and run is not None and not failed:
                 which = "the shifted previous plan" if plan.k < 0 else f"iterate {plan.k}"
                 run.log("info", f"K={K} t={t}: fallback to {which} (||Phi|| {plan.residual_norm:.2e}, first step "
@@ -369,20 +344,21 @@ def closed_loop(cfg: Config, game: CompiledGame, K: int, run: RunDirectory | Non
             # the paper's rule: z^K(t); after a failed step the last iterate before it (a diverged or NaN one is not
             # used)
             applied = trace[-1][2] if failed else z
-            fallback[t] = failed
+            fallback.append(failed)
         u = game.first_inputs(applied[: game.n])
-        us[t] = u
+        us.append(u)
         w = plant()
-        ws[t] = w
+        ws.append(w)
         x_next = game.step_dynamics(x, u) + w
-        viol[t], label = stage.violation(x_next, u)
+        violation, label = stage.violation(x_next, u)
+        viol.append(violation)
         worst.append(label)
 
         if run is not None:
             record(t, trace, z_star, x, u)
         if progress is not None:
             progress(StepReport(K, t, steps, x.copy(), u.copy(), status[t], bool(fallback[t]), float(viol[t]),
-                                int(its[t]), float(res[t]), float(e[t]), float(elapsed)))
+                                int(its[t]), float(res[t]), e[t], float(elapsed)))
 
         x = x_next
         # the solver goes on from its own iterates (time-distributed optimisation), even where the plant got another
@@ -392,16 +368,23 @@ def closed_loop(cfg: Config, game: CompiledGame, K: int, run: RunDirectory | Non
             applied if failed else z
         z_warm = game.shift(z_next) if shift else z_next
     else:
-        xs[steps] = x
+        xs.append(x)
         if run is not None:
             run.at(steps * cfg.run.sampling_time)
             run.write(f"{topic}/state", MpcState(t=steps, x=x.tolist(), u=None, status="", fallback=False,
                                                  constraint_violation=None))
             run.flush()
-    return ClosedLoopResult(K=K, x=xs, u=us, w=ws, e_norm=e, e_norm_agent=e_agent, residual_norm=res,
-                            iterations=its, solve_time_s=times, status=status, reference_status=ref_status,
-                            constraint_violation=viol, worst_constraint=worst, fallback=fallback,
-                            z=zs, z_star=zstars, completed=completed, ended=ended)
+
+    def rows(values: list, width: int) -> np.ndarray:
+        return np.array(values, dtype=float).reshape(len(values), width)
+
+    return ClosedLoopResult(K=K, x=rows(xs, nx), u=rows(us, nu), w=rows(ws, nx), e_norm=np.array(e, dtype=float),
+                            e_norm_agent={a: np.array(v, dtype=float) for a, v in e_agent.items()},
+                            residual_norm=np.array(res, dtype=float), iterations=np.array(its, dtype=int),
+                            solve_time_s=np.array(times, dtype=float), status=status, reference_status=ref_status,
+                            constraint_violation=np.array(viol, dtype=float), worst_constraint=worst,
+                            fallback=np.array(fallback, dtype=bool), z=rows(zs, size), z_star=rows(zstars, size),
+                            completed=completed, ended=ended, planned=steps)
 
 
 def _safeguarded(game: CompiledGame, solver, stage: StageConstraints, x: np.ndarray, trace: list,

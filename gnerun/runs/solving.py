@@ -19,6 +19,7 @@ from ..log.mcap_log import json_ready
 from ..solvers.hybrid import globalized
 from ..solvers.ssn import SemismoothNewton, SSNState, Status
 from ..threads import single_threaded_blas
+from .interrupt import Interrupt
 from .rundir import RunDirectory, recording
 
 
@@ -279,13 +280,25 @@ def solve(cfg: Config, out: str | Path | None = None, *, force: bool = False,
     compile_time = time.perf_counter() - t0
     solver = make_solver(cfg, game)
     run = RunDirectory.create(out, cfg, command="solve", force=force) if out is not None else None
-    with recording(run):
-        return _solve(cfg, game, solver, run, compile_time, on_iterate, on_stage)
+    interrupt = Interrupt()
+    with recording(run), interrupt.installed():
+        result = _solve(cfg, game, solver, run, compile_time, on_iterate, interrupt, on_stage)
+    if result.status == INTERRUPTED:
+        raise KeyboardInterrupt  # after the summary and a finished log: the caller decides what it means
+    return result
+
+
+INTERRUPTED = "interrupted"  # the status of a solve stopped by Ctrl-C, SIGTERM or SIGHUP
+
+
+class _Stopped(Exception):
+    """A stop request seen between two iterates."""
 
 
 def _solve(cfg: Config, game: CompiledGame, solver: SemismoothNewton, run: RunDirectory | None,
            compile_time: float, on_iterate: Callable[[SSNState, float | None], None] | None,
-           on_stage: Callable[[str], None] | None = None) -> SolveResult:
+           interrupt: Interrupt, on_stage: Callable[[str], None] | None = None) -> SolveResult:
+    started = time.perf_counter()
     x = game.x0
     z0 = game.z_start()
     exact = cfg.run.reference == "exact"
@@ -298,6 +311,8 @@ def _solve(cfg: Config, game: CompiledGame, solver: SemismoothNewton, run: RunDi
 
     def record(state: SSNState) -> None:
         nonlocal sink_time
+        if interrupt.requested:  # before the iterate is counted: the last one recorded is the result
+            raise _Stopped
         t = time.perf_counter()
         history.append(state)
         error = None if z_star is None else float(np.linalg.norm(state.z - z_star))
@@ -319,9 +334,13 @@ def _solve(cfg: Config, game: CompiledGame, solver: SemismoothNewton, run: RunDi
 
     from ..solvers.certificate import NewtonResponses
 
-    outcome = certified_solve(game, solver, solver.init(z0, x), x, record, note,
-                              best_responses=cfg.run.certificate, responses=NewtonResponses(cfg, game),
-                              on_stage=on_stage)
+    try:
+        outcome = certified_solve(game, solver, solver.init(z0, x), x, record, note,
+                                  best_responses=cfg.run.certificate, responses=NewtonResponses(cfg, game),
+                                  on_stage=on_stage)
+    except _Stopped:
+        return _interrupted(cfg, game, run, history, z_star, ref, interrupt,
+                            time.perf_counter() - started - sink_time, compile_time)
     state, cert = outcome.state, outcome.certificate
     elapsed = outcome.time_s - sink_time  # the solver alone: the sink's I/O and the certificate are excluded
     if exact and outcome.restarts and state.status == Status.CONVERGED:  # the equilibrium reached, polished
@@ -362,5 +381,32 @@ def _solve(cfg: Config, game: CompiledGame, solver: SemismoothNewton, run: RunDi
     )
     if run is not None:
         run.log("info" if result.success else "warning", f"status {result.status}: {result.message}")
+        run.write_summary(result.summary())
+    return result
+
+
+def _interrupted(cfg: Config, game: CompiledGame, run: RunDirectory | None, history: list[SSNState],
+                 z_star: np.ndarray | None, ref: Reference | None, interrupt: Interrupt, elapsed: float,
+                 compile_time: float) -> SolveResult:
+    """The result of a solve stopped on request: the last iterate made, its KKT residuals, status interrupted."""
+    from ..solvers.certificate import kkt_residuals
+
+    x = game.x0
+    state = history[-1] if history else None
+    z = state.z if state is not None else game.z_start()
+    k = state.k if state is not None else 0
+    residual = state.residual_norm if state is not None else float("nan")
+    message = f"interrupted ({interrupt.reason}) after {k} iterations; the summary holds the last iterate"
+    result = SolveResult(
+        status=INTERRUPTED, message=message, iterations=k, z=z, residual_norm=residual,
+        residual_history=[s.residual_norm for s in history],
+        error_history=None if z_star is None else [float(np.linalg.norm(s.z - z_star)) for s in history],
+        step_norms=[s.step_norm for s in history], active_set_changes=[s.active_set_changes for s in history],
+        solution=game.solution_by_agent(z[: game.n]), multipliers=game.multipliers_by_agent(z[game.n:]),
+        z_star=z_star, reference_status=str(ref.status) if ref is not None else "skipped",
+        certificate=kkt_residuals(game, z, x), time_s=elapsed, compile_time_s=compile_time,
+        x=np.asarray(x, dtype=float), game=game, run_dir=run.path if run is not None else None)
+    if run is not None:
+        run.log("warning", f"status {INTERRUPTED}: {message}")
         run.write_summary(result.summary())
     return result

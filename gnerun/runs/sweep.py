@@ -15,12 +15,14 @@ message; the sweep goes on.
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import io
 import itertools
 import json
 import math
 import re
+import sys
 import time
 import traceback
 from collections.abc import Callable, Iterator
@@ -336,20 +338,42 @@ def rows_from_summary(task: dict[str, Any], summary: dict[str, Any], wall: float
 Completed = Iterator[tuple[dict[str, Any], list[dict[str, Any]]]]
 
 
-def _ignore_sigint() -> None:
-    """Workers leave Ctrl-C to the sweep, which stops them (their points then run again on resume)."""
+def _worker_start(parent: int) -> None:
+    """A worker leaves Ctrl-C and a terminal's hang-up to the sweep, which stops it (its point then runs again on
+    resume), and on Linux dies with the sweep even when the sweep is killed (SIGKILL): no worker outlives it."""
+    import os
     import signal
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGHUP, signal.SIG_IGN)
+    if sys.platform.startswith("linux"):
+        import ctypes
+
+        with contextlib.suppress(OSError, AttributeError):
+            ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+    if os.getppid() != parent:  # the sweep died before the line above
+        os._exit(1)
+
+
+def available_cpus() -> int:
+    """The CPUs this process may run on."""
+    import os
+
+    try:
+        return len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        return os.cpu_count() or 1
 
 
 def _local(tasks: list[dict[str, Any]], workers: int) -> Completed:
     import multiprocessing
+    import os
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
-    # spawn: workers start clean (no forked BLAS or CasADi state), as on any platform
+    # spawn: workers start clean (no forked BLAS or CasADi state), as on any platform; they stay in the sweep's
+    # process group, so that a signal to the group (a terminal's Ctrl-C, a scheduler's stop) reaches them too
     pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
-                               initializer=_ignore_sigint)
+                               initializer=_worker_start, initargs=(os.getpid(),))
     try:
         futures = {pool.submit(run_point, t): t for t in tasks}
         for f in as_completed(futures):
@@ -449,13 +473,20 @@ def _task(sweep: Sweep, sweep_dir: Path, p: Point) -> dict[str, Any]:
             "out": str((sweep_dir / p.directory).resolve())}
 
 
-def check_executor(executor: str, workers: int, address: str | None) -> None:
+def check_executor(executor: str, workers: int, address: str | None, force_workers: bool = True) -> None:
+    """The executor's options make sense; unless ``force_workers``, workers on this machine (local, or a dask
+    LocalCluster) are at most its CPUs: more only slow each other down and each one takes memory."""
     if executor not in ("local", "dask"):
         raise InputError(f"--executor {executor}: choose local or dask")
     if workers < 1:
         raise InputError(f"--workers {workers}: at least 1")
     if address is not None and executor != "dask":
         raise InputError("--address needs --executor dask")
+    cpus = available_cpus()
+    if address is None and workers > cpus and not force_workers:
+        raise InputError(f"--workers {workers}: this machine has {cpus} CPU{'s' * (cpus > 1)} for gnerun; more "
+                         "workers than CPUs only slow each other down, and each takes its own memory (about 150 "
+                         "MB); use --force-workers to start them anyway")
 
 
 def run_sweep(sweep: Sweep, out: str | Path, *, executor: str = "local", workers: int = 2,

@@ -1,0 +1,65 @@
+"""Stopping a run on request: Ctrl-C (SIGINT), SIGTERM (a scheduler's or `kill`'s stop) and SIGHUP (a closed
+terminal) all ask a run to end cleanly.
+
+While a run holds :meth:`Interrupt.installed`, the first of these signals is a request: the run finishes the
+iterate or sampling time in progress, writes its summary with status ``interrupted`` and a finished, indexed
+log, and then raises KeyboardInterrupt for the caller (the command line exits with 130). A second signal
+interrupts at once (the log is still closed and indexed on the way out).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import signal
+import threading
+from collections.abc import Iterator
+
+SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name))
+
+
+class Interrupt:
+    """A stop request from SIGINT, SIGTERM or SIGHUP (see the module docstring).
+
+    Outside the main thread (where signals cannot be handled) this does nothing and the signals keep their
+    handlers; in a process that ignores Ctrl-C (a sweep's worker, which the sweep stops itself) it does nothing
+    either, so that the worker does not race the sweep to write a summary of an interrupted point.
+    """
+
+    def __init__(self) -> None:
+        self.requested = False
+        self.signal: str | None = None  # the name of the signal that asked, e.g. "SIGTERM"
+
+    @property
+    def reason(self) -> str:
+        """``Ctrl-C`` or the signal's name, for messages."""
+        return "Ctrl-C" if self.signal in (None, "SIGINT") else self.signal
+
+    @contextlib.contextmanager
+    def installed(self) -> Iterator[Interrupt]:
+        if threading.current_thread() is not threading.main_thread() \
+                or signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+            yield self
+            return
+
+        def handler(signum, frame) -> None:
+            if self.requested:
+                raise KeyboardInterrupt
+            self.requested = True
+            self.signal = signal.Signals(signum).name
+
+        previous = {sig: signal.signal(sig, handler) for sig in SIGNALS}
+        try:
+            yield self
+        finally:
+            for sig, old in previous.items():
+                signal.signal(sig, old)
+
+
+def terminate_like_ctrl_c() -> None:
+    """SIGTERM and SIGHUP raise KeyboardInterrupt as Ctrl-C does, so that every command ends through the same
+    clean-up (locks released, logs closed, temporary files removed) whichever of them stops it."""
+    if threading.current_thread() is not threading.main_thread():
+        return
+    for sig in SIGNALS:
+        if sig != signal.SIGINT and signal.getsignal(sig) is signal.SIG_DFL:
+            signal.signal(sig, signal.default_int_handler)
