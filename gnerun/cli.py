@@ -211,17 +211,32 @@ def validate(config: ConfigArg, set_: SetOpt = None, quiet: QuietOpt = False, ex
             for p in e.problems:
                 typer.echo(f"error: {p}", err=True)
             raise typer.Exit(2) from None
-        from .game.compile import compile_game
-        from .runs.solving import make_solver
+        large = cfg.size_warnings("simulate" if cfg.game.kind == "dynamic" else "solve")
+        _warn(config, large, quiet)
+        if not large or not cfg.size.problems()[1]:  # a game of a size that builds in seconds is built
+            from .game.compile import compile_game
+            from .runs.solving import make_solver
 
-        game = compile_game(cfg)
-        make_solver(cfg, game)  # refuses what the configured method cannot solve
+            game = compile_game(cfg)
+            make_solver(cfg, game)  # refuses what the configured method cannot solve
     if expand:
         typer.echo(cfg.resolved_yaml(), nl=False)
         return
-    if not quiet:
+    if quiet:
+        return
+    if cfg.size.problems()[1]:
+        typer.echo(f"{config}: ok ({cfg.game.kind} game '{cfg.name}': {len(cfg.game.agents)} agents, "
+                   f"{cfg.size.decisions} decisions, {cfg.size.multipliers} multipliers; not built, as it is large: "
+                   "`gnerun solve` builds it)")
+    else:
         typer.echo(f"{config}: ok ({cfg.game.kind} game '{cfg.name}': {len(game.agent_names)} agents, "
                    f"{game.n} decisions, {game.m} multipliers)")
+
+
+def _warn(config: Path, warnings: list[str], quiet: bool) -> None:
+    if not quiet:
+        for w in warnings:
+            typer.echo(f"warning: {config}: {w}", err=True)
 
 
 @app.command(cls=_Command, short_help="Solve one equilibrium problem and print the solution.")
@@ -230,6 +245,7 @@ def solve(config: ConfigArg, out: OutOpt = None, set_: SetOpt = None, quiet: Qui
     """Solve one equilibrium problem (a static game, or a dynamic game at its x0)."""
     with _reported():
         cfg = _load(config, set_)
+        _warn(config, cfg.size_warnings("solve"), quiet)
         from .runs.rundir import default_run_dir
         from .runs.solving import solve as run_solve
 
@@ -277,6 +293,7 @@ def simulate(config: ConfigArg, out: OutOpt = None, set_: SetOpt = None, quiet: 
         if cfg.game.kind != "dynamic":  # before the header: nothing runs
             raise InputError(f"{config}: simulate needs a dynamic game (game.kind: dynamic); use `gnerun solve` "
                              "for a static game")
+        _warn(config, cfg.size_warnings("simulate"), quiet)
         from .runs.closed_loop import simulate as run_simulate
         from .runs.rundir import default_run_dir
 

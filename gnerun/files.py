@@ -121,7 +121,7 @@ def read_regular(path: str | Path, limit: int, what: str = "file") -> bytes:
     try:
         fd = os.open(p, os.O_RDONLY | _CLOEXEC | _NONBLOCK)
     except FileNotFoundError:
-        raise InputError(f"{p}: no such {what}") from None
+        raise InputError(f"{p}: no such file (a {what} was expected)") from None
     except OSError as e:
         raise InputError(f"{p}: cannot read: {e.strerror or e}") from None
     try:
@@ -129,7 +129,7 @@ def read_regular(path: str | Path, limit: int, what: str = "file") -> bytes:
         if not stat.S_ISREG(st.st_mode):
             raise InputError(f"{p}: is {_kind(st.st_mode)}, not a {what}")
         if st.st_size > limit:
-            raise InputError(f"{p}: {st.st_size} bytes; the limit for a {what} is {limit}")
+            raise InputError(f"{p}: the {what} is {st.st_size} bytes; the limit is {limit}")
         os.set_blocking(fd, True)
         chunks, size = [], 0
         while size <= limit:
@@ -139,7 +139,7 @@ def read_regular(path: str | Path, limit: int, what: str = "file") -> bytes:
             chunks.append(chunk)
             size += len(chunk)
         if size > limit:
-            raise InputError(f"{p}: more than {limit} bytes; the limit for a {what} is {limit}")
+            raise InputError(f"{p}: the {what} is more than {limit} bytes; the limit is {limit}")
         return b"".join(chunks)
     except OSError as e:
         raise InputError(f"{p}: cannot read: {e.strerror or e}") from None

@@ -271,7 +271,8 @@ def _one_or_list(v: Any) -> Any:
 
 class RunConfig(Strict):
     K: Annotated[list[Annotated[int, Field(ge=1, le=100_000)]], BeforeValidator(_one_or_list)] = Field(
-        default_factory=lambda: [5], min_length=1, description="iteration budgets; one number is a list of one")
+        default_factory=lambda: [5], min_length=1, max_length=1000,
+        description="iteration budgets; one number is a list of one")
     steps: int = Field(30, ge=1, le=10_000_000)
     warm_start: Literal["previous", "shift"] = Field(
         "shift", description="shift: the plan applied at the last sampling time without its stage 0, its last stage "
@@ -335,6 +336,7 @@ class Config(Strict):
     run: RunConfig = Field(default_factory=RunConfig)
 
     _source: str | None = PrivateAttr(default=None)
+    _size: Any = PrivateAttr(default=None)
 
     @model_validator(mode="after")
     def _fill_sampling_time(self) -> Config:
@@ -353,6 +355,21 @@ class Config(Strict):
     def source(self) -> str | None:
         """The file this config was loaded from, if any."""
         return self._source
+
+    @property
+    def size(self) -> Any:
+        """The estimated size of the game (:class:`gnerun.language.size.Size`), computed before building it."""
+        if self._size is None:
+            from .size import estimate
+
+            self._size = estimate(self)
+        return self._size
+
+    def size_warnings(self, command: str) -> list[str]:
+        """Warnings about the size of what ``command`` (solve, simulate, validate) would build and run."""
+        warnings = list(self.size.problems()[1])
+        loop = self.size.loop_warning() if command == "simulate" and self.game.kind == "dynamic" else None
+        return warnings + ([loop] if loop else [])
 
     def resolved_yaml(self) -> str:
         """The config with every default filled in, as YAML (what runs write to config.yaml)."""
@@ -490,7 +507,15 @@ def load_config(
     problems = check_semantics(cfg, smap)
     if problems:
         raise ConfigError(problems)
+    from .size import estimate  # the size of the game, before anything is built from it
+
+    size = estimate(cfg)
+    too_large, _ = size.problems()
+    if too_large:
+        where = ("game", "horizon") if cfg.game.kind == "dynamic" else ("game", "agents")
+        raise ConfigError([f"{smap.locate(where)}: {show_path(where)}: {p}" for p in too_large])
     cfg._source = str(path) if path is not None else None
+    cfg._size = size
     return cfg
 
 

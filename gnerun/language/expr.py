@@ -520,14 +520,14 @@ _BINARY: dict[str, Callable[[Any, Any], Any]] = {
 
 def check_names(parsed: Expression | Constraint, allowed: Iterable[str], what: str = "name") -> None:
     """Raise :class:`ExpressionError` at the first name that is not in ``allowed``."""
-    allowed = set(allowed) | set(CONSTANTS)
+    allowed = allowed if isinstance(allowed, set | frozenset) else set(allowed)  # not copied: one per agent
     tree_roots = [parsed.tree] if isinstance(parsed, Expression) else [parsed.lhs, parsed.rhs]
     unknown: list[tuple[int, str]] = []
     for root in tree_roots:
         for name in names_in(root):
-            if name not in allowed:
+            if name not in allowed and name not in CONSTANTS:
                 unknown.append((first_column_of(root, name) or 1, name))
     if unknown:
         column, name = min(unknown)
-        known = ", ".join(sorted(allowed)) or "none"
+        known = ", ".join(sorted(set(allowed) | set(CONSTANTS))) or "none"
         raise ExpressionError(f"unknown {what} {name!r} (known here: {known})", parsed.text, column)

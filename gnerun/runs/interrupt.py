@@ -17,12 +17,22 @@ from collections.abc import Iterator
 SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name))
 
 
+_worker = False  # this process is a sweep's worker: the sweep stops it
+
+
+def leave_signals_to_the_parent() -> None:
+    """In a sweep's worker: runs install no handlers (the sweep stops its workers itself, and a worker must not race
+    it to write a summary of an interrupted point)."""
+    global _worker
+    _worker = True
+
+
 class Interrupt:
     """A stop request from SIGINT, SIGTERM or SIGHUP (see the module docstring).
 
-    Outside the main thread (where signals cannot be handled) this does nothing and the signals keep their
-    handlers; in a process that ignores Ctrl-C (a sweep's worker, which the sweep stops itself) it does nothing
-    either, so that the worker does not race the sweep to write a summary of an interrupted point.
+    Outside the main thread (where signals cannot be handled) and in a sweep's worker this does nothing and the
+    signals keep their handlers. A signal that the process ignores stays ignored (a job started in the background
+    by a script ignores Ctrl-C; one started by nohup ignores SIGHUP): the others still ask the run to stop.
     """
 
     def __init__(self) -> None:
@@ -36,8 +46,7 @@ class Interrupt:
 
     @contextlib.contextmanager
     def installed(self) -> Iterator[Interrupt]:
-        if threading.current_thread() is not threading.main_thread() \
-                or signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        if threading.current_thread() is not threading.main_thread() or _worker:
             yield self
             return
 
@@ -47,7 +56,7 @@ class Interrupt:
             self.requested = True
             self.signal = signal.Signals(signum).name
 
-        previous = {sig: signal.signal(sig, handler) for sig in SIGNALS}
+        previous = {sig: signal.signal(sig, handler) for sig in SIGNALS if signal.getsignal(sig) is not signal.SIG_IGN}
         try:
             yield self
         finally:

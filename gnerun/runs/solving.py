@@ -325,6 +325,8 @@ def _solve(cfg: Config, game: CompiledGame, solver: SemismoothNewton, run: RunDi
     if run is not None:
         run.log("info", f"solve {cfg.name}: {game.n} decisions, {game.m} multipliers, {cfg.solver.kind} "
                         f"({cfg.solver.complementarity}), disturbance {cfg.disturbance.kind}")
+        for warning in cfg.size_warnings("solve"):
+            run.log("warning", warning)
         if ref is not None and not ref.converged:
             run.log("warning", f"the undisturbed reference solve did not converge ({ref.message}); "
                                "error norms are not available")

@@ -344,6 +344,9 @@ def _worker_start(parent: int) -> None:
     import os
     import signal
 
+    from .interrupt import leave_signals_to_the_parent
+
+    leave_signals_to_the_parent()
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGHUP, signal.SIG_IGN)
     if sys.platform.startswith("linux"):
