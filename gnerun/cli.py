@@ -425,20 +425,24 @@ def inspect(run: Annotated[Path, typer.Argument(help="A run directory or its run
     """Topics, message counts, time range, status and config of a run, finished or not."""
     with _reported():
         import datetime as dt
-        import json
 
+        from .errors import InputError, shorten
+        from .files import read_json_object
         from .log.mcap_log import read_run
 
         record = read_run(_existing_logs([run])[0])
         summary_file = record.path.parent / "summary.json"
         status = "unknown"
-        if summary_file.is_file():
-            status = json.loads(summary_file.read_text()).get("status", "unknown")
+        if summary_file.exists() or summary_file.is_symlink():
+            try:
+                status = shorten(str(read_json_object(summary_file).get("status", "unknown")), 60)
+            except InputError as e:
+                status = f"unknown ({e})"
         elif not record.complete:
             status = "incomplete: the run did not finish (no summary.json)"
         times = [t for ts in record.log_times.values() for t in ts]
-    typer.echo(f"{record.path}: {record.note}")
-    meta = record.metadata
+    typer.echo(f"{record.path}: {one_line(record.note)}")
+    meta = {k: one_line(shorten(v, 80)) for k, v in record.metadata.items()}  # a log may have been edited
     typer.echo(f"config: {meta.get('config_name', '?')} (hash {meta.get('config_hash', '?')[:12]}, gnerun "
                f"{meta.get('version', '?')}, seed {meta.get('seed', '?')}, {meta.get('git_describe', '?')})")
     typer.echo(f"status: {status}")
@@ -455,11 +459,11 @@ def inspect(run: Annotated[Path, typer.Argument(help="A run directory or its run
                    f"({(max(times) - min(times)) / 1e9:.3f} s)")
     typer.echo(f"{'topic':<24} {'messages':>8}")
     for topic, msgs in sorted(record.messages.items()):
-        typer.echo(f"{topic:<24} {len(msgs):>8}")
-    if record.config_yaml:
+        typer.echo(f"{one_line(shorten(topic, 60)):<24} {len(msgs):>8}")
+    if record.config:
         typer.echo("config.yaml:")
         for line in record.config_yaml.rstrip().splitlines():
-            typer.echo(f"  {line}")
+            typer.echo(f"  {one_line(line)}")
 
 
 @app.command(cls=_Command, short_help="Open runs in Rerun: viewer, .rrd file, web viewer or screenshots.")
@@ -553,7 +557,7 @@ def recover(
         with locked(source.parent) if beside else contextlib.nullcontext():
             record = recover_log(source, target)
     if not quiet:
-        typer.echo(f"{target}: {record.message_count} messages recovered ({record.note})")
+        typer.echo(f"{target}: {record.message_count} messages recovered ({one_line(record.note)})")
 
 
 def _interrupted(out_dir: Path) -> str:

@@ -96,9 +96,12 @@ def agent_names(run: RunRecord, errors: list[dict]) -> list[str]:
     return [a for a in configured if a in seen] + [a for a in seen if a not in configured]
 
 
+DRAWABLE = 1e300  # a larger magnitude is left as a gap: an axis spanning it overflows
+
+
 def number(v: object) -> float:
-    """A logged value as a float (NaN where it is missing)."""
-    return float(v) if isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) else math.nan
+    """A logged value as a float (NaN where it is missing, or too large to draw)."""
+    return float(v) if isinstance(v, int | float) and not isinstance(v, bool) and abs(v) < DRAWABLE else math.nan
 
 
 def below_floor(v: float) -> bool:
