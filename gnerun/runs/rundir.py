@@ -8,6 +8,7 @@ import functools
 import json
 import math
 import subprocess
+import warnings
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -132,18 +133,44 @@ class RunDirectory:
 
 
 @contextlib.contextmanager
+def numerical_warnings(run: RunDirectory | None) -> Iterator[None]:
+    """numpy's RuntimeWarnings (overflow, invalid values: iterates beyond the range of doubles) become warning lines
+    in the run's ``/log``, once per place, instead of lines on stderr: the solver's status already says what they
+    led to (diverged, nan, ...). Without a run they are left to Python as usual."""
+    if run is None:
+        yield
+        return
+    with warnings.catch_warnings():
+        warnings.simplefilter("default", RuntimeWarning)  # once per place in the code
+        shown = warnings.showwarning
+
+        def show(message, category, filename, lineno, file=None, line=None) -> None:
+            if not issubclass(category, RuntimeWarning):
+                shown(message, category, filename, lineno, file, line)
+                return
+            where = f"{Path(filename).parent.name}/{Path(filename).name}:{lineno}"
+            with contextlib.suppress(WriteError):
+                run.log("warning", f"floating-point trouble: {message} ({where}); the status says where it led")
+
+        warnings.showwarning = show
+        yield
+
+
+@contextlib.contextmanager
 def recording(run: RunDirectory | None) -> Iterator[RunDirectory | None]:
-    """Log an exception that ends the run to ``/log`` and always close the log (a finished MCAP)."""
-    try:
-        yield run
-    except BaseException as exc:
-        if run is not None:
-            # the error that ends the run is on its way: a log that cannot be written must not replace it
-            with contextlib.suppress(WriteError):
-                run.log("error", f"the run stopped: {type(exc).__name__}: {exc}")
-            with contextlib.suppress(WriteError):
+    """Log an exception that ends the run to ``/log`` and always close the log (a finished MCAP); numerical
+    warnings go to the log too (:func:`numerical_warnings`)."""
+    with numerical_warnings(run):
+        try:
+            yield run
+        except BaseException as exc:
+            if run is not None:
+                # the error that ends the run is on its way: a log that cannot be written must not replace it
+                with contextlib.suppress(WriteError):
+                    run.log("error", f"the run stopped: {type(exc).__name__}: {exc}")
+                with contextlib.suppress(WriteError):
+                    run.close()
+            raise
+        else:
+            if run is not None:
                 run.close()
-        raise
-    else:
-        if run is not None:
-            run.close()
