@@ -28,7 +28,7 @@ from ..language.config import Config, PlantDisturbance
 from ..log.mcap_log import json_ready
 from ..log.messages import MpcError, MpcIterate, MpcState
 from ..solvers.ssn import FAILURES, Status
-from .interrupt import Interrupt
+from .interrupt import Interrupt, Stopped
 from .rundir import RunDirectory, recording
 from .safeguard import Plan, choose, finite_or_inf, first_step_violation
 from .solving import make_solver, reference_solution
@@ -270,11 +270,18 @@ def closed_loop(cfg: Config, game: CompiledGame, K: int, run: RunDirectory | Non
             z_star = None
             ref_status.append("skipped")
         else:
-            ref = reference_solution(game, cfg, z_warm, x)
-            for start in (z_star_prev, game.z_start()):
-                if ref.converged:
-                    break
-                ref = reference_solution(game, cfg, start, x)
+            try:
+                ref = reference_solution(game, cfg, z_warm, x, interrupt=interrupt)
+                for start in (z_star_prev, game.z_start()):
+                    if ref.converged:
+                        break
+                    ref = reference_solution(game, cfg, start, x, interrupt=interrupt)
+            except Stopped:  # a stop request during z*(t): this sampling time is not run
+                xs.pop()
+                ended, completed = "interrupted", t
+                if run is not None:
+                    run.log("warning", f"K={K}: interrupted ({interrupt.reason}) after {t} sampling times")
+                break
             z_star = ref.z if ref.converged else None
             ref_status.append(str(ref.status))
         if z_star is not None:

@@ -17,6 +17,10 @@ from collections.abc import Iterator
 SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name))
 
 
+class Stopped(Exception):
+    """Raised by :meth:`Interrupt.check` between two iterates once a stop was requested."""
+
+
 _worker = False  # this process is a sweep's worker: the sweep stops it
 
 
@@ -43,6 +47,11 @@ class Interrupt:
     def reason(self) -> str:
         """``Ctrl-C`` or the signal's name, for messages."""
         return "Ctrl-C" if self.signal in (None, "SIGINT") else self.signal
+
+    def check(self) -> None:
+        """Raise :class:`Stopped` if a stop was requested (called between iterates, where a run may end)."""
+        if self.requested:
+            raise Stopped
 
     @contextlib.contextmanager
     def installed(self) -> Iterator[Interrupt]:

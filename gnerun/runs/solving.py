@@ -19,7 +19,7 @@ from ..log.mcap_log import json_ready
 from ..solvers.hybrid import globalized
 from ..solvers.ssn import SemismoothNewton, SSNState, Status
 from ..threads import single_threaded_blas
-from .interrupt import Interrupt
+from .interrupt import Interrupt, Stopped
 from .rundir import RunDirectory, recording
 
 
@@ -108,13 +108,15 @@ class Reference:
 
 
 def reference_solution(game: CompiledGame, cfg: Config, z0: np.ndarray, x: np.ndarray | None = None,
-                       polish: int = 3) -> Reference:
+                       polish: int = 3, interrupt: Interrupt | None = None) -> Reference:
     """Solve undisturbed from z0 with the configured method, then by the globalized semismooth Newton method if
     that fails, and polish.
 
     Polishing takes up to ``polish`` further Newton steps while ||Phi|| keeps decreasing, so that z*
-    is accurate to rounding, not just to ``solver.tol``.
+    is accurate to rounding, not just to ``solver.tol``. A stop request (``interrupt``) raises
+    :class:`~gnerun.runs.interrupt.Stopped` between two iterates.
     """
+    check = (lambda state: interrupt.check()) if interrupt is not None else None
     last: SSNState | None = None
     # the exact solution is the centralised one: a distributed run is measured against SSN's
     first = cfg.solver.model_copy(update={"kind": "ssn"}) if cfg.solver.kind == "distributed" else cfg.solver
@@ -123,7 +125,7 @@ def reference_solution(game: CompiledGame, cfg: Config, z0: np.ndarray, x: np.nd
     for options in attempts:
         opts = options.model_copy(update={"max_iter": max(options.max_iter, 100)})
         solver = make_solver(cfg.model_copy(update={"solver": opts}), game, disturbed=False)
-        state = iterate(solver, solver.init(z0, x))
+        state = iterate(solver, solver.init(z0, x), check)
         last = state
         if state.converged:
             newton = getattr(solver, "newton", solver)  # polishing takes plain Newton steps
@@ -291,10 +293,6 @@ def solve(cfg: Config, out: str | Path | None = None, *, force: bool = False,
 INTERRUPTED = "interrupted"  # the status of a solve stopped by Ctrl-C, SIGTERM or SIGHUP
 
 
-class _Stopped(Exception):
-    """A stop request seen between two iterates."""
-
-
 def _solve(cfg: Config, game: CompiledGame, solver: SemismoothNewton, run: RunDirectory | None,
            compile_time: float, on_iterate: Callable[[SSNState, float | None], None] | None,
            interrupt: Interrupt, on_stage: Callable[[str], None] | None = None) -> SolveResult:
@@ -302,17 +300,13 @@ def _solve(cfg: Config, game: CompiledGame, solver: SemismoothNewton, run: RunDi
     x = game.x0
     z0 = game.z_start()
     exact = cfg.run.reference == "exact"
-    if exact and on_stage is not None:
-        on_stage("solving for the exact solution z* of the error norms (run.reference: none skips it)")
-    ref = reference_solution(game, cfg, z0, x) if exact else None
-    z_star = ref.z if ref is not None and ref.converged else None
     history: list[SSNState] = []
     sink_time = 0.0
+    ref, z_star = None, None
 
     def record(state: SSNState) -> None:
         nonlocal sink_time
-        if interrupt.requested:  # before the iterate is counted: the last one recorded is the result
-            raise _Stopped
+        interrupt.check()  # before the iterate is counted: the last one recorded is the result
         t = time.perf_counter()
         history.append(state)
         error = None if z_star is None else float(np.linalg.norm(state.z - z_star))
@@ -327,9 +321,7 @@ def _solve(cfg: Config, game: CompiledGame, solver: SemismoothNewton, run: RunDi
                         f"({cfg.solver.complementarity}), disturbance {cfg.disturbance.kind}")
         for warning in cfg.size_warnings("solve"):
             run.log("warning", warning)
-        if ref is not None and not ref.converged:
-            run.log("warning", f"the undisturbed reference solve did not converge ({ref.message}); "
-                               "error norms are not available")
+
     def note(text: str) -> None:
         if run is not None:
             run.log("info", text)
@@ -337,10 +329,18 @@ def _solve(cfg: Config, game: CompiledGame, solver: SemismoothNewton, run: RunDi
     from ..solvers.certificate import NewtonResponses
 
     try:
+        if exact:
+            if on_stage is not None:
+                on_stage("solving for the exact solution z* of the error norms (run.reference: none skips it)")
+            ref = reference_solution(game, cfg, z0, x, interrupt=interrupt)
+            z_star = ref.z if ref.converged else None
+            if run is not None and not ref.converged:
+                run.log("warning", f"the undisturbed reference solve did not converge ({ref.message}); "
+                                   "error norms are not available")
         outcome = certified_solve(game, solver, solver.init(z0, x), x, record, note,
                                   best_responses=cfg.run.certificate, responses=NewtonResponses(cfg, game),
                                   on_stage=on_stage)
-    except _Stopped:
+    except Stopped:
         return _interrupted(cfg, game, run, history, z_star, ref, interrupt,
                             time.perf_counter() - started - sink_time, compile_time)
     state, cert = outcome.state, outcome.certificate

@@ -21,6 +21,7 @@ import io
 import itertools
 import json
 import math
+import os
 import re
 import sys
 import time
@@ -252,9 +253,15 @@ def run_point(task: dict[str, Any]) -> list[dict[str, Any]]:
     except (InputError, OSError) as e:
         message = str(e) if isinstance(e, InputError) else f"{out}: cannot write the point: {e.strerror or e}"
         return [_row(task, K=None, status="error", message=message, wall=time.perf_counter() - t0)]
+    global _point_in_progress
+    _point_in_progress = True
     try:
         return _run_point(task, out, t0)
+    except _Stopped:
+        lock.release()
+        os._exit(143)
     finally:
+        _point_in_progress = False
         lock.release()
 
 
@@ -338,17 +345,31 @@ def rows_from_summary(task: dict[str, Any], summary: dict[str, Any], wall: float
 Completed = Iterator[tuple[dict[str, Any], list[dict[str, Any]]]]
 
 
+_point_in_progress = False  # in a worker: run_point is running
+
+
+class _Stopped(BaseException):
+    """SIGTERM in a worker: unwinds the point in progress (its log closed, its lock released), then the worker
+    exits (the executor would otherwise take it as the point's result and go on to the next)."""
+
+
 def _worker_start(parent: int) -> None:
-    """A worker leaves Ctrl-C and a terminal's hang-up to the sweep, which stops it (its point then runs again on
-    resume), and on Linux dies with the sweep even when the sweep is killed (SIGKILL): no worker outlives it."""
-    import os
+    """A worker leaves Ctrl-C and a terminal's hang-up to the sweep, which stops it with SIGTERM: the point in
+    progress then closes its log and its directory's lock on the way out (no summary: it runs again on resume).
+    On Linux a worker also dies with the sweep when the sweep is killed (SIGKILL): no worker outlives it."""
     import signal
 
     from .interrupt import leave_signals_to_the_parent
 
+    def stop(signum, frame) -> None:
+        if _point_in_progress:
+            raise _Stopped
+        os._exit(128 + signum)  # idle: nothing to close (and the executor's exit would wait on a dead sweep)
+
     leave_signals_to_the_parent()
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGHUP, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, stop)
     if sys.platform.startswith("linux"):
         import ctypes
 
@@ -360,8 +381,6 @@ def _worker_start(parent: int) -> None:
 
 def available_cpus() -> int:
     """The CPUs this process may run on."""
-    import os
-
     try:
         return len(os.sched_getaffinity(0))
     except (AttributeError, OSError):
@@ -370,7 +389,6 @@ def available_cpus() -> int:
 
 def _local(tasks: list[dict[str, Any]], workers: int) -> Completed:
     import multiprocessing
-    import os
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
     # spawn: workers start clean (no forked BLAS or CasADi state), as on any platform; they stay in the sweep's
@@ -396,6 +414,9 @@ def _local(tasks: list[dict[str, Any]], workers: int) -> Completed:
                 proc.terminate()
             for proc in procs:
                 proc.join(timeout=10)
+                if proc.is_alive():  # busy in compiled code past the grace time
+                    proc.kill()
+                    proc.join(timeout=10)
         pool.shutdown(wait=False, cancel_futures=True)
         raise
     finally:

@@ -1,0 +1,184 @@
+"""SIGTERM and SIGHUP stop solve, simulate and sweep as Ctrl-C does (gnerun/runs/interrupt.py): real processes
+and real signals; a finished, indexed log, a summary with status interrupted, exit code 130, and no process of
+a sweep left behind."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import time
+from pathlib import Path
+
+import pytest
+from mcap.reader import make_reader
+
+from gnerun.log.mcap_log import read_run
+from gnerun.runs.sweep import available_cpus, read_index
+
+from .conftest import CONFIGS, gnerun_command
+from .test_reliability import _start, _steps_are_whole, _wait_for_steps
+
+
+def _ignore_ctrl_c() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # as a job started in the background by a script
+
+
+def _signalled(proc: subprocess.Popen, out: Path, sig: signal.Signals, size: int) -> tuple[str, str]:
+    """Send ``sig`` once the run's log has grown past ``size`` bytes; its output (it is killed if it hangs)."""
+    try:
+        _wait_for_steps(out, proc, size)
+        proc.send_signal(sig)
+        return proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP], ids=["SIGTERM", "SIGHUP"])
+def test_a_signal_ends_simulate_like_ctrl_c(sig: signal.Signals, tmp_path) -> None:
+    out = tmp_path / "run"
+    proc = _start(out, preexec_fn=_ignore_ctrl_c if sig == signal.SIGTERM else None)
+    _, stderr = _signalled(proc, out, sig, 20_000)
+    assert proc.returncode == 130, stderr
+    assert stderr.strip().splitlines() == [f"interrupted: {out} holds a finished log and a summary with status "
+                                           "interrupted"]
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "interrupted" and summary["by_K"]["1"]["ended"] == "interrupted"
+    with open(out / "run.mcap", "rb") as f:
+        assert make_reader(f).get_summary() is not None  # finished and indexed
+    record = read_run(out)
+    n = _steps_are_whole(record)
+    assert summary["by_K"]["1"]["completed_steps"] == n
+    assert any(f"interrupted ({sig.name})" in e["message"] for e in record.messages["/log"])
+    assert sorted(p.name for p in out.iterdir()) == ["config.yaml", "run.mcap", "summary.json"]  # no temporary left
+
+
+# the agent-distributed method converges linearly and never meets this tolerance: it iterates until stopped
+LONG_SOLVE = ["--set", "solver.tol=1e-300", "--set", "solver.max_iter=1000000", "--set", "run.reference=none", "-q"]
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP], ids=["SIGINT", "SIGTERM", "SIGHUP"])
+def test_a_signal_ends_solve_with_a_summary_and_a_finished_log(sig: signal.Signals, tmp_path) -> None:
+    out = tmp_path / "run"
+    proc = subprocess.Popen([*gnerun_command(), "solve", str(CONFIGS / "paper_study3.yaml"), "--out", str(out),
+                             *LONG_SOLVE], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            stdin=subprocess.DEVNULL)
+    _, stderr = _signalled(proc, out, sig, 30_000)
+    assert proc.returncode == 130, stderr
+    assert stderr.strip().splitlines() == [f"interrupted: {out} holds a finished log and a summary with status "
+                                           "interrupted"]
+    summary = json.loads((out / "summary.json").read_text())
+    record = read_run(out)
+    assert record.complete
+    iterates = record.messages["/solve/iterate"]
+    assert summary["status"] == "interrupted" and summary["iterations"] == iterates[-1]["k"] > 0
+    assert summary["z"] == iterates[-1]["z"] and len(summary["residual_history"]) == len(iterates)
+    reason = "Ctrl-C" if sig == signal.SIGINT else sig.name
+    assert summary["message"].startswith(f"interrupted ({reason}) after {iterates[-1]['k']} iterations")
+    assert summary["certificate"]["kkt_residual"] is not None
+
+
+SWEEP = f"""
+base: {CONFIGS / "paper_study2.yaml"}
+set:
+  run.K: [1]
+grid:
+  run.steps: [4, 200000, 300000]
+"""
+
+
+def _group(pgid: int) -> list[str]:
+    """The live (not zombie) processes of a process group."""
+    out = subprocess.run(["ps", "-o", "stat=,pid=,args=", "-g", str(pgid)], capture_output=True, text=True).stdout
+    return [line for line in out.splitlines() if line.strip() and not line.strip().startswith("Z")]
+
+
+def _sweep_started(tmp_path: Path) -> tuple[subprocess.Popen, Path]:
+    spec = tmp_path / "sweep.yaml"
+    spec.write_text(SWEEP)
+    out = tmp_path / "out"
+    # a session of its own: its process group holds the sweep, its workers and their resource tracker
+    proc = subprocess.Popen([*gnerun_command(), "sweep", str(spec), "--out", str(out), "--workers", "2"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, stdin=subprocess.DEVNULL,
+                            start_new_session=True)
+    deadline = time.monotonic() + 120
+    while not (out / "index.csv").is_file() or len(read_index(out)) < 1:
+        assert time.monotonic() < deadline and proc.poll() is None, proc.communicate()
+        time.sleep(0.2)
+    assert len(_group(proc.pid)) >= 3  # the sweep and its two workers
+    return proc, out
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP], ids=["SIGTERM", "SIGHUP"])
+def test_a_signal_to_the_sweep_alone_stops_its_workers_too(sig: signal.Signals, tmp_path) -> None:
+    proc, out = _sweep_started(tmp_path)
+    try:
+        proc.send_signal(sig)  # to the sweep's process only, as `kill PID` or a scheduler does
+        _, err = proc.communicate(timeout=60)
+    finally:
+        left = _group(proc.pid)
+        if left:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 130, err
+    assert err.strip().splitlines() == [f"interrupted: {out} holds the index of the finished points; run again to "
+                                        "resume"]
+    assert not left, left
+    assert json.loads((out / "sweep.json").read_text())["finished"] == 1
+    assert [r["run.steps"] for r in read_index(out)] == [4]
+    assert not list(out.rglob("*.tmp")) and not list(out.rglob(".gnerun.lock"))
+
+
+def test_a_killed_sweep_leaves_no_worker_running(tmp_path) -> None:
+    """SIGKILL gives the sweep no chance to stop its workers: they stop themselves (their parent died)."""
+    proc, out = _sweep_started(tmp_path)
+    proc.kill()
+    proc.wait(timeout=30)
+    deadline = time.monotonic() + 30
+    while _group(proc.pid) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    left = _group(proc.pid)
+    if left:
+        os.killpg(proc.pid, signal.SIGKILL)
+    assert not left, left
+
+
+def test_workers_are_bounded_by_the_cpus_unless_forced(tmp_path) -> None:
+    spec = tmp_path / "sweep.yaml"
+    spec.write_text(SWEEP.replace("[4, 200000, 300000]", "[2, 3]"))
+    too_many = str(available_cpus() + 1)
+    refused = subprocess.run([*gnerun_command(), "sweep", str(spec), "--out", str(tmp_path / "a"), "--workers",
+                              too_many], capture_output=True, text=True, timeout=120, stdin=subprocess.DEVNULL)
+    assert refused.returncode == 2
+    [line] = refused.stderr.strip().splitlines()
+    assert line.startswith(f"error: --workers {too_many}: this machine has {available_cpus()} CPU") \
+        and "--force-workers" in line
+    assert not (tmp_path / "a").exists()
+    forced = subprocess.run([*gnerun_command(), "sweep", str(spec), "--out", str(tmp_path / "b"), "--workers",
+                             too_many, "--force-workers", "-q"], capture_output=True, text=True, timeout=300,
+                            stdin=subprocess.DEVNULL)
+    assert forced.returncode == 0, forced.stderr
+    assert [r["status"] for r in read_index(tmp_path / "b")] == ["completed", "completed"]
+    help_text = subprocess.run([*gnerun_command(), "sweep", "--help"], capture_output=True, text=True).stdout
+    assert "--force-workers" in help_text and "CPUs" in help_text
+
+
+def test_a_sweep_worker_leaves_every_signal_to_the_sweep() -> None:
+    from gnerun.runs import interrupt
+
+    handlers = {sig: signal.getsignal(sig) for sig in interrupt.SIGNALS}
+    interrupt.leave_signals_to_the_parent()
+    try:
+        with interrupt.Interrupt().installed():
+            assert {sig: signal.getsignal(sig) for sig in interrupt.SIGNALS} == handlers
+    finally:
+        interrupt._worker = False
+    with interrupt.Interrupt().installed() as request:  # an ordinary process: each of them is a request
+        for sig in interrupt.SIGNALS:
+            assert signal.getsignal(sig) not in (handlers[sig], signal.SIG_IGN)
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(0.1)
+        assert request.requested and request.reason == "SIGTERM"
+    assert {sig: signal.getsignal(sig) for sig in interrupt.SIGNALS} == handlers
