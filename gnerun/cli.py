@@ -385,7 +385,8 @@ def _existing_logs(runs: list[Path]) -> list[Path]:
     from .log.mcap_log import run_log_path
 
     for run in runs:
-        if not run_log_path(run).is_file():
+        log = run_log_path(run)
+        if not log.exists() or log.is_dir():  # anything else that is there is refused by the reader, with its kind
             raise InputError(f"{run}: no run log here (expected a run directory or its run.mcap)")
     return runs
 

@@ -33,7 +33,7 @@ SPARSE_WARN = 30_000  # unknowns of the sparse formulation (states and costates 
 SPARSE_LIMIT = 250_000  # refused: minutes to build
 NODES_WARN = 1_000_000  # expression nodes over all stages
 NODES_LIMIT = 10_000_000
-LOOP_STEPS_WARN = 10_000_000  # solver steps of a simulate: sum over K of run.steps * K
+LOOP_STEPS_WARN = 10_000_000  # from this many solver steps of a simulate on (sum over K of run.steps * K)
 
 
 @dataclass(frozen=True)
@@ -81,7 +81,7 @@ class Size:
 
     def loop_warning(self) -> str | None:
         """A warning for a simulate whose loops take very many solver steps (they run, stream and can be stopped)."""
-        if self.loop_steps > LOOP_STEPS_WARN:
+        if self.loop_steps >= LOOP_STEPS_WARN:
             return (f"a long closed loop: up to {self.loop_steps:,} solver steps (run.steps times K, over the K "
                     f"values); it streams to the log and Ctrl-C or SIGTERM ends it cleanly")
         return None

@@ -1,0 +1,105 @@
+"""Size estimates before building (gnerun/language/size.py): they agree with the compiled games, huge configs are
+refused or warned about with the estimate in the message while validate stays fast, and a closed loop allocates
+nothing by run.steps."""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import time
+
+import pytest
+import yaml
+
+from gnerun.errors import ConfigError
+from gnerun.game.compile import compile_game
+from gnerun.language.config import load_config
+from gnerun.language.size import DENSE_LIMIT, SPARSE_WARN, estimate
+
+from .conftest import CONFIGS, gnerun_command, shipped_configs
+from .test_reliability import _wait_for_steps
+
+
+@pytest.mark.parametrize("path", shipped_configs(), ids=lambda p: p.stem)
+def test_the_estimate_counts_what_the_compiled_game_has(path) -> None:
+    cfg = load_config(path)
+    size = estimate(cfg)
+    game = compile_game(cfg)
+    assert size.decisions == game.n
+    # rows that depend on no decision (an initial state's constraint) are checked, not compiled: at most that many
+    assert game.m <= size.multipliers <= game.m + len(cfg.game.agents) * 4 + 8, (size.multipliers, game.m)
+    assert size.nodes > 0 and size.states == (0 if cfg.game.kind == "static" else game.nx * (cfg.game.horizon + 1))
+
+
+def _validate(*args: str, timeout: float = 60) -> subprocess.CompletedProcess:
+    """validate in a real process; the timeout catches a hang (it is not a timing measurement)."""
+    return subprocess.run([*gnerun_command(), "validate", *args], capture_output=True, text=True, timeout=timeout,
+                          stdin=subprocess.DEVNULL)
+
+
+def test_validate_stays_fast_on_huge_configs(tmp_path) -> None:
+    study2 = str(CONFIGS / "paper_study2.yaml")
+    # horizon 10,000 for ssn: the sparse formulation, linear in T: a warning, and validate does not build it
+    proc = _validate(study2, "--set", "game.horizon=10000")
+    assert proc.returncode == 0, proc.stderr
+    [warning] = proc.stderr.strip().splitlines()
+    assert warning.startswith(f"warning: {study2}: a large game: estimated 130,013 unknowns in the sparse "
+                              "formulation (30,003 decisions, 40,004 multipliers") and f"{SPARSE_WARN:,}" in warning
+    assert "not built, as it is large" in proc.stdout
+    # and for jn and distributed: a dense system of 70,007 unknowns, refused where horizon is written
+    row = (CONFIGS / "paper_study2.yaml").read_text().splitlines().index("  horizon: 10") + 1
+    for kind in ("jn", "distributed"):
+        config = tmp_path / f"{kind}.yaml"
+        config.write_text((CONFIGS / "paper_study2.yaml").read_text().replace("  horizon: 10", "  horizon: 10000")
+                          .replace("kind: ssn", f"kind: {kind}").replace("globalization: none", "globalization: auto"))
+        proc = _validate(str(config))
+        assert proc.returncode == 2
+        [line] = proc.stderr.strip().splitlines()
+        assert line.startswith(f"error: {config}:{row}:12: game.horizon: the game is too large: estimated 70,007 "
+                               "unknowns in the dense formulation") and f"the limit is {DENSE_LIMIT:,}" in line, line
+    # 5,000 agents written out
+    agents = [{"name": f"p{i}", "variables": {f"x{i}": {"lower": 0, "upper": 10}},
+               "cost": f"x{i}**2 - x{i}*x{(i + 1) % 5000}"} for i in range(5000)]
+    many = tmp_path / "many.yaml"
+    many.write_text(yaml.safe_dump({"name": "many", "game": {"kind": "static", "agents": agents}}))
+    proc = _validate(str(many))
+    assert proc.returncode == 2 and "estimated 15,000 unknowns in the dense formulation (5,000 decisions, 10,000 " \
+                                    "multipliers)" in proc.stderr, proc.stderr
+    # a K list of 20,000
+    klist = tmp_path / "klist.yaml"
+    data = yaml.safe_load((CONFIGS / "paper_study2.yaml").read_text())
+    data["run"]["K"] = list(range(1, 20001))
+    klist.write_text(yaml.safe_dump(data))
+    proc = _validate(str(klist))
+    assert proc.returncode == 2 and "run.K: List should have at most 1000 items" in proc.stderr
+
+
+def test_a_config_past_the_limit_is_refused_by_the_library_too() -> None:
+    with pytest.raises(ConfigError, match="the game is too large: estimated 70,007 unknowns"):
+        load_config(CONFIGS / "paper_study2.yaml", {"game.horizon": 10000, "solver.kind": "distributed"})
+
+
+def test_ten_million_steps_stream_instead_of_allocating(tmp_path) -> None:
+    """run.steps 10^7 used to allocate GBs before the first step; now the loop's memory is that of its steps."""
+    out = tmp_path / "run"
+    proc = subprocess.Popen([*gnerun_command(), "simulate", str(CONFIGS / "paper_study2.yaml"), "--out", str(out),
+                             "--set", "run.steps=10000000", "--set", "run.K=[1]"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, stdin=subprocess.DEVNULL)
+    try:
+        _wait_for_steps(out, proc, 50_000)
+        time.sleep(1)
+        with open(f"/proc/{proc.pid}/status") as f:
+            peak_kb = next(int(line.split()[1]) for line in f if line.startswith("VmHWM:"))
+        proc.send_signal(signal.SIGINT)
+        _, stderr = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    print(f"run.steps 10^7: peak resident memory {peak_kb / 1024:.0f} MB")
+    assert peak_kb < 400 * 1024  # the arrays of 10^7 steps alone would be 12 GB
+    assert stderr.splitlines()[0].startswith("warning: ") and "up to 10,000,000 solver steps" in stderr
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "interrupted" and summary["steps"] == 10_000_000
+    assert 0 < summary["by_K"]["1"]["completed_steps"] == len(summary["by_K"]["1"]["u"]) < 10_000_000
