@@ -32,6 +32,18 @@ def test_the_estimate_counts_what_the_compiled_game_has(path) -> None:
     assert size.nodes > 0 and size.states == (0 if cfg.game.kind == "static" else game.nx * (cfg.game.horizon + 1))
 
 
+def test_the_estimate_takes_the_formulation_auto_takes() -> None:
+    from gnerun.language import size
+    from gnerun.runs import solving
+
+    assert size.SPARSE_WORK == solving.SPARSE_WORK
+    for path in shipped_configs():
+        cfg = load_config(path)
+        if cfg.game.kind == "dynamic":
+            game = compile_game(cfg)
+            assert estimate(cfg).dense == (solving.formulation(cfg, game) == "condensed"), path.stem
+
+
 def _validate(*args: str, timeout: float = 60) -> subprocess.CompletedProcess:
     """validate in a real process; the timeout catches a hang (it is not a timing measurement)."""
     return subprocess.run([*gnerun_command(), "validate", *args], capture_output=True, text=True, timeout=timeout,

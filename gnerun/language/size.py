@@ -33,6 +33,7 @@ SPARSE_WARN = 30_000  # unknowns of the sparse formulation (states and costates 
 SPARSE_LIMIT = 250_000  # refused: minutes to build
 NODES_WARN = 1_000_000  # expression nodes over all stages
 NODES_LIMIT = 10_000_000
+SPARSE_WORK = 20_000  # auto takes the sparse formulation from this size times stages on (gnerun.runs.solving)
 LOOP_STEPS_WARN = 10_000_000  # from this many solver steps of a simulate on (sum over K of run.steps * K)
 
 
@@ -131,6 +132,7 @@ def estimate(cfg: Config) -> Size:
             nodes += _expression_nodes(constraint_text(c), True)
         return Size(decisions, multipliers, 0, nodes, True, 0)
     stages = g.horizon + 1
+    auto_condensed = cfg.solver.formulation == "auto"  # decided below, once the size is known
 
     def at(c) -> int:
         chosen = constraint_stages(c)
@@ -152,4 +154,6 @@ def estimate(cfg: Config) -> Size:
         equations = dynamics.ode if isinstance(dynamics, ContinuousDynamics) else dynamics
         nodes += sum(_expression_nodes(text, False) for text in equations.values()) * stages
     loop_steps = cfg.run.steps * sum(dict.fromkeys(cfg.run.K))
+    if auto_condensed and (decisions + multipliers) * stages < SPARSE_WORK:
+        dense = True
     return Size(decisions, multipliers, len(g.states) * stages, nodes, dense, loop_steps)
