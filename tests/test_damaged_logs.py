@@ -61,7 +61,7 @@ def variants(logs: dict[str, bytes]) -> Iterator[tuple[str, bytes]]:
     """(name, bytes): at least 200 damaged or edited logs."""
     rng = random.Random(18)
     for source, data in logs.items():
-        for i in range(35):  # bit flips, 1 to 3 anywhere
+        for i in range(30):  # bit flips, 1 to 3 anywhere
             d = bytearray(data)
             for _ in range(rng.randint(1, 3)):
                 pos = rng.randrange(len(d))
@@ -70,7 +70,7 @@ def variants(logs: dict[str, bytes]) -> Iterator[tuple[str, bytes]]:
         records = list(_records(data))
         lengths = [0, 1, 7, 2**31, 2**40, 2**63, 2**64 - 1]
         for j, (pos, _opcode, length) in enumerate(records[:: max(1, len(records) // 12)]):
-            for value in rng.sample(lengths, 3) + [length + 1, length - 1]:
+            for value in rng.sample(lengths, 2) + [length + 1]:
                 yield f"{source}: record {j} length {value}", _patched(data, pos + 1, value)
         chunks = [(pos, length) for pos, opcode, length in records if opcode == CHUNK]
         for j, (pos, _length) in enumerate(chunks[:6]):  # the chunk's own sizes and compressed data
@@ -188,7 +188,7 @@ def test_every_damaged_log_is_read_in_part_or_refused_in_one_line(logs, tmp_path
         assert copy.complete and all("config.yaml" in d for d in copy.damage), name  # its text is kept as it was
         for topic, msgs in copy.messages.items():
             assert msgs == record.messages[topic][: len(msgs)], (name, topic)
-        if count % 9 == 0:  # the readers that draw: one variant in nine (matplotlib and rerun take longer)
+        if count % 12 == 0:  # the readers that draw: one variant in twelve (matplotlib and rerun take longer)
             _invoke("figures", str(run), "--out", str(tmp_path / "figs"), "--format", "png")
             _invoke("replay", str(run), "--save", str(tmp_path / "r.rrd"))
     print(f"\ndamaged logs: {count} variants: " + ", ".join(f"{k} {v}" for k, v in sorted(OUTCOMES.items())))

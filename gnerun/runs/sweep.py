@@ -346,6 +346,7 @@ Completed = Iterator[tuple[dict[str, Any], list[dict[str, Any]]]]
 
 
 _point_in_progress = False  # in a worker: run_point is running
+STOP_GRACE_S = 5.0  # a stopped worker closes its point within this time, or exits without closing it
 
 
 class _Stopped(BaseException):
@@ -358,13 +359,16 @@ def _worker_start(parent: int) -> None:
     progress then closes its log and its directory's lock on the way out (no summary: it runs again on resume).
     On Linux a worker also dies with the sweep when the sweep is killed (SIGKILL): no worker outlives it."""
     import signal
+    import threading
 
     from .interrupt import leave_signals_to_the_parent
 
     def stop(signum, frame) -> None:
-        if _point_in_progress:
-            raise _Stopped
-        os._exit(128 + signum)  # idle: nothing to close (and the executor's exit would wait on a dead sweep)
+        if not _point_in_progress:  # idle: nothing to close (and the executor's exit would wait on a dead sweep)
+            os._exit(128 + signum)
+        # the exception may land where Python ignores it (a finalizer): the worker then ends after a grace time
+        threading.Timer(STOP_GRACE_S, os._exit, (128 + signum,)).start()
+        raise _Stopped
 
     leave_signals_to_the_parent()
     signal.signal(signal.SIGINT, signal.SIG_IGN)
