@@ -33,7 +33,11 @@ SPARSE_WARN = 30_000  # unknowns of the sparse formulation (states and costates 
 SPARSE_LIMIT = 250_000  # refused: minutes to build
 NODES_WARN = 1_000_000  # expression nodes over all stages
 NODES_LIMIT = 10_000_000
-SPARSE_WORK = 20_000  # auto takes the sparse formulation from this size times stages on (gnerun.runs.solving)
+# auto's choice (gnerun.runs.solving.formulation): sparse from SPARSE_FROM unknowns with linear dynamics, from
+# SPARSE_WORK unknowns times stages with nonlinear ones; dynamics written as expressions count as nonlinear here
+# (they are found linear only when compiled), which errs towards the dense formulation and its stricter limits
+SPARSE_FROM = 800
+SPARSE_WORK = 20_000
 LOOP_STEPS_WARN = 10_000_000  # from this many solver steps of a simulate on (sum over K of run.steps * K)
 
 
@@ -154,6 +158,7 @@ def estimate(cfg: Config) -> Size:
         equations = dynamics.ode if isinstance(dynamics, ContinuousDynamics) else dynamics
         nodes += sum(_expression_nodes(text, False) for text in equations.values()) * stages
     loop_steps = cfg.run.steps * sum(dict.fromkeys(cfg.run.K))
-    if auto_condensed and (decisions + multipliers) * stages < SPARSE_WORK:
+    kkt = decisions + multipliers
+    if auto_condensed and (kkt < SPARSE_FROM if isinstance(dynamics, LinearDynamics) else kkt * stages < SPARSE_WORK):
         dense = True
     return Size(decisions, multipliers, len(g.states) * stages, nodes, dense, loop_steps)
