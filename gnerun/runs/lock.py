@@ -90,6 +90,14 @@ class DirectoryLock:
             os.close(fd)
 
 
+def release_all() -> None:
+    """Release every lock this process holds (a process about to end at once: its lock files go with it)."""
+    for lock in list(_held.values()):
+        lock._depth = 1
+        with contextlib.suppress(OSError):
+            lock.release()
+
+
 def _holder(fd: int) -> str:
     """``pid N`` of the process that holds the lock (it writes its pid just after taking it)."""
     for _ in range(50):

@@ -37,7 +37,7 @@ from ..errors import ConfigError, InputError, Unavailable, shorten
 from ..files import read_json_object, replace_text, replacing, write_text
 from ..language.config import CONFIG_VERSION, Config, document_path, load_config, override_label
 from ..language.yaml_source import SourceMap, dotted, read_yaml
-from .lock import DirectoryLock, contents, locked
+from .lock import DirectoryLock, contents, locked, release_all
 
 MAX_POINTS = 10_000  # every point's config is checked before the sweep starts
 INDEX_CSV = "index.csv"
@@ -243,26 +243,34 @@ def run_point(task: dict[str, Any]) -> list[dict[str, Any]]:
     ``task``: base (config path), overrides, out (the point's run directory), command, params, index,
     directory, config_hash. Module-level and plain-data in and out, so that any executor can ship it.
     """
+    global _point_in_progress
     out = Path(task["out"])
     t0 = time.perf_counter()
-    try:  # the point's directory is written by this point alone
-        if out.exists() and not out.is_dir():
-            raise InputError(f"{out}: exists and is not a directory")
-        out.mkdir(parents=True, exist_ok=True)
-        lock = DirectoryLock.acquire(out)
-    except (InputError, OSError) as e:
-        message = str(e) if isinstance(e, InputError) else f"{out}: cannot write the point: {e.strerror or e}"
-        return [_row(task, K=None, status="error", message=message, wall=time.perf_counter() - t0)]
-    global _point_in_progress
+    lock = None
     _point_in_progress = True
     try:
+        try:  # the point's directory is written by this point alone
+            if out.exists() and not out.is_dir():
+                raise InputError(f"{out}: exists and is not a directory")
+            out.mkdir(parents=True, exist_ok=True)
+            lock = DirectoryLock.acquire(out)
+        except (InputError, OSError) as e:
+            message = str(e) if isinstance(e, InputError) else f"{out}: cannot write the point: {e.strerror or e}"
+            return [_row(task, K=None, status="error", message=message, wall=time.perf_counter() - t0)]
         return _run_point(task, out, t0)
     except _Stopped:
-        lock.release()
-        os._exit(143)
+        _abandon(143)
     finally:
         _point_in_progress = False
-        lock.release()
+        if lock is not None:
+            lock.release()
+
+
+def _abandon(code: int) -> None:
+    """End a stopped worker at once, its locks released (the point's log was closed on the way, or is left as a
+    killed run's log is)."""
+    release_all()
+    os._exit(code)
 
 
 def _run_point(task: dict[str, Any], out: Path, t0: float) -> list[dict[str, Any]]:
@@ -367,7 +375,7 @@ def _worker_start(parent: int) -> None:
         if not _point_in_progress:  # idle: nothing to close (and the executor's exit would wait on a dead sweep)
             os._exit(128 + signum)
         # the exception may land where Python ignores it (a finalizer): the worker then ends after a grace time
-        threading.Timer(STOP_GRACE_S, os._exit, (128 + signum,)).start()
+        threading.Timer(STOP_GRACE_S, _abandon, (128 + signum,)).start()
         raise _Stopped
 
     leave_signals_to_the_parent()
@@ -417,14 +425,26 @@ def _local(tasks: list[dict[str, Any]], workers: int) -> Completed:
             for proc in procs:
                 proc.terminate()
             for proc in procs:
-                proc.join(timeout=10)
-                if proc.is_alive():  # busy in compiled code past the grace time
-                    proc.kill()
-                    proc.join(timeout=10)
+                _reaped(proc)
         pool.shutdown(wait=False, cancel_futures=True)
         raise
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _reaped(proc, grace: float = 2 * STOP_GRACE_S) -> None:
+    """Wait until a stopped worker has exited and is reaped (its pipes close before it is gone: join alone may
+    return while it still exits); one still there after ``grace`` seconds is killed."""
+    deadline = time.monotonic() + grace
+    killed = False
+    proc.join(timeout=grace)
+    while proc.exitcode is None:  # exitcode reaps it once it has exited
+        if time.monotonic() > deadline and not killed:
+            proc.kill()
+            killed, deadline = True, time.monotonic() + grace
+        elif time.monotonic() > deadline:
+            return
+        time.sleep(0.02)
 
 
 def _dask(tasks: list[dict[str, Any]], workers: int, address: str | None) -> Completed:
