@@ -252,19 +252,18 @@ def _decode(topic: str, data: bytes, log_time: int) -> dict:
 _INDEX_LIMIT = 2**53  # t and k are counts: anything larger is damage (and no timeline could hold it)
 
 
-def _inconsistent(msg: dict, before: list[dict] | None) -> str | None:
+def _inconsistent(msg: dict, lengths: dict[str, int]) -> str | None:
     """Why a decoded message cannot belong with the messages before it on its topic (None: it can): a count out
-    of range, or vectors and agent names that differ from the first message's (a reader takes them as one)."""
+    of range, or a vector of another length than the earlier ones' (``lengths``: vector -> its length, filled in
+    here; a vector may be left out, for a non-finite entry, but readers take the others as one series)."""
     for key in ("t", "k"):
         if key in msg and isinstance(msg[key], int) and not 0 <= msg[key] < _INDEX_LIMIT:
             return f"has {key} = {shorten(str(msg[key]), 30)}"
-    if not before:
-        return None
-    first = before[0]
-    for key in ("x", "z", "u"):  # a vector may be left out (a non-finite entry), never of another length
-        known = next((m[key] for m in before if isinstance(m.get(key), list)), None)
-        if isinstance(msg.get(key), list) and known is not None and len(msg[key]) != len(known):
-            return f"has {len(msg[key])} entries in {key}, an earlier message {len(known)}"
+    for key in ("x", "z", "u"):
+        if isinstance(msg.get(key), list):
+            known = lengths.setdefault(key, len(msg[key]))
+            if len(msg[key]) != known:
+                return f"has {len(msg[key])} entries in {key}, an earlier message {known}"
     return None
 
 
@@ -416,8 +415,9 @@ def read_run(path: str | Path) -> RunRecord:
     got.triples.sort(key=lambda t: t[1])
     messages: dict[str, list[dict]] = {}
     times: dict[str, list[int]] = {}
+    lengths: dict[str, dict[str, int]] = {}
     for topic, t, msg in got.triples:
-        why = _inconsistent(msg, messages.get(topic))
+        why = _inconsistent(msg, lengths.setdefault(topic, {}))
         if why:
             got.damage.append(f"a message on {shorten(topic, 40)} at {t} {why}")
             continue
