@@ -13,6 +13,7 @@ import pytest
 
 from gnerun.errors import MAX_MESSAGE
 from gnerun.log.mcap_log import read_run
+from gnerun.log.messages import level_name
 
 from .conftest import CONFIGS, gnerun_command, run_cli
 
@@ -122,6 +123,7 @@ def test_serve_refuses_taken_and_invalid_ports_before_printing_a_url(tmp_path) -
             assert not list((tmp_path / "tmp").iterdir())  # no temporary recording left behind
 
 
+@pytest.mark.slow
 def test_tampered_summaries_and_sweep_files(tmp_path) -> None:
     run = tmp_path / "run"
     assert run_cli("solve", str(CONFIGS / "fk_a12.yaml"), "--out", str(run), "-q").returncode == 0
@@ -159,5 +161,5 @@ def test_numerical_overflow_is_a_line_in_the_log_not_a_warning_on_stderr(tmp_pat
     assert proc.returncode == 0 and proc.stderr == "", proc.stderr
     summary = json.loads((out / "summary.json").read_text())
     assert summary["status"] != "converged"
-    warnings = [e["message"] for e in read_run(out).messages["/log"] if e["level"] == "warning"]
+    warnings = [e["message"] for e in read_run(out).messages["/log"] if level_name(e) == "warning"]
     assert any(w.startswith("floating-point trouble: overflow encountered") for w in warnings), warnings

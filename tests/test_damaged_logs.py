@@ -165,6 +165,7 @@ def _invoke(*args: str):
     return result
 
 
+@pytest.mark.slow
 def test_every_damaged_log_is_read_in_part_or_refused_in_one_line(logs, tmp_path: Path) -> None:
     count = 0
     for name, data in variants(logs):
@@ -200,6 +201,7 @@ def test_every_damaged_log_is_read_in_part_or_refused_in_one_line(logs, tmp_path
     assert OUTCOMES["refused"] >= 5 and OUTCOMES["damage noted"] >= 50 and OUTCOMES["read"] >= 1, OUTCOMES
 
 
+@pytest.mark.slow
 def test_the_real_command_line_says_damaged_log_in_one_line(logs, tmp_path: Path) -> None:
     """In real processes: an empty log, a random one, and an unfinished one whose chunk claims 2**62 bytes (a
     MemoryError before such logs were read at the reader level)."""

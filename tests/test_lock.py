@@ -70,6 +70,7 @@ def _start(*args: str) -> subprocess.Popen:
                             stdin=subprocess.DEVNULL)
 
 
+@pytest.mark.slow
 def test_two_simulate_force_into_one_directory_at_once(tmp_path) -> None:
     """Started together with different configs: one runs, the other is refused (exit 2, the holder's pid), and
     the directory holds one run whose config.yaml, run.mcap and summary.json agree."""

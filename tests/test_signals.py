@@ -112,6 +112,7 @@ def _sweep_started(tmp_path: Path) -> tuple[subprocess.Popen, Path]:
     return proc, out
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP], ids=["SIGTERM", "SIGHUP"])
 def test_a_signal_to_the_sweep_alone_stops_its_workers_too(sig: signal.Signals, tmp_path) -> None:
     proc, out = _sweep_started(tmp_path)
@@ -131,6 +132,7 @@ def test_a_signal_to_the_sweep_alone_stops_its_workers_too(sig: signal.Signals, 
     assert not list(out.rglob("*.tmp")) and not list(out.rglob(".gnerun.lock"))
 
 
+@pytest.mark.slow
 def test_a_killed_sweep_leaves_no_worker_running(tmp_path) -> None:
     """SIGKILL gives the sweep no chance to stop its workers: they stop themselves (their parent died)."""
     proc, out = _sweep_started(tmp_path)

@@ -58,6 +58,7 @@ def _validate(*args: str, timeout: float = 60) -> subprocess.CompletedProcess:
                           stdin=subprocess.DEVNULL)
 
 
+@pytest.mark.slow
 def test_validate_stays_fast_on_huge_configs(tmp_path) -> None:
     study2 = str(CONFIGS / "paper_study2.yaml")
     # horizon 10,000 for ssn: the sparse formulation, linear in T: a warning, and validate does not build it
