@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import os
+import select
 import signal
 import socket
 import subprocess
@@ -148,15 +149,13 @@ def test_serve_binds_to_localhost_only(runs, tmp_path: Path) -> None:
                              "--grpc-port", str(grpc)], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
                             stdin=subprocess.DEVNULL, text=True, start_new_session=True)
     try:
-        deadline = time.monotonic() + 60
-        up = False
-        while time.monotonic() < deadline and not up:
-            try:
-                with socket.create_connection(("127.0.0.1", web), timeout=1):
-                    up = True
-            except OSError:
-                time.sleep(0.5)
-        assert up, "the web viewer did not start"
+        # gnerun prints the URL once both of the viewer's ports answer: wait for that line, not for one port
+        # (a terminate between the web port's answer and the line would leave nothing printed)
+        ready, _, _ = select.select([proc.stdout], [], [], 60)
+        assert ready, "the web viewer did not start"
+        first = proc.stdout.readline()
+        with socket.create_connection(("127.0.0.1", web), timeout=1):
+            pass
         # bound to the loopback interface only: no other address of this machine answers
         others = {info[4][0] for info in socket.getaddrinfo(socket.gethostname(), None, socket.AF_INET)}
         for address in others - {"127.0.0.1"}:
@@ -166,6 +165,7 @@ def test_serve_binds_to_localhost_only(runs, tmp_path: Path) -> None:
                 pass
         proc.terminate()  # gnerun stops its viewer when terminated
         out, _ = proc.communicate(timeout=30)
+        out = first + out
     finally:
         if proc.poll() is None:
             os.killpg(proc.pid, signal.SIGKILL)
