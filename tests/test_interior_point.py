@@ -138,7 +138,10 @@ def test_the_interior_start() -> None:
         assert np.all(game.a_lower < z[: game.n]) and np.all(z[: game.n] < game.a_upper)
         assert np.all(w >= interior_point.START_FLOOR)
         lam = z[game.n + ip.I]
-        np.testing.assert_allclose(lam * w, eps)  # every pair starts on the central path of its eps
+        # a pair starts on the central path of its eps, or below it where the slack is below 1 (its multiplier is
+        # not raised by a small slack)
+        np.testing.assert_allclose(lam * np.maximum(w, 1.0), eps)
+        assert np.any(w < 1.0)  # the start is at its bound: that row's slack starts at the floor, not at 1
         if not scaled:
             assert eps == mu
         else:

@@ -24,10 +24,18 @@ What makes it work on the field's games, measured on the benchmark suite (``pyth
   with nonlinear dynamics send the inputs far away.
 - **Primal and dual variables take their own step lengths** to the boundary (``BOUNDARY`` of the way), so that a
   multiplier heading for zero does not hold up the decisions.
-- **Multipliers start small**, at mu / w with mu = 1e-3 (``STARTS``): a multiplier of 1 on a constraint of a game
-  whose costs are of order 1e-2 starts the method far from the central path. Where that stalls, the globalized
-  method restarts with mu = 1e-4, then with mu scaled by the size of the pseudogradient (which says how large the
-  multipliers must become: decisions starting at their bounds with gradients of 1e4, FK A.6 from 10).
+- **Multipliers start small**, at mu / max(w, 1) with mu = 1e-3 (``STARTS``): a multiplier of 1 on a constraint of
+  a game whose costs are of order 1e-2 starts the method far from the central path. Where that stalls, the
+  globalized method restarts with mu = 1e-4, then with mu scaled by the size of the pseudogradient (which says how
+  large the multipliers must become: decisions starting at their bounds with gradients of 1e4, FK A.6 from 10).
+- **Slacks start close**: at -c, or ``START_FLOOR`` = 0.1 where a row is violated or nearly active (not 1, which is
+  ten times the size of a trajectory game's constraint values: collision distances and road margins of order 0.1),
+  and the barrier target eps shrinks once every residual of H_eps is below ``KAPPA`` = 100 eps. Measured against
+  a floor of 1 and KAPPA = 10 on 100 random ALGAMES merges: a median of 31 iterations instead of 56 and a 90th
+  percentile of 62 instead of 127 (on 100 merges of another seed: 30 and 60 instead of 52 and 118); 50
+  T-intersections, 28 instead of 39; the FK library and the bounded LQ games stay certified at every start. The
+  smaller slack does not raise the multiplier (mu / max(w, 1)): with mu / w the merges took 10% more iterations and
+  FK A.10d and A.10e twice as many.
 - **No merit function**: every step is taken at its full length to the boundary. A potential-reduction line
   search (Dreves et al.) and residual-based backtracking were both measured and lost robustness on nonconvex
   games (the potential reduction solved 1 of 6 ALGAMES merges); instead, the globalized method
@@ -52,12 +60,12 @@ from scipy.linalg import lapack
 
 BOUNDARY = 0.995  # a step goes at most this fraction of the way to the boundary lambda_I = 0 or w = 0
 SHRINK = 0.2  # eps shrinks by this factor ...
-KAPPA = 10.0  # ... once every residual of H_eps is below KAPPA eps
+KAPPA = 100.0  # ... once every residual of H_eps is below KAPPA eps
 # lambda_i w_i starts at mu, times the size of the pseudogradient when scaled (it says how large the multipliers
 # must become); one start after another: the globalized method restarts with the next when the phase stalls
 STARTS = ((1e-3, False), (1e-4, False), (1e-2, True))
 WARM = 1e-5  # lambda_i w_i at a warm start: a point near an equilibrium (see HybridNewton.restart)
-START_FLOOR = 1.0  # slacks start at least this far inside
+START_FLOOR = 0.1  # slacks start at least this far inside
 BOUND_PUSH = 1e-2  # decisions start at least this far (relative) inside their bounds
 REGULARIZATION = 1e-10  # the first multiple of the identity tried where the Newton matrix is singular
 
@@ -92,7 +100,7 @@ class InteriorPoint:
     def start(self, z: np.ndarray, x: np.ndarray, attempt: int = 0,
               warm: bool = False) -> tuple[np.ndarray, np.ndarray, float]:
         """An interior start (z, w, eps) from z: decisions moved inside their bounds, slacks at least
-        ``START_FLOOR``, multipliers at least mu / w (``STARTS[attempt]``, or ``WARM`` for a warm start), the
+        ``START_FLOOR``, multipliers at least mu / max(w, 1) (``STARTS[attempt]``, or ``WARM`` for a warm start), the
         rows no decision reaches at zero."""
         z = z.copy()
         n, I = self.n, self.I
@@ -109,7 +117,7 @@ class InteriorPoint:
             size = float(np.max(np.abs(F), initial=0.0))
             mu *= max(1.0, size) if math.isfinite(size) else 1.0
         lam = z[n + I]
-        floor = mu / w
+        floor = mu / np.maximum(w, 1.0)
         z[n + I] = np.where(lam >= floor, lam, floor)  # NaN too
         z[n + self.fixed] = 0.0
         return z, w, mu
