@@ -349,3 +349,35 @@ def test_a_solve_says_when_it_computes_the_exact_solution_and_the_certificate() 
     solve(load_config(CONFIGS / "harker.yaml", {"run.reference": "none", "run.certificate": False}),
           on_stage=stages.append)
     assert stages == []
+
+
+UNBOUNDED = """
+game:
+  kind: static
+  agents:
+    - name: p1
+      variables: {x1: {start: 0}}
+      cost: "-(x1)**2 + x1*x2"
+    - name: p2
+      variables: {x2: {start: 0}}
+      cost: "(x2 - 1)**2 + x1*x2"
+"""
+
+
+def test_a_player_unbounded_below_is_no_equilibrium() -> None:
+    """p1's cost -(x1)^2 + x1 x2 has no minimum: the only KKT point, (2/5, 4/5), is p1's maximum. Every Newton best
+    response of p1 runs away without converging, and SLSQP stops at the stationary candidate; a feasible point where
+    p1's cost is lower still proves that p1 can improve, so the point is not certified and the solve does not end
+    converged."""
+    from gnerun.solvers.certificate import NewtonResponses
+
+    cfg = load_config(text=UNBOUNDED)
+    game = compile_game(cfg)
+    kkt = np.array([0.4, 0.8])
+    cert = certificate(game, _z(game, kkt), responses=NewtonResponses(cfg, game))
+    assert cert["kkt_residual"] <= 1e-12
+    assert cert["best_response_gap"]["p1"] > 1.0  # p1 gains at least 1 by moving away (J = -x1^2 + 0.8 x1)
+    assert abs(cert["best_response_gap"]["p2"]) <= GAP_TOL  # p2's cost is convex: it is at its best response
+    res = solve(cfg, out=None)
+    assert res.status != "converged"
+    assert res.certificate["best_response_gap"]["p1"] > 1.0

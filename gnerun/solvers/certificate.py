@@ -131,19 +131,23 @@ class NewtonResponses:
             state = solver.init(np.concatenate([np.asarray(s, dtype=float), lam]), p)
             while not solver.terminate(state)[0]:
                 state = solver.step(state)
-            if solver.terminate(state)[1] != Status.CONVERGED or state.status in FAILURES:
-                continue
+            converged = solver.terminate(state)[1] == Status.CONVERGED and state.status not in FAILURES
             ai = state.z[: problem.n]
+            if not np.all(np.isfinite(ai)):
+                continue
             c = problem.constraint(ai, p)
             eq = problem.equality_mask
             viol = max(float(np.max(c[~eq], initial=0.0)), float(np.max(np.abs(c[eq]), initial=0.0)))
-            if viol > FEASIBILITY_TOL * max(1.0, float(np.max(np.abs(ai), initial=0.0))):
+            if not viol <= FEASIBILITY_TOL * max(1.0, float(np.max(np.abs(ai), initial=0.0))):
                 continue
             b = a.copy()
             b[sl] = ai
             val = float(game.costs(b, x)[agent])
-            counted += 1
-            if math.isfinite(val) and (best_val is None or val < best_val):
+            counted += converged
+            # a start that did not converge still counts where it ended feasible and better: a feasible point of
+            # lower cost proves that the agent can improve (a player whose cost is unbounded below diverges)
+            if math.isfinite(val) and (converged or val < float(game.costs(a, x)[agent])) and (
+                    best_val is None or val < best_val):
                 best_val, best_x = val, ai
         return best_val, best_x, counted
 
