@@ -316,3 +316,19 @@ def test_screenshots_without_vulkan_say_what_to_install(runs, tmp_path: Path, mo
     assert result.exit_code == 1
     assert "mesa-vulkan-drivers" in result.output and "Traceback" not in result.output
     assert not (tmp_path / "s").exists()
+
+
+def test_fig_2b_of_a_loop_without_z_star_shows_its_residual(tmp_path) -> None:
+    """run.reference: none logs no e(t): Fig. 2b draws log10 ||Phi|| of each sampling time's last iterate per K."""
+    simulate(load_config(CONFIGS / "paper_study2.yaml", {"run.steps": 5, "run.K": [1, 3], "run.reference": "none"}),
+             out=tmp_path / "run")
+    rrd = save([tmp_path / "run"], tmp_path / "run.rrd")
+    assert "Fig. 2b: log10 ||Phi(z^K(t))|| (no z*) (y) against sampling time t (x), per K" in _blueprint_text(rrd)
+    series = _series(rrd)
+    record = read_run(tmp_path / "run")
+    for K in (1, 3):
+        last = {}
+        for m in record.messages[f"/K{K}/mpc/iterate"]:
+            last[m["t"]] = m["residual_norm"]
+        _check_log10(series[f"/paper-study2/K{K}/log10_residual_norm"], "t", list(last.items()))
+        assert f"/paper-study2/K{K}/log10_e_norm" not in series

@@ -35,7 +35,9 @@ from .figures import (
     disturbance,
     failed_steps,
     fallback_steps,
+    final_residuals,
     final_status,
+    has_errors,
     number,
     run_name,
     solver_kind,
@@ -200,6 +202,7 @@ def log_run(rec, run: RunRecord, prefix: str, contents: Contents, several: bool 
     rec.reset_time()
 
     loops = closed_loops(run)
+    with_errors = has_errors(loops)  # (none without z*: Fig. 2b then shows the residual)
     for K, topics in loops.items():
         base = f"{prefix}/K{K}"
         x_view = "fig2_x" if K == max(loops) and kind != "distributed" else None
@@ -225,10 +228,18 @@ def log_run(rec, run: RunRecord, prefix: str, contents: Contents, several: bool 
             for agent, v in (m.get("e_norm_agent") or {}).items():
                 scalar(f"{base}/e_agent/{agent}", "t", m["t"], v)
         if kind != "distributed":
-            contents.titles["fig2_e"] = "Fig. 2b: log10 ||e(t)|| (y) against sampling time t (x), per K"
-            tr = trace("fig2_e", "fig2_e", f"{base}/log10_e_norm", f"{name}: K = {K}" if several else f"K = {K}",
-                       "t")
-            tr.points = [(m["t"], number(m.get("e_norm"))) for m in errors]
+            what = "||e(t)||" if with_errors else "||Phi(z^K(t))|| (no z*)"
+            title = f"Fig. 2b: log10 {what} (y) against sampling time t (x), per K"
+            if contents.titles.get("fig2_e", title) != title:  # runs with and without z*
+                title = "Fig. 2b: log10 ||e(t)||, or ||Phi(z^K(t))|| without z* (y), against sampling time t (x), per K"
+            contents.titles["fig2_e"] = title
+            label = f"{name}: K = {K}" if several else f"K = {K}"
+            if with_errors:
+                tr = trace("fig2_e", "fig2_e", f"{base}/log10_e_norm", label, "t")
+                tr.points = [(m["t"], number(m.get("e_norm"))) for m in errors]
+            else:
+                tr = trace("fig2_e", "fig2_e", f"{base}/log10_residual_norm", label + " (||Phi||)", "t")
+                tr.points = [(t, number(v)) for t, v in zip(*final_residuals(topics.get("iterate", [])), strict=True)]
             tr.failed, tr.fallback, tr.marks = failed, fallback, base
         else:
             view = f"fig3:{name}: K = {K}"
