@@ -2,7 +2,8 @@
 
 - Study 1 (solve runs): ||z^k - z*|| against k on a log scale, one panel per run, side by side (the clean
   and the disturbed solve of Fig. 1), on one y range.
-- Study 2 (closed loops): x(t) of the loop with the largest K, and ||e(t)|| per K on a log scale (Fig. 2).
+- Study 2 (closed loops): x(t) of the loop with the largest K, and ||e(t)|| per K on a log scale (Fig. 2); a loop
+  without z* (run.reference none) has no e(t), and shows ||Phi|| of each sampling time's last iterate instead.
 - Study 3 (distributed closed loops): ||e_i(t)|| per agent, one panel per K, on one y range (Fig. 3).
 - Games with positions (closed loops): the paths in the plane and the pairwise distances against the required
   ones (:mod:`gnerun.view.paths`).

@@ -9,9 +9,9 @@ error and residual also has a ``log10_`` series; as in `gnerun figures`, values 
 :data:`figures.FLOOR` are drawn in a band under a floor line, one row per series. Failed and fallback
 sampling times are marked (``<run>/K<k>/failed_steps``, ``fallback_steps``). The blueprint has one tab per
 figure of the paper that the runs contain: Fig. 1 (||z^k - z*|| against k, one view per solve, side by
-side), Fig. 2 (x(t); ||e(t)|| per K), Fig. 3 (||e_i(t)|| per agent, one view per K), and tabs for the log
-and the configs. Rerun's views have no axis titles: each view's name says what its axes show, and views
-that the paper compares share their y range.
+side), Fig. 2 (x(t); ||e(t)|| per K, or ||Phi|| without z*), Fig. 3 (||e_i(t)|| per agent, one view per K),
+and tabs for the log and the configs. Rerun's views have no axis titles: each view's name says what its axes
+show, and views that the paper compares share their y range.
 
 rerun-sdk is imported here only, so that ``gnerun --help`` stays fast.
 """
