@@ -413,7 +413,8 @@ def simulate(cfg: Config, out: str | Path | None = None, *, force: bool = False,
     """One closed loop per K in ``cfg.run.K``; ``out`` as in :func:`gnerun.solve`."""
     if cfg.game.kind != "dynamic":
         raise InputError(f"{cfg.source or cfg.name}: simulate needs a dynamic game (game.kind: dynamic); "
-                         "use `gnerun solve` for a static game")
+                         "solve a static game with gnerun.solve", cli=f"{cfg.source or cfg.name}: simulate needs a "
+                         "dynamic game (game.kind: dynamic); use `gnerun solve` for a static game")
     game = compile_game(cfg)
     stage = compile_stage_constraints(cfg)
     if cfg.run.warm_start == "shift":
