@@ -264,6 +264,7 @@ def test_a_loop_without_z_star_shows_its_residual(tmp_path: Path) -> None:
              out=tmp_path / "run")
     record = read_run(tmp_path / "run")
     assert not any("e_norm" in m for K in (1, 3) for m in record.messages[f"/K{K}/mpc/error"])
+    assert "no e (run.reference: none)" in record.messages["/log"][-1]["message"]  # (the Log panel: no "nan")
     ax_x, ax_e = make_figures([tmp_path / "run"])["paper-study2-study2"].axes
     assert "Phi" in ax_e.get_ylabel() and ax_e.get_title() == "(b) residual (no z*)"
     by_K = json.loads((tmp_path / "run" / "summary.json").read_text())["by_K"]
