@@ -278,6 +278,7 @@ def test_failed_and_fallback_steps_are_marked(tmp_path) -> None:
 HAS_VULKAN = vulkan_available()
 
 
+@pytest.mark.slow  # (a headless viewer: 12 s)
 @pytest.mark.skipif(not HAS_VULKAN, reason="no Vulkan driver on this machine (Debian: apt-get install "
                                             "mesa-vulkan-drivers); CI installs it")
 def test_screenshots_show_the_figures(runs, tmp_path: Path) -> None:
