@@ -321,3 +321,18 @@ def test_equal_series_are_drawn_as_markers_inside_markers(tmp_path: Path) -> Non
     assert all(np.array_equal(lines[0].get_ydata(), ln.get_ydata()) for ln in lines)
     sizes = [ln.get_markersize() for ln in lines]
     assert sizes == sorted(sizes, reverse=True) and len(set(sizes)) == 3
+
+
+def test_a_distributed_loop_without_z_star_shows_its_residual(tmp_path: Path) -> None:
+    simulate(load_config(CONFIGS / "paper_study3.yaml", {"run.steps": 4, "run.reference": "none"}),
+             out=tmp_path / "run")
+    record = read_run(tmp_path / "run")
+    axes = make_figures([tmp_path / "run"])["paper-study3-study3"].axes
+    assert "Phi" in axes[0].get_ylabel()
+    for ax, K in zip(axes, (2, 5), strict=True):
+        last = {}
+        for m in record.messages[f"/K{K}/mpc/iterate"]:
+            last[m["t"]] = m["residual_norm"]
+        line = _series(ax, "residual (no z*)")
+        np.testing.assert_array_equal(line.get_xdata(), list(last))
+        _check_drawn(ax, line, list(last.values()))

@@ -319,8 +319,9 @@ def test_screenshots_without_vulkan_say_what_to_install(runs, tmp_path: Path, mo
     assert not (tmp_path / "s").exists()
 
 
-def test_fig_2b_of_a_loop_without_z_star_shows_its_residual(tmp_path) -> None:
-    """run.reference: none logs no e(t): Fig. 2b draws log10 ||Phi|| of each sampling time's last iterate per K."""
+def test_a_loop_without_z_star_shows_its_residual(tmp_path) -> None:
+    """run.reference: none logs no e(t): Fig. 2b (and Fig. 3) draw log10 ||Phi|| of each sampling time's last
+    iterate per K."""
     simulate(load_config(CONFIGS / "paper_study2.yaml", {"run.steps": 5, "run.K": [1, 3], "run.reference": "none"}),
              out=tmp_path / "run")
     rrd = save([tmp_path / "run"], tmp_path / "run.rrd")
@@ -333,3 +334,15 @@ def test_fig_2b_of_a_loop_without_z_star_shows_its_residual(tmp_path) -> None:
             last[m["t"]] = m["residual_norm"]
         _check_log10(series[f"/paper-study2/K{K}/log10_residual_norm"], "t", list(last.items()))
         assert f"/paper-study2/K{K}/log10_e_norm" not in series
+    # a distributed loop: each K's Fig. 3 view
+    simulate(load_config(CONFIGS / "paper_study3.yaml", {"run.steps": 3, "run.reference": "none"}),
+             out=tmp_path / "dist")
+    rrd = save([tmp_path / "dist"], tmp_path / "dist.rrd")
+    assert ("Fig. 3: log10 ||Phi(z^K(t))|| (no z*) (y) against sampling time t (x), paper-study3: K = 5"
+            in _blueprint_text(rrd))
+    series = _series(rrd)
+    for K in (2, 5):
+        last = {}
+        for m in read_run(tmp_path / "dist").messages[f"/K{K}/mpc/iterate"]:
+            last[m["t"]] = m["residual_norm"]
+        _check_log10(series[f"/paper-study3/K{K}/log10_residual_norm"], "t", list(last.items()))

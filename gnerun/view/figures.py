@@ -4,7 +4,8 @@
   and the disturbed solve of Fig. 1), on one y range.
 - Study 2 (closed loops): x(t) of the loop with the largest K, and ||e(t)|| per K on a log scale (Fig. 2); a loop
   without z* (run.reference none) has no e(t), and shows ||Phi|| of each sampling time's last iterate instead.
-- Study 3 (distributed closed loops): ||e_i(t)|| per agent, one panel per K, on one y range (Fig. 3).
+- Study 3 (distributed closed loops): ||e_i(t)|| per agent, one panel per K, on one y range (Fig. 3); ||Phi||
+  without z*.
 - Games with positions (closed loops): the paths in the plane and the pairwise distances against the required
   ones (:mod:`gnerun.view.paths`).
 
@@ -415,10 +416,12 @@ def study2_figure(run: RunRecord):
 
 
 def study3_figure(run: RunRecord):
-    """||e_i(t)|| per agent, one panel per K, on one y range."""
+    """||e_i(t)|| per agent, one panel per K, on one y range (a loop without z*, run.reference none, has no
+    e_i(t): its residual ||Phi(z^K(t))|| instead)."""
     loops = closed_loops(run)
     fig, axes, width = _panels(len(loops))
     floors = []
+    errors_logged = has_errors(loops)
     for ax, (K, topics), label in zip(axes, loops.items(), "abcdefghijklmnop", strict=False):
         errors = topics.get("error", [])
         states = topics.get("state", [])
@@ -426,6 +429,8 @@ def study3_figure(run: RunRecord):
         for i, agent in enumerate(agent_names(run, errors)):
             floor.add([m["t"] for m in errors], [(m.get("e_norm_agent") or {}).get(agent) for m in errors],
                       label=agent, color=f"C{i % 10}")
+        if not errors_logged:
+            floor.add(*final_residuals(topics.get("iterate", [])), label="residual (no z*)", color="C0")
         _mark_steps(ax, failed_steps(states), fallback_steps(states))
         floors.append(floor)
         ax.set_xlabel("t")
@@ -435,7 +440,7 @@ def study3_figure(run: RunRecord):
     for ax in axes[1:]:
         ax.sharey(axes[0])
         ax.tick_params(labelleft=False)
-    axes[0].set_ylabel(r"$\|e_i(t)\|$")
+    axes[0].set_ylabel(r"$\|e_i(t)\|$" if errors_logged else r"$\|\Phi(z^K(t))\|$")
     for ax, floor in zip(axes, floors, strict=True):
         _legend(ax, width, floor.notes())
     return fig

@@ -9,7 +9,7 @@ error and residual also has a ``log10_`` series; as in `gnerun figures`, values 
 :data:`figures.FLOOR` are drawn in a band under a floor line, one row per series. Failed and fallback
 sampling times are marked (``<run>/K<k>/failed_steps``, ``fallback_steps``). The blueprint has one tab per
 figure of the paper that the runs contain: Fig. 1 (||z^k - z*|| against k, one view per solve, side by
-side), Fig. 2 (x(t); ||e(t)|| per K, or ||Phi|| without z*), Fig. 3 (||e_i(t)|| per agent, one view per K),
+side), Fig. 2 (x(t); ||e(t)|| per K, or ||Phi|| without z*), Fig. 3 (||e_i(t)|| per agent, one view per K, or ||Phi||),
 and tabs for the log and the configs. Rerun's views have no axis titles: each view's name says what its axes
 show, and views that the paper compares share their y range.
 
@@ -243,13 +243,18 @@ def log_run(rec, run: RunRecord, prefix: str, contents: Contents, several: bool 
             tr.failed, tr.fallback, tr.marks = failed, fallback, base
         else:
             view = f"fig3:{name}: K = {K}"
-            contents.titles[view] = f"Fig. 3: log10 ||e_i(t)|| (y) against sampling time t (x), {name}: K = {K}"
+            what = "||e_i(t)||" if with_errors else "||Phi(z^K(t))|| (no z*)"
+            contents.titles[view] = f"Fig. 3: log10 {what} (y) against sampling time t (x), {name}: K = {K}"
             agents = dict.fromkeys(a for m in errors for a in (m.get("e_norm_agent") or {}))
             for i, agent in enumerate(agents):
                 tr = trace(view, "fig3", f"{base}/log10_e_agent/{agent}", agent, "t")
                 tr.points = [(m["t"], number((m.get("e_norm_agent") or {}).get(agent))) for m in errors]
                 if i == 0:  # the K's failures, along the top of its view
                     tr.failed, tr.fallback, tr.marks, tr.on_trace = failed, fallback, base, False
+            if not with_errors:
+                tr = trace(view, "fig3", f"{base}/log10_residual_norm", "||Phi||", "t")
+                tr.points = [(t, number(v)) for t, v in zip(*final_residuals(topics.get("iterate", [])), strict=True)]
+                tr.failed, tr.fallback, tr.marks = failed, fallback, base
     rec.reset_time()
 
 
