@@ -17,6 +17,14 @@ from gnerun.view.figures import FLOOR, make_figures, write_figures
 from .conftest import CONFIGS, run_cli
 
 
+@pytest.fixture(autouse=True)
+def _close_figures():
+    yield
+    import matplotlib.pyplot as plt
+
+    plt.close("all")
+
+
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory) -> dict[str, Path]:
     root = tmp_path_factory.mktemp("runs")
@@ -336,3 +344,15 @@ def test_a_distributed_loop_without_z_star_shows_its_residual(tmp_path: Path) ->
         line = _series(ax, "residual (no z*)")
         np.testing.assert_array_equal(line.get_xdata(), list(last))
         _check_drawn(ax, line, list(last.values()))
+
+
+def test_a_solve_without_z_star_shows_its_residual(runs, tmp_path: Path) -> None:
+    solve(load_config(CONFIGS / "paper_study1.yaml", {"run.reference": "none"}), out=tmp_path / "run")
+    iterates = read_run(tmp_path / "run").messages["/solve/iterate"]
+    assert not any("error_norm" in m for m in iterates)
+    ax_none, ax_noisy = make_figures([tmp_path / "run", runs["noisy"]])["study1"].axes
+    line = _series(ax_none, "undisturbed: ||Phi(z^k)||, no z*")
+    _check_drawn(ax_none, line, [m["residual_norm"] for m in iterates])
+    _check_drawn(ax_noisy, _series(ax_noisy, "jacobian noise, scale 0.001"),
+                 [m.get("error_norm") for m in read_run(runs["noisy"]).messages["/solve/iterate"]])
+    assert "Phi" in ax_none.get_ylabel() and "z^*" in ax_none.get_ylabel()  # the axis names both

@@ -321,7 +321,7 @@ def test_screenshots_without_vulkan_say_what_to_install(runs, tmp_path: Path, mo
 
 def test_a_loop_without_z_star_shows_its_residual(tmp_path) -> None:
     """run.reference: none logs no e(t): Fig. 2b (and Fig. 3) draw log10 ||Phi|| of each sampling time's last
-    iterate per K."""
+    iterate per K, Fig. 1 log10 ||Phi(z^k)||."""
     simulate(load_config(CONFIGS / "paper_study2.yaml", {"run.steps": 5, "run.K": [1, 3], "run.reference": "none"}),
              out=tmp_path / "run")
     rrd = save([tmp_path / "run"], tmp_path / "run.rrd")
@@ -334,6 +334,14 @@ def test_a_loop_without_z_star_shows_its_residual(tmp_path) -> None:
             last[m["t"]] = m["residual_norm"]
         _check_log10(series[f"/paper-study2/K{K}/log10_residual_norm"], "t", list(last.items()))
         assert f"/paper-study2/K{K}/log10_e_norm" not in series
+    # a solve: Fig. 1
+    solve(load_config(CONFIGS / "paper_study1.yaml", {"run.reference": "none"}), out=tmp_path / "solve")
+    rrd = save([tmp_path / "solve"], tmp_path / "solve.rrd")
+    assert "Fig. 1: paper-study1 (undisturbed): log10 ||Phi(z^k)|| (no z*) (y) against iteration k (x)" in (
+        _blueprint_text(rrd))
+    iterates = read_run(tmp_path / "solve").messages["/solve/iterate"]
+    _check_log10(_series(rrd)["/paper-study1/solve/log10_residual_norm"], "iteration",
+                 [(m["k"], m["residual_norm"]) for m in iterates])
     # a distributed loop: each K's Fig. 3 view
     simulate(load_config(CONFIGS / "paper_study3.yaml", {"run.steps": 3, "run.reference": "none"}),
              out=tmp_path / "dist")

@@ -1,7 +1,7 @@
 """Paper-style figures from run logs alone (`gnerun figures`).
 
 - Study 1 (solve runs): ||z^k - z*|| against k on a log scale, one panel per run, side by side (the clean
-  and the disturbed solve of Fig. 1), on one y range.
+  and the disturbed solve of Fig. 1), on one y range; ||Phi(z^k)|| for a solve without z*.
 - Study 2 (closed loops): x(t) of the loop with the largest K, and ||e(t)|| per K on a log scale (Fig. 2); a loop
   without z* (run.reference none) has no e(t), and shows ||Phi|| of each sampling time's last iterate instead.
 - Study 3 (distributed closed loops): ||e_i(t)|| per agent, one panel per K, on one y range (Fig. 3); ||Phi||
@@ -351,17 +351,24 @@ def _mark_steps(ax, failed: list[int], fallback: list[int]) -> None:
 # ---------------------------------------------------------------------------------------------
 
 
+def solve_has_errors(run: RunRecord) -> bool:
+    """Whether a solve logged ||z^k - z*|| (not without z*: run.reference none)."""
+    return any(not math.isnan(number(m.get("error_norm"))) for m in run.messages.get("/solve/iterate", []))
+
+
 def study1_figure(runs: list[RunRecord]):
-    """||z^k - z*|| vs k, one panel per solve run, on one y range."""
+    """||z^k - z*|| vs k, one panel per solve run, on one y range (a solve without z*, run.reference none:
+    ||Phi(z^k)||)."""
     fig, axes, width = _panels(len(runs))
     floors = []
-    for ax, run, label in zip(axes, runs, "abcdefghijklmnop", strict=False):
+    with_errors = [solve_has_errors(run) for run in runs]
+    for ax, run, label, errors in zip(axes, runs, "abcdefghijklmnop", with_errors, strict=False):
         its = run.messages.get("/solve/iterate", [])
         status = final_status(run)
         text = disturbance(run) + (f"; {status}" if status and status != "converged" else "")
         floor = FloorAxis(ax, "run")
-        floor.add([m["k"] for m in its], [m.get("error_norm") for m in its], label=text or run_name(run),
-                   color="C0")
+        floor.add([m["k"] for m in its], [m.get("error_norm" if errors else "residual_norm") for m in its],
+                  label=(text or run_name(run)) + ("" if errors else ": ||Phi(z^k)||, no z*"), color="C0")
         floors.append(floor)
         ax.set_xlabel("iteration k")
         _integer_ticks(ax)
@@ -370,7 +377,8 @@ def study1_figure(runs: list[RunRecord]):
     for ax in axes[1:]:
         ax.sharey(axes[0])
         ax.tick_params(labelleft=False)
-    axes[0].set_ylabel(r"$\|z^k - z^*\|$")
+    axes[0].set_ylabel(r"$\|z^k - z^*\|$" if all(with_errors) else r"$\|\Phi(z^k)\|$" if not any(with_errors)
+                       else r"$\|z^k - z^*\|$, $\|\Phi(z^k)\|$")
     for ax, floor in zip(axes, floors, strict=True):
         _legend(ax, width, floor.notes())
     return fig

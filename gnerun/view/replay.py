@@ -40,6 +40,7 @@ from .figures import (
     has_errors,
     number,
     run_name,
+    solve_has_errors,
     solver_kind,
 )
 
@@ -185,20 +186,21 @@ def log_run(rec, run: RunRecord, prefix: str, contents: Contents, several: bool 
     rec.reset_time()
 
     iterates = run.messages.get("/solve/iterate", [])
+    solve_errors = solve_has_errors(run)  # (none without z*: Fig. 1 then shows ||Phi(z^k)||)
     for m in iterates:
         for key in ("error_norm", "residual_norm", "step_norm"):
             scalar(f"{prefix}/solve/{key}", "iteration", m["k"], m.get(key))
-            if key == "residual_norm":
+            if key == "residual_norm" and solve_errors:  # (else Fig. 1's series, drawn with the floor)
                 scalar(f"{prefix}/solve/log10_{key}", "iteration", m["k"], _log10(m.get(key)))
     if iterates:
         status = final_status(run)
         view = f"fig1:{prefix}"
+        key, what = ("error_norm", "||z^k - z*||") if solve_errors else ("residual_norm", "||Phi(z^k)||")
         contents.titles[view] = (f"Fig. 1: {name} ({disturbance(run) or 'solve'}"
                                  + (f"; {status}" if status and status != "converged" else "")
-                                 + "): log10 ||z^k - z*|| (y) against iteration k (x)")
-        tr = trace(view, "fig1", f"{prefix}/solve/log10_error_norm", name if several else "||z^k - z*||",
-                   "iteration")
-        tr.points = [(m["k"], number(m.get("error_norm"))) for m in iterates]
+                                 + f"): log10 {what}{'' if solve_errors else ' (no z*)'} (y) against iteration k (x)")
+        tr = trace(view, "fig1", f"{prefix}/solve/log10_{key}", name if several else what, "iteration")
+        tr.points = [(m["k"], number(m.get(key))) for m in iterates]
     rec.reset_time()
 
     loops = closed_loops(run)
