@@ -99,7 +99,7 @@ def _fail(exc: BaseException) -> NoReturn:
     if _options["debug"]:
         traceback.print_exception(exc)
     if isinstance(exc, InputError):  # one line already (InputError escapes what it quotes)
-        typer.echo(f"error: {exc}", err=True)
+        typer.echo(f"error: {exc.cli}", err=True)
         raise typer.Exit(2)
     if isinstance(exc, Unavailable):
         typer.echo(f"error: {one_line(str(exc))}", err=True)

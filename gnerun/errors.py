@@ -35,28 +35,32 @@ class InputError(Exception):
     ``str(err)`` is the complete one-line message, e.g.
     ``configs/x.yaml:12:7: game.agents.0.cost: unknown name 'y' at column 5 of expression 'x + y'``.
     Control characters quoted from the input are escaped (:func:`one_line`), and a message that quotes a huge
-    value is shortened to about ``MAX_MESSAGE`` characters.
+    value is shortened to about ``MAX_MESSAGE`` characters. A message that tells the caller what to do next says
+    it in Python (``force=True``); ``cli`` is the same message for the command line (``--force``), which prints it.
     """
 
-    def __init__(self, *args: object):
+    def __init__(self, *args: object, cli: str | None = None):
         if len(args) == 1 and isinstance(args[0], str):
             args = (_bounded(args[0]),)
         super().__init__(*args)
+        self.cli = _bounded(cli) if cli is not None else str(self)
 
 
 class ConfigError(InputError):
     """A config that cannot be loaded: YAML syntax, schema or semantic error.
 
     ``problems`` holds every message found (each ``file:line:column: field.path: message``);
-    ``str(err)`` is the first one, followed by a count of the others.
+    ``str(err)`` is the first one, followed by a count of the others (``cli``: the same, pointing to
+    ``gnerun validate``).
     """
 
     def __init__(self, problems: list[str]):
         self.problems = [_bounded(p) for p in problems]
         first = self.problems[0] if self.problems else "invalid config"
         more = len(self.problems) - 1
-        suffix = f" (and {more} more problem{'s' if more > 1 else ''}: run `gnerun validate` for all)" if more else ""
-        super().__init__(first + suffix)
+        count = f" (and {more} more problem{'s' if more > 1 else ''}" if more else ""
+        super().__init__(first + (f"{count}: all of them in the error's .problems)" if more else ""),
+                         cli=first + (f"{count}: run `gnerun validate` for all)" if more else ""))
 
 
 class Unavailable(Exception):

@@ -244,6 +244,31 @@ def test_python_callers_get_python_in_error_messages() -> None:
     assert str(err.value).startswith("--set solver.tl=1: solver.tl: unknown key")
 
 
+def test_what_to_do_next_is_said_in_python_to_python_and_in_options_on_the_command_line(tmp_path: Path) -> None:
+    import gnerun
+
+    two_problems = {"solver.tl": 1, "solver.kind": "foo"}
+    with pytest.raises(gnerun.ConfigError) as err:
+        gnerun.load_config(CONFIGS / "fk_a12.yaml", overrides=two_problems)
+    assert str(err.value).endswith("(and 1 more problem: all of them in the error's .problems)")
+    assert len(err.value.problems) == 2 and "gnerun" not in str(err.value)
+    bad = tmp_path / "bad.yaml"
+    bad.write_text((CONFIGS / "fk_a12.yaml").read_text() + "extra: 1\nmore: 2\n")
+    proc = run_cli("solve", str(bad))
+    assert proc.returncode == 2 and proc.stderr.rstrip().endswith(
+        "(and 1 more problem: run `gnerun validate` for all)"), proc.stderr
+    cfg = gnerun.load_config(CONFIGS / "harker.yaml")
+    gnerun.solve(cfg, out=tmp_path / "run")
+    with pytest.raises(gnerun.InputError) as err:
+        gnerun.solve(cfg, out=tmp_path / "run")
+    assert "force=True" in str(err.value) and "--force" not in str(err.value)
+    with pytest.raises(gnerun.InputError) as err:
+        gnerun.simulate(cfg)
+    assert "gnerun.solve" in str(err.value) and "`gnerun solve`" not in str(err.value)
+    proc = run_cli("solve", str(CONFIGS / "harker.yaml"), "--out", str(tmp_path / "run"))
+    assert proc.returncode == 2 and "(use --force to overwrite)" in proc.stderr and "force=True" not in proc.stderr
+
+
 def test_the_public_namespace_is_the_api() -> None:
     import subprocess
     import sys

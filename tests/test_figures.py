@@ -17,6 +17,14 @@ from gnerun.view.figures import FLOOR, make_figures, write_figures
 from .conftest import CONFIGS, run_cli
 
 
+@pytest.fixture(autouse=True)
+def _close_figures():
+    yield
+    import matplotlib.pyplot as plt
+
+    plt.close("all")
+
+
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory) -> dict[str, Path]:
     root = tmp_path_factory.mktemp("runs")
@@ -161,7 +169,7 @@ def test_failed_and_fallback_steps_are_marked(tmp_path: Path, marks: bool) -> No
         assert "failed step" not in labels and not any(p.get_label() == "failed step" for p in ax_x.patches)
         return
     failed = [ln for ln in ax_e.get_lines() if ln.get_label() == "failed step"]
-    fallback = [ln for ln in ax_e.get_lines() if ln.get_label() == "fallback: iterate not applied"]
+    fallback = [ln for ln in ax_e.get_lines() if ln.get_label() == "fallback step"]
     assert len(failed) == len(fallback) == 2  # on each K's curve
     for ln in failed:
         np.testing.assert_array_equal(ln.get_xdata(), [2, 5])
@@ -169,12 +177,12 @@ def test_failed_and_fallback_steps_are_marked(tmp_path: Path, marks: bool) -> No
         np.testing.assert_array_equal(ln.get_xdata(), [4])
         assert ln.get_ydata()[0] == pytest.approx(K * 1e-4)  # at the K's error at t = 4
     legend = [t.get_text() for t in ax_e.get_legend().get_texts()]
-    assert "failed step" in legend and "fallback: iterate not applied" in legend
+    assert "failed step" in legend and "fallback step" in legend
     # the states' panel and Study 3's panels (one K each) shade the sampling times
     for ax in (ax_x, *figures["marks-study3"].axes):
         steps = [p for p in ax.patches if p.get_gid() != "floor band"]
         assert sorted(round(p.get_x() + p.get_width() / 2) for p in steps) == [2, 4, 5]
-        assert {p.get_label() for p in ax.patches} >= {"failed step", "fallback: iterate not applied"}
+        assert {p.get_label() for p in ax.patches} >= {"failed step", "fallback step"}
 
 
 def _truncated(run: Path, tmp_path: Path, fraction: float) -> Path:
@@ -250,7 +258,101 @@ def test_a_real_loop_with_failed_steps_is_marked_where_it_failed(tmp_path: Path)
     ax_x, ax_e = make_figures([tmp_path / "run"])["paper-study2-study2"].axes
     [failed] = [ln for ln in ax_e.get_lines() if ln.get_label() == "failed step"]
     np.testing.assert_array_equal(failed.get_xdata(), by_K["failed_steps"])
-    fallback = [ln for ln in ax_e.get_lines() if ln.get_label() == "fallback: iterate not applied"]
+    fallback = [ln for ln in ax_e.get_lines() if ln.get_label() == "fallback step"]
     assert [list(ln.get_xdata()) for ln in fallback] == ([by_K["fallback_steps"]] if by_K["fallback_steps"] else [])
     shaded = sorted(round(p.get_x() + p.get_width() / 2) for p in ax_x.patches if p.get_gid() != "floor band")
     assert shaded == sorted(by_K["failed_steps"] + by_K["fallback_steps"])  # a failed step is often a fallback too
+
+
+def test_a_loop_without_z_star_shows_its_residual(tmp_path: Path) -> None:
+    """run.reference: none logs no e(t): panel (b) draws ||Phi|| of each sampling time's last iterate per K."""
+    import json
+
+    simulate(load_config(CONFIGS / "paper_study2.yaml", {"run.steps": 6, "run.K": [1, 3], "run.reference": "none"}),
+             out=tmp_path / "run")
+    record = read_run(tmp_path / "run")
+    assert not any("e_norm" in m for K in (1, 3) for m in record.messages[f"/K{K}/mpc/error"])
+    assert "no e (run.reference: none)" in record.messages["/log"][-1]["message"]  # (the Log panel: no "nan")
+    ax_x, ax_e = make_figures([tmp_path / "run"])["paper-study2-study2"].axes
+    assert "Phi" in ax_e.get_ylabel() and ax_e.get_title() == "(b) residual (no z*)"
+    by_K = json.loads((tmp_path / "run" / "summary.json").read_text())["by_K"]
+    for K in (1, 3):
+        last = {}
+        for m in record.messages[f"/K{K}/mpc/iterate"]:
+            last[m["t"]] = m["residual_norm"]  # the iterates of a sampling time come in the order of k
+        assert list(last.values()) == by_K[str(K)]["residual_norm"]
+        line = _series(ax_e, f"K = {K}")
+        np.testing.assert_array_equal(line.get_xdata(), list(last))
+        _check_drawn(ax_e, line, list(last.values()))
+
+
+def _many_states_loop(path: Path, states: int) -> None:
+    """A closed-loop log of a game with many states and fallback steps."""
+    from gnerun.log.mcap_log import RunLog
+    from gnerun.log.messages import MpcError, MpcState
+
+    names = ", ".join(f"s{j}" for j in range(states))
+    config = f"name: many\nsolver: {{kind: ssn}}\ngame: {{kind: dynamic, states: [{names}], agents: [{{name: a}}]}}\n"
+    with RunLog(path, config_yaml=config, metadata={"version": "0", "log_time": "simulated"}) as log:
+        for K in (2, 3, 5):
+            for t in range(12):
+                log.write(f"/K{K}/mpc/state", MpcState(t=t, x=[j + 0.1 * t for j in range(states)], u=[0.0],
+                                                       status="incomplete", fallback=t in (3, 4)), log_time=t * 10**9)
+                log.write(f"/K{K}/mpc/error", MpcError(t=t, e_norm=10.0 ** -t, e_norm_agent={}), log_time=t * 10**9)
+
+
+@pytest.mark.parametrize("states", [3, 8, 12, 20])
+def test_a_game_of_many_states_keeps_its_panels_and_its_legend_below_them(tmp_path: Path, states: int) -> None:
+    """The legend of x(t) grows with the states; the figure grows with it, so that the panels keep their height."""
+    _many_states_loop(tmp_path / "many.mcap", states)
+    fig = make_figures([tmp_path / "many.mcap"])["many-study2"]
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    ax_x, ax_e = fig.axes
+    for ax in (ax_x, ax_e):
+        legend, data = ax.get_legend().get_window_extent(renderer), ax.get_window_extent(renderer)
+        assert data.height / fig.dpi == pytest.approx(1.5, abs=0.05), states  # the panel, whatever its legend
+        assert legend.y1 <= data.y0 and fig.bbox.y0 <= legend.y0, states  # below the panel, inside the figure
+    labels = [t.get_text() for t in ax_x.get_legend().get_texts()]
+    assert labels == [f"s{j}" for j in range(states)] + ["fallback step"]
+    assert ax_x.get_legend()._ncols >= 2  # in columns, not one long list
+    if states == 3:  # a legend of two rows: the figure's own height
+        assert fig.get_figheight() == pytest.approx(2.35)
+
+
+def test_equal_series_are_drawn_as_markers_inside_markers(tmp_path: Path) -> None:
+    """Series of equal values above the floor (K = 3 and 5 taking the same steps) cover each other: each series'
+    markers are smaller than the one's before, so that every one shows."""
+    _many_states_loop(tmp_path / "many.mcap", 3)
+    ax_e = make_figures([tmp_path / "many.mcap"])["many-study2"].axes[1]
+    lines = [_series(ax_e, f"K = {K}") for K in (2, 3, 5)]
+    assert all(np.array_equal(lines[0].get_ydata(), ln.get_ydata()) for ln in lines)
+    sizes = [ln.get_markersize() for ln in lines]
+    assert sizes == sorted(sizes, reverse=True) and len(set(sizes)) == 3
+
+
+def test_a_distributed_loop_without_z_star_shows_its_residual(tmp_path: Path) -> None:
+    simulate(load_config(CONFIGS / "paper_study3.yaml", {"run.steps": 4, "run.reference": "none"}),
+             out=tmp_path / "run")
+    record = read_run(tmp_path / "run")
+    axes = make_figures([tmp_path / "run"])["paper-study3-study3"].axes
+    assert "Phi" in axes[0].get_ylabel()
+    for ax, K in zip(axes, (2, 5), strict=True):
+        last = {}
+        for m in record.messages[f"/K{K}/mpc/iterate"]:
+            last[m["t"]] = m["residual_norm"]
+        line = _series(ax, "residual (no z*)")
+        np.testing.assert_array_equal(line.get_xdata(), list(last))
+        _check_drawn(ax, line, list(last.values()))
+
+
+def test_a_solve_without_z_star_shows_its_residual(runs, tmp_path: Path) -> None:
+    solve(load_config(CONFIGS / "paper_study1.yaml", {"run.reference": "none"}), out=tmp_path / "run")
+    iterates = read_run(tmp_path / "run").messages["/solve/iterate"]
+    assert not any("error_norm" in m for m in iterates)
+    ax_none, ax_noisy = make_figures([tmp_path / "run", runs["noisy"]])["study1"].axes
+    line = _series(ax_none, "undisturbed: ||Phi(z^k)||, no z*")
+    _check_drawn(ax_none, line, [m["residual_norm"] for m in iterates])
+    _check_drawn(ax_noisy, _series(ax_noisy, "jacobian noise, scale 0.001"),
+                 [m.get("error_norm") for m in read_run(runs["noisy"]).messages["/solve/iterate"]])
+    assert "Phi" in ax_none.get_ylabel() and "z^*" in ax_none.get_ylabel()  # the axis names both

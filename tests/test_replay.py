@@ -278,6 +278,7 @@ def test_failed_and_fallback_steps_are_marked(tmp_path) -> None:
 HAS_VULKAN = vulkan_available()
 
 
+@pytest.mark.slow  # (a headless viewer: 12 s)
 @pytest.mark.skipif(not HAS_VULKAN, reason="no Vulkan driver on this machine (Debian: apt-get install "
                                             "mesa-vulkan-drivers); CI installs it")
 def test_screenshots_show_the_figures(runs, tmp_path: Path) -> None:
@@ -297,6 +298,10 @@ def test_screenshots_show_the_figures(runs, tmp_path: Path) -> None:
         body = image[image.shape[0] // 15:]
         for colour in PALETTE[:colours]:
             assert np.all(np.abs(body - np.array(colour)) <= 12, axis=-1).sum() > 300, (name, colour)
+        # no start-up notification over the views' top right corner (a grey box about 33 bright, where the
+        # views' headers are 13)
+        corner = image[40:60, image.shape[1] - 300:image.shape[1] - 20].mean(axis=-1)
+        assert np.median(corner) < 25, name
 
 
 def test_screenshots_without_vulkan_say_what_to_install(runs, tmp_path: Path, monkeypatch) -> None:
@@ -312,3 +317,40 @@ def test_screenshots_without_vulkan_say_what_to_install(runs, tmp_path: Path, mo
     assert result.exit_code == 1
     assert "mesa-vulkan-drivers" in result.output and "Traceback" not in result.output
     assert not (tmp_path / "s").exists()
+
+
+def test_a_loop_without_z_star_shows_its_residual(tmp_path) -> None:
+    """run.reference: none logs no e(t): Fig. 2b (and Fig. 3) draw log10 ||Phi|| of each sampling time's last
+    iterate per K, Fig. 1 log10 ||Phi(z^k)||."""
+    simulate(load_config(CONFIGS / "paper_study2.yaml", {"run.steps": 5, "run.K": [1, 3], "run.reference": "none"}),
+             out=tmp_path / "run")
+    rrd = save([tmp_path / "run"], tmp_path / "run.rrd")
+    assert "Fig. 2b: log10 ||Phi(z^K(t))|| (no z*) (y) against sampling time t (x), per K" in _blueprint_text(rrd)
+    series = _series(rrd)
+    record = read_run(tmp_path / "run")
+    for K in (1, 3):
+        last = {}
+        for m in record.messages[f"/K{K}/mpc/iterate"]:
+            last[m["t"]] = m["residual_norm"]
+        _check_log10(series[f"/paper-study2/K{K}/log10_residual_norm"], "t", list(last.items()))
+        assert f"/paper-study2/K{K}/log10_e_norm" not in series
+    # a solve: Fig. 1
+    solve(load_config(CONFIGS / "paper_study1.yaml", {"run.reference": "none"}), out=tmp_path / "solve")
+    rrd = save([tmp_path / "solve"], tmp_path / "solve.rrd")
+    assert "Fig. 1: paper-study1 (undisturbed): log10 ||Phi(z^k)|| (no z*) (y) against iteration k (x)" in (
+        _blueprint_text(rrd))
+    iterates = read_run(tmp_path / "solve").messages["/solve/iterate"]
+    _check_log10(_series(rrd)["/paper-study1/solve/log10_residual_norm"], "iteration",
+                 [(m["k"], m["residual_norm"]) for m in iterates])
+    # a distributed loop: each K's Fig. 3 view
+    simulate(load_config(CONFIGS / "paper_study3.yaml", {"run.steps": 3, "run.reference": "none"}),
+             out=tmp_path / "dist")
+    rrd = save([tmp_path / "dist"], tmp_path / "dist.rrd")
+    assert ("Fig. 3: log10 ||Phi(z^K(t))|| (no z*) (y) against sampling time t (x), paper-study3: K = 5"
+            in _blueprint_text(rrd))
+    series = _series(rrd)
+    for K in (2, 5):
+        last = {}
+        for m in read_run(tmp_path / "dist").messages[f"/K{K}/mpc/iterate"]:
+            last[m["t"]] = m["residual_norm"]
+        _check_log10(series[f"/paper-study3/K{K}/log10_residual_norm"], "t", list(last.items()))

@@ -77,7 +77,7 @@ def test_a_signal_ends_solve_with_a_summary_and_a_finished_log(sig: signal.Signa
     assert summary["status"] == "interrupted" and summary["iterations"] == iterates[-1]["k"] > 0
     assert summary["z"] == iterates[-1]["z"] and len(summary["residual_history"]) == len(iterates)
     reason = "Ctrl-C" if sig == signal.SIGINT else sig.name
-    assert summary["message"].startswith(f"interrupted ({reason}) after {iterates[-1]['k']} iterations")
+    assert summary["message"].startswith(f"interrupted ({reason}) after {iterates[-1]['k']} iteration")
     assert summary["certificate"]["kkt_residual"] is not None
 
 

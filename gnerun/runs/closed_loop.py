@@ -413,7 +413,8 @@ def simulate(cfg: Config, out: str | Path | None = None, *, force: bool = False,
     """One closed loop per K in ``cfg.run.K``; ``out`` as in :func:`gnerun.solve`."""
     if cfg.game.kind != "dynamic":
         raise InputError(f"{cfg.source or cfg.name}: simulate needs a dynamic game (game.kind: dynamic); "
-                         "use `gnerun solve` for a static game")
+                         "solve a static game with gnerun.solve", cli=f"{cfg.source or cfg.name}: simulate needs a "
+                         "dynamic game (game.kind: dynamic); use `gnerun solve` for a static game")
     game = compile_game(cfg)
     stage = compile_stage_constraints(cfg)
     if cfg.run.warm_start == "shift":
@@ -438,10 +439,11 @@ def simulate(cfg: Config, out: str | Path | None = None, *, force: bool = False,
                 break
             sim[K] = r = closed_loop(cfg, game, K, run, progress, interrupt, stage)
             if run is not None:
-                run.log("info", f"K={K}: {r.ended} after {r.done} sampling time{'s' * (r.done != 1)}, max e "
-                                f"{_nanmax(r.e_norm):.3e}, final e {r.final_e_norm}, failed steps {r.failed_steps}, "
-                                f"fallback steps {r.fallback_steps}, max constraint violation "
-                                f"{r.max_constraint_violation:.3e}")
+                errors = (f"max e {_nanmax(r.e_norm):.3e}, final e {r.final_e_norm:.3e}" if cfg.run.reference != "none"
+                          else "no e (run.reference: none)")
+                run.log("info", f"K={K}: {r.ended} after {r.done} sampling time{'s' * (r.done != 1)}, {errors}, "
+                                f"failed steps {r.failed_steps}, fallback steps {r.fallback_steps}, max constraint "
+                                f"violation {r.max_constraint_violation:.3e}")
         sim.interrupted = interrupt.requested
         if run is not None:
             run.write_summary(sim.summary())

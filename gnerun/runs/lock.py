@@ -59,7 +59,9 @@ class DirectoryLock:
                 os.close(fd)
                 raise DirectoryBusy(f"{directory}: the {what} is in use by another gnerun process ({holder}); "
                                     "one process writes into it at a time: wait for it to finish, or stop it, "
-                                    "or choose another --out") from None
+                                    "or write elsewhere", cli=f"{directory}: the {what} is in use by another gnerun "
+                                    f"process ({holder}); one process writes into it at a time: wait for it to "
+                                    "finish, or stop it, or choose another --out") from None
             try:
                 current = os.stat(path, follow_symlinks=False).st_ino
             except FileNotFoundError:

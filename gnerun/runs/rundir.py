@@ -61,7 +61,8 @@ class RunDirectory:
             raise InputError(f"{path}: cannot write the run directory: {e.strerror or e}") from None
         try:
             if contents(path) and not force:
-                raise InputError(f"{path}: the run directory exists and is not empty (use --force to overwrite)")
+                raise InputError(f"{path}: the run directory exists and is not empty (force=True overwrites it)",
+                                 cli=f"{path}: the run directory exists and is not empty (use --force to overwrite)")
             config_yaml = cfg.resolved_yaml()
             for stale in ("summary.json", "summary.json.tmp"):  # unlink never follows a link
                 (path / stale).unlink(missing_ok=True)

@@ -398,7 +398,8 @@ def _interrupted(cfg: Config, game: CompiledGame, run: RunDirectory | None, hist
     z = state.z if state is not None else game.z_start()
     k = state.k if state is not None else 0
     residual = state.residual_norm if state is not None else float("nan")
-    message = f"interrupted ({interrupt.reason}) after {k} iterations; the summary holds the last iterate"
+    message = (f"interrupted ({interrupt.reason}) after {k} iteration{'s' * (k != 1)}; the summary holds the last "
+               "iterate")
     result = SolveResult(
         status=INTERRUPTED, message=message, iterations=k, z=z, residual_norm=residual,
         residual_history=[s.residual_norm for s in history],

@@ -1,9 +1,11 @@
 """Paper-style figures from run logs alone (`gnerun figures`).
 
 - Study 1 (solve runs): ||z^k - z*|| against k on a log scale, one panel per run, side by side (the clean
-  and the disturbed solve of Fig. 1), on one y range.
-- Study 2 (closed loops): x(t) of the loop with the largest K, and ||e(t)|| per K on a log scale (Fig. 2).
-- Study 3 (distributed closed loops): ||e_i(t)|| per agent, one panel per K, on one y range (Fig. 3).
+  and the disturbed solve of Fig. 1), on one y range; ||Phi(z^k)|| for a solve without z*.
+- Study 2 (closed loops): x(t) of the loop with the largest K, and ||e(t)|| per K on a log scale (Fig. 2); a loop
+  without z* (run.reference none) has no e(t), and shows ||Phi|| of each sampling time's last iterate instead.
+- Study 3 (distributed closed loops): ||e_i(t)|| per agent, one panel per K, on one y range (Fig. 3); ||Phi||
+  without z*.
 - Games with positions (closed loops): the paths in the plane and the pairwise distances against the required
   ones (:mod:`gnerun.view.paths`).
 
@@ -36,9 +38,12 @@ ROW_DECADES = 0.5  # the band's rows are this far apart (in decades)
 COLUMN_WIDTH = 3.5  # inches: the paper's column (IEEEtran \columnwidth)
 TEXT_WIDTH = 7.16  # inches: both columns (\textwidth)
 PANEL_HEIGHT = 1.6  # inches, without the legend
+LEGEND_ROOM = 0.3  # inches under a panel's x label for its legend (two rows); a taller one makes the figure taller
 DPI = 300
 MARKERS = "osD^vPX*ph"
-FAILED_LABEL, FALLBACK_LABEL = "failed step", "fallback: iterate not applied"
+# points: the last series' markers, how much larger each earlier series' are, how much larger the first's at most
+MARKER_SIZE, MARKER_STEP, MARKER_SPREAD = 3.0, 0.8, 2.0
+FAILED_LABEL, FALLBACK_LABEL = "failed step", "fallback step"  # (a fallback step: the budgeted iterate not applied)
 MARK_LABELS = (FAILED_LABEL, FALLBACK_LABEL)
 
 
@@ -86,6 +91,20 @@ def failed_steps(states: list[dict]) -> list[int]:
 def fallback_steps(states: list[dict]) -> list[int]:
     """Sampling times whose budgeted iterate was not applied (the closed-loop safeguard)."""
     return [m["t"] for m in states if m.get("fallback")]
+
+
+def has_errors(loops: dict[int, dict[str, list[dict]]]) -> bool:
+    """Whether the closed loops logged any tracking error (none without z*: run.reference none)."""
+    return any(not math.isnan(number(m.get("e_norm"))) for topics in loops.values() for m in topics.get("error", []))
+
+
+def final_residuals(iterates: list[dict]) -> tuple[list[int], list[float | None]]:
+    """Per sampling time, ||Phi|| of its last iterate (after its K steps, or fewer where it converged)."""
+    last: dict[int, dict] = {}
+    for m in iterates:
+        if m["t"] not in last or m.get("k", 0) >= last[m["t"]].get("k", 0):
+            last[m["t"]] = m
+    return sorted(last), [last[t].get("residual_norm") for t in sorted(last)]
 
 
 def agent_names(run: RunRecord, errors: list[dict]) -> list[str]:
@@ -189,7 +208,11 @@ class FloorAxis:
         ax.set_yscale("log")
         for i, s in enumerate(self.series):
             y = self.plotted(i)
-            ax.plot(s.x, y, marker=MARKERS[i % len(MARKERS)], mfc="none", **s.style)
+            # each series' markers a little smaller than the one's before, drawn over it: series that are equal
+            # (the same iterates for several K) show as markers inside markers, none hidden
+            size = MARKER_SIZE + min(MARKER_STEP, MARKER_SPREAD / max(len(self.series) - 1, 1)) * (
+                len(self.series) - 1 - i)
+            ax.plot(s.x, y, marker=MARKERS[i % len(MARKERS)], mfc="none", ms=size, **s.style)
             top = limits[1] / 1.6 if limits else FLOOR
             for marks, marker, label in ((s.failed, "x", FAILED_LABEL), (s.fallback, "v", FALLBACK_LABEL)):
                 if marks:
@@ -297,8 +320,15 @@ def _legend(ax, width: float, notes: list = ()) -> None:
                            bbox_transform=anchor, ncol=column, frameon=False, handlelength=1.6, handletextpad=0.4,
                            columnspacing=0.9, borderaxespad=0)
         if column == 1 or legend.get_window_extent(renderer).width <= 0.97 * width * ax.figure.dpi:
-            return
+            break
         legend.remove()
+    # a legend of many rows (a game of many states) gets room of its own instead of squeezing its panel
+    fig = ax.figure
+    excess = legend.get_window_extent(renderer).height / fig.dpi - LEGEND_ROOM
+    grown = getattr(fig, "_legend_growth", 0.0)
+    if excess > grown:
+        fig.set_figheight(fig.get_figheight() + excess - grown)
+        fig._legend_growth = excess
 
 
 def _integer_ticks(ax) -> None:
@@ -321,17 +351,24 @@ def _mark_steps(ax, failed: list[int], fallback: list[int]) -> None:
 # ---------------------------------------------------------------------------------------------
 
 
+def solve_has_errors(run: RunRecord) -> bool:
+    """Whether a solve logged ||z^k - z*|| (not without z*: run.reference none)."""
+    return any(not math.isnan(number(m.get("error_norm"))) for m in run.messages.get("/solve/iterate", []))
+
+
 def study1_figure(runs: list[RunRecord]):
-    """||z^k - z*|| vs k, one panel per solve run, on one y range."""
+    """||z^k - z*|| vs k, one panel per solve run, on one y range (a solve without z*, run.reference none:
+    ||Phi(z^k)||)."""
     fig, axes, width = _panels(len(runs))
     floors = []
-    for ax, run, label in zip(axes, runs, "abcdefghijklmnop", strict=False):
+    with_errors = [solve_has_errors(run) for run in runs]
+    for ax, run, label, errors in zip(axes, runs, "abcdefghijklmnop", with_errors, strict=False):
         its = run.messages.get("/solve/iterate", [])
         status = final_status(run)
         text = disturbance(run) + (f"; {status}" if status and status != "converged" else "")
         floor = FloorAxis(ax, "run")
-        floor.add([m["k"] for m in its], [m.get("error_norm") for m in its], label=text or run_name(run),
-                   color="C0")
+        floor.add([m["k"] for m in its], [m.get("error_norm" if errors else "residual_norm") for m in its],
+                  label=(text or run_name(run)) + ("" if errors else ": ||Phi(z^k)||, no z*"), color="C0")
         floors.append(floor)
         ax.set_xlabel("iteration k")
         _integer_ticks(ax)
@@ -340,14 +377,16 @@ def study1_figure(runs: list[RunRecord]):
     for ax in axes[1:]:
         ax.sharey(axes[0])
         ax.tick_params(labelleft=False)
-    axes[0].set_ylabel(r"$\|z^k - z^*\|$")
+    axes[0].set_ylabel(r"$\|z^k - z^*\|$" if all(with_errors) else r"$\|\Phi(z^k)\|$" if not any(with_errors)
+                       else r"$\|z^k - z^*\|$, $\|\Phi(z^k)\|$")
     for ax, floor in zip(axes, floors, strict=True):
         _legend(ax, width, floor.notes())
     return fig
 
 
 def study2_figure(run: RunRecord):
-    """x(t) of the loop with the largest K, and ||e(t)|| per K."""
+    """x(t) of the loop with the largest K, and ||e(t)|| per K (a loop without z*, run.reference none, has no
+    e(t): its residual ||Phi(z^K(t))|| per K instead)."""
     loops = closed_loops(run)
     fig, (ax_x, ax_e), width = _panels(2)
     K_max = max(loops)
@@ -357,22 +396,27 @@ def study2_figure(run: RunRecord):
     t = [m["t"] for m in states]
     for j in range(nx):
         ax_x.plot(t, [number((m.get("x") or [math.nan] * nx)[j]) for m in states],
-                  label=names[j] if j < len(names) else f"x{j + 1}")
+                  label=names[j] if j < len(names) else f"x{j + 1}", ls=("-", "--", ":")[j // 10 % 3])
     _mark_steps(ax_x, failed_steps(states), fallback_steps(states))
     ax_x.set_xlabel("t")
     ax_x.set_ylabel("x(t)")
     ax_x.set_title(f"(a) x(t), K = {K_max}")
     _integer_ticks(ax_x)
     floor = FloorAxis(ax_e, "K")
+    errors_logged = has_errors(loops)
     for i, (K, topics) in enumerate(loops.items()):
-        errors = topics.get("error", [])
         states_K = topics.get("state", [])
-        floor.add([m["t"] for m in errors], [m.get("e_norm") for m in errors], failed=failed_steps(states_K),
-                  fallback=fallback_steps(states_K), label=f"K = {K}", color=f"C{i % 10}")
+        if errors_logged:
+            errors = topics.get("error", [])
+            t_K, values = [m["t"] for m in errors], [m.get("e_norm") for m in errors]
+        else:
+            t_K, values = final_residuals(topics.get("iterate", []))
+        floor.add(t_K, values, failed=failed_steps(states_K), fallback=fallback_steps(states_K), label=f"K = {K}",
+                  color=f"C{i % 10}")
     floor.draw()
     ax_e.set_xlabel("t")
-    ax_e.set_ylabel(r"$\|e(t)\|$")
-    ax_e.set_title("(b) tracking error")
+    ax_e.set_ylabel(r"$\|e(t)\|$" if errors_logged else r"$\|\Phi(z^K(t))\|$")
+    ax_e.set_title("(b) tracking error" if errors_logged else "(b) residual (no z*)")
     _integer_ticks(ax_e)
     _legend(ax_x, width)
     _legend(ax_e, width, floor.notes())
@@ -380,10 +424,12 @@ def study2_figure(run: RunRecord):
 
 
 def study3_figure(run: RunRecord):
-    """||e_i(t)|| per agent, one panel per K, on one y range."""
+    """||e_i(t)|| per agent, one panel per K, on one y range (a loop without z*, run.reference none, has no
+    e_i(t): its residual ||Phi(z^K(t))|| instead)."""
     loops = closed_loops(run)
     fig, axes, width = _panels(len(loops))
     floors = []
+    errors_logged = has_errors(loops)
     for ax, (K, topics), label in zip(axes, loops.items(), "abcdefghijklmnop", strict=False):
         errors = topics.get("error", [])
         states = topics.get("state", [])
@@ -391,6 +437,8 @@ def study3_figure(run: RunRecord):
         for i, agent in enumerate(agent_names(run, errors)):
             floor.add([m["t"] for m in errors], [(m.get("e_norm_agent") or {}).get(agent) for m in errors],
                       label=agent, color=f"C{i % 10}")
+        if not errors_logged:
+            floor.add(*final_residuals(topics.get("iterate", [])), label="residual (no z*)", color="C0")
         _mark_steps(ax, failed_steps(states), fallback_steps(states))
         floors.append(floor)
         ax.set_xlabel("t")
@@ -400,7 +448,7 @@ def study3_figure(run: RunRecord):
     for ax in axes[1:]:
         ax.sharey(axes[0])
         ax.tick_params(labelleft=False)
-    axes[0].set_ylabel(r"$\|e_i(t)\|$")
+    axes[0].set_ylabel(r"$\|e_i(t)\|$" if errors_logged else r"$\|\Phi(z^K(t))\|$")
     for ax, floor in zip(axes, floors, strict=True):
         _legend(ax, width, floor.notes())
     return fig

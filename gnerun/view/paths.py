@@ -74,11 +74,13 @@ def paths_figure(run: RunRecord, loops: dict[int, dict[str, list[dict]]]):
     fig, (ax_p, ax_d), width = _panels(2)
     colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     styles = ["-", "--", ":", "-."]
+    any_marked = False
     for n, (K, topics) in enumerate(loops.items()):
         states = [m for m in topics.get("state", []) if m.get("x") is not None]
         ls = styles[n % len(styles)]
         steps = set(failed_steps(states)) | set(fallback_steps(states))
         marked = [m for m in states if m["t"] in steps]
+        any_marked = any_marked or bool(marked)
         for c, (label, ix, iy) in enumerate(cars):
             xs = [_num(m["x"][ix]) for m in states]
             ys = [_num(m["x"][iy]) for m in states]
@@ -94,13 +96,16 @@ def paths_figure(run: RunRecord, loops: dict[int, dict[str, list[dict]]]):
                  for m in states]
             ax_d.plot(t, d, ls, color=colors[p % len(colors)], lw=1.0,
                       label=f"{a[0]}-{b[0]}, K = {K}" if len(loops) > 1 else f"{a[0]}-{b[0]}")
+            ax_d.plot([ti for ti, m in zip(t, states, strict=True) if m["t"] in steps],
+                      [di for di, m in zip(d, states, strict=True) if m["t"] in steps], "x", color="k", ms=3, mew=0.6)
     for p, (a, b) in enumerate((a, b) for i, a in enumerate(cars) for b in cars[i + 1:]):
         r = required.get((names[a[1]], names[b[1]]))
         if r is not None:
             ax_d.axhline(r, color=colors[p % len(colors)], lw=0.8, ls=(0, (1, 1)))
     if required:
         ax_d.plot([], [], color="0.4", lw=0.8, ls=(0, (1, 1)), label="required")
-    ax_p.plot([], [], "x", color="k", ms=3, mew=0.6, label="fallback / failed step")
+    if any_marked:  # (in the paths' legend: the distances' marks are the same)
+        ax_p.plot([], [], "x", color="k", ms=3, mew=0.6, label="fallback / failed step")
     ax_p.set_xlabel("x")
     ax_p.set_ylabel("y")
     xlo, xhi = ax_p.get_xlim()

@@ -9,9 +9,9 @@ error and residual also has a ``log10_`` series; as in `gnerun figures`, values 
 :data:`figures.FLOOR` are drawn in a band under a floor line, one row per series. Failed and fallback
 sampling times are marked (``<run>/K<k>/failed_steps``, ``fallback_steps``). The blueprint has one tab per
 figure of the paper that the runs contain: Fig. 1 (||z^k - z*|| against k, one view per solve, side by
-side), Fig. 2 (x(t); ||e(t)|| per K), Fig. 3 (||e_i(t)|| per agent, one view per K), and tabs for the log
-and the configs. Rerun's views have no axis titles: each view's name says what its axes show, and views
-that the paper compares share their y range.
+side), Fig. 2 (x(t); ||e(t)|| per K, or ||Phi|| without z*), Fig. 3 (||e_i(t)|| per agent, one view per K, or ||Phi||),
+and tabs for the log and the configs. Rerun's views have no axis titles: each view's name says what its axes
+show, and views that the paper compares share their y range.
 
 rerun-sdk is imported here only, so that ``gnerun --help`` stays fast.
 """
@@ -35,9 +35,12 @@ from .figures import (
     disturbance,
     failed_steps,
     fallback_steps,
+    final_residuals,
     final_status,
+    has_errors,
     number,
     run_name,
+    solve_has_errors,
     solver_kind,
 )
 
@@ -183,23 +186,25 @@ def log_run(rec, run: RunRecord, prefix: str, contents: Contents, several: bool 
     rec.reset_time()
 
     iterates = run.messages.get("/solve/iterate", [])
+    solve_errors = solve_has_errors(run)  # (none without z*: Fig. 1 then shows ||Phi(z^k)||)
     for m in iterates:
         for key in ("error_norm", "residual_norm", "step_norm"):
             scalar(f"{prefix}/solve/{key}", "iteration", m["k"], m.get(key))
-            if key == "residual_norm":
+            if key == "residual_norm" and solve_errors:  # (else Fig. 1's series, drawn with the floor)
                 scalar(f"{prefix}/solve/log10_{key}", "iteration", m["k"], _log10(m.get(key)))
     if iterates:
         status = final_status(run)
         view = f"fig1:{prefix}"
+        key, what = ("error_norm", "||z^k - z*||") if solve_errors else ("residual_norm", "||Phi(z^k)||")
         contents.titles[view] = (f"Fig. 1: {name} ({disturbance(run) or 'solve'}"
                                  + (f"; {status}" if status and status != "converged" else "")
-                                 + "): log10 ||z^k - z*|| (y) against iteration k (x)")
-        tr = trace(view, "fig1", f"{prefix}/solve/log10_error_norm", name if several else "||z^k - z*||",
-                   "iteration")
-        tr.points = [(m["k"], number(m.get("error_norm"))) for m in iterates]
+                                 + f"): log10 {what}{'' if solve_errors else ' (no z*)'} (y) against iteration k (x)")
+        tr = trace(view, "fig1", f"{prefix}/solve/log10_{key}", name if several else what, "iteration")
+        tr.points = [(m["k"], number(m.get(key))) for m in iterates]
     rec.reset_time()
 
     loops = closed_loops(run)
+    with_errors = has_errors(loops)  # (none without z*: Fig. 2b then shows the residual)
     for K, topics in loops.items():
         base = f"{prefix}/K{K}"
         x_view = "fig2_x" if K == max(loops) and kind != "distributed" else None
@@ -225,20 +230,33 @@ def log_run(rec, run: RunRecord, prefix: str, contents: Contents, several: bool 
             for agent, v in (m.get("e_norm_agent") or {}).items():
                 scalar(f"{base}/e_agent/{agent}", "t", m["t"], v)
         if kind != "distributed":
-            contents.titles["fig2_e"] = "Fig. 2b: log10 ||e(t)|| (y) against sampling time t (x), per K"
-            tr = trace("fig2_e", "fig2_e", f"{base}/log10_e_norm", f"{name}: K = {K}" if several else f"K = {K}",
-                       "t")
-            tr.points = [(m["t"], number(m.get("e_norm"))) for m in errors]
+            what = "||e(t)||" if with_errors else "||Phi(z^K(t))|| (no z*)"
+            title = f"Fig. 2b: log10 {what} (y) against sampling time t (x), per K"
+            if contents.titles.get("fig2_e", title) != title:  # runs with and without z*
+                title = "Fig. 2b: log10 ||e(t)||, or ||Phi(z^K(t))|| without z* (y), against sampling time t (x), per K"
+            contents.titles["fig2_e"] = title
+            label = f"{name}: K = {K}" if several else f"K = {K}"
+            if with_errors:
+                tr = trace("fig2_e", "fig2_e", f"{base}/log10_e_norm", label, "t")
+                tr.points = [(m["t"], number(m.get("e_norm"))) for m in errors]
+            else:
+                tr = trace("fig2_e", "fig2_e", f"{base}/log10_residual_norm", label + " (||Phi||)", "t")
+                tr.points = [(t, number(v)) for t, v in zip(*final_residuals(topics.get("iterate", [])), strict=True)]
             tr.failed, tr.fallback, tr.marks = failed, fallback, base
         else:
             view = f"fig3:{name}: K = {K}"
-            contents.titles[view] = f"Fig. 3: log10 ||e_i(t)|| (y) against sampling time t (x), {name}: K = {K}"
+            what = "||e_i(t)||" if with_errors else "||Phi(z^K(t))|| (no z*)"
+            contents.titles[view] = f"Fig. 3: log10 {what} (y) against sampling time t (x), {name}: K = {K}"
             agents = dict.fromkeys(a for m in errors for a in (m.get("e_norm_agent") or {}))
             for i, agent in enumerate(agents):
                 tr = trace(view, "fig3", f"{base}/log10_e_agent/{agent}", agent, "t")
                 tr.points = [(m["t"], number((m.get("e_norm_agent") or {}).get(agent))) for m in errors]
                 if i == 0:  # the K's failures, along the top of its view
                     tr.failed, tr.fallback, tr.marks, tr.on_trace = failed, fallback, base, False
+            if not with_errors:
+                tr = trace(view, "fig3", f"{base}/log10_residual_norm", "||Phi||", "t")
+                tr.points = [(t, number(v)) for t, v in zip(*final_residuals(topics.get("iterate", [])), strict=True)]
+                tr.failed, tr.fallback, tr.marks = failed, fallback, base
     rec.reset_time()
 
 
@@ -537,7 +555,7 @@ def web_url(web_port: int, grpc_port: int) -> str:
 VULKAN_HINT = ("headless screenshots need a Vulkan driver and none was found; on Debian or Ubuntu install "
                "one with `apt-get install mesa-vulkan-drivers` (a software rasteriser is enough)")
 
-TOAST_SECONDS = 8.0  # how long the viewer's start-up notification stays, from its first answer (5-7 s)
+TOAST_SECONDS = 8.0  # how long the viewer's start-up notification may stay, from its first frame (about 4 s)
 _ICD_DIRS = ("/usr/share/vulkan/icd.d", "/etc/vulkan/icd.d", "/usr/local/share/vulkan/icd.d")
 
 
@@ -590,7 +608,8 @@ class _HeadlessViewer:
             try:
                 self.client = ViewerClient.connect(self.url)
                 self.client.get_state()
-                self.started = time.monotonic()  # its start-up notification appears about now
+                self.client.take_screenshot()  # its first frame, which shows the start-up notification
+                self.started = time.monotonic()
                 return
             except Exception:  # noqa: BLE001 - not listening yet
                 if time.monotonic() > deadline:
@@ -604,6 +623,16 @@ class _HeadlessViewer:
             return VULKAN_HINT.replace("none was found", "none works")
         lines = [ln for ln in text.splitlines() if ln.strip()]
         return "the headless viewer stopped: " + (lines[-1] if lines else "no output")
+
+    def outlive_notifications(self) -> None:
+        """Until the start-up notification, which covers the views' top right corner, is gone: the viewer draws
+        frames only when asked, and a notification counts down and fades out only while frames are drawn, so
+        frames are asked for until it has had its time (on a busy machine a notification outlived a wait)."""
+        import time
+
+        while time.monotonic() < self.started + TOAST_SECONDS:
+            self.client.take_screenshot()
+            time.sleep(0.25)
 
     def close(self) -> None:
         _stop(self.proc)
@@ -658,8 +687,6 @@ def check_size(size: str) -> None:
 def screenshots(paths: list[str | Path], out_dir: str | Path, size: str = "1600x900",
                 timeout: float = 60.0) -> list[Path]:
     """One PNG per paper figure the runs contain, taken by a headless viewer (needs a Vulkan driver)."""
-    import time
-
     import rerun.blueprint as rrb
 
     check_size(size)
@@ -678,8 +705,7 @@ def screenshots(paths: list[str | Path], out_dir: str | Path, size: str = "1600x
                                              collapse_panels=True), make_active=True)
             rec.flush()
             _wait_for(viewer.client, _view_names(fig.container), fig.timeline, contents.ends, timeout)
-            # the viewer's start-up notifications cover the views for their first seconds
-            time.sleep(max(0.0, viewer.started + TOAST_SECONDS - time.monotonic()))
+            viewer.outlive_notifications()
             png = _settled_screenshot(viewer.client)
             target = out_dir / f"{fig.slug}.png"
             write_bytes(target, png)
