@@ -347,7 +347,7 @@ def sweep(
 ) -> None:
     """Run a grid of runs (every point a run directory) and write the index table; resumable."""
     with _reported():
-        from .runs.sweep import check_executor, default_sweep_dir, load_sweep, run_sweep
+        from .runs.sweep import check_executor, default_sweep_dir, load_sweep, run_sweep, stop_resource_tracker
 
         check_executor(executor, workers, address, force_workers)  # before the points are loaded
         sw = load_sweep(spec)
@@ -374,6 +374,8 @@ def sweep(
             typer.echo(f"interrupted: {out_dir} holds the index of the finished points; run again to resume",
                        err=True)
             raise typer.Exit(130) from None
+        finally:
+            stop_resource_tracker()  # the pool is gone: no process of the sweep outlives it
     if not quiet:
         typer.echo(f"{result.ran} run, {result.skipped} already finished (skipped), {result.failed} failed; "
                    f"{result.wall_s:.1f} s with {executor}")

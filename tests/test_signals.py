@@ -132,6 +132,46 @@ def test_a_signal_to_the_sweep_alone_stops_its_workers_too(sig: signal.Signals, 
     assert not list(out.rglob("*.tmp")) and not list(out.rglob(".gnerun.lock"))
 
 
+def _workers(pgid: int) -> list[int]:
+    """The pids of a sweep's workers (its children that run points)."""
+    out = subprocess.run(["ps", "-ww", "-o", "pid=,args=", "--ppid", str(pgid)], capture_output=True, text=True).stdout
+    return [int(line.split()[0]) for line in out.splitlines() if "spawn_main" in line]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("sig", "twice"), [(signal.SIGTERM, False), (signal.SIGHUP, False), (signal.SIGTERM, True)],
+                         ids=["SIGTERM", "SIGHUP", "SIGTERM-twice"])
+def test_a_signal_to_the_sweeps_process_group_stops_it_in_one_line(sig: signal.Signals, twice: bool,
+                                                                    tmp_path) -> None:
+    """As a closed terminal (SIGHUP) or `kill -- -PGID` (SIGTERM) sends it: to the sweep, its workers and the
+    resource tracker at once. A worker gets the sweep's own stop on top (twice: at once): it ends its point once,
+    with a finished log and a summary of status interrupted; no helper process dies loudly on the way."""
+    proc, out = _sweep_started(tmp_path)
+    try:
+        workers = _workers(proc.pid)
+        assert len(workers) == 2
+        os.killpg(proc.pid, sig)
+        if twice:
+            for pid in workers:
+                os.kill(pid, sig)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        left = _group(proc.pid)
+        if left:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 130, err
+    assert err.strip().splitlines() == [f"interrupted: {out} holds the index of the finished points; run again to "
+                                        "resume"]
+    assert not left, left
+    statuses = []
+    for point in sorted((out / "points").iterdir()):
+        record = read_run(point)
+        assert record.complete and not record.damage, (point.name, record.damage)
+        statuses.append(json.loads((point / "summary.json").read_text())["status"])
+    assert sorted(statuses) == ["completed", "interrupted", "interrupted"]
+    assert not list(out.rglob("*.tmp")) and not list(out.rglob(".gnerun.lock"))
+
+
 @pytest.mark.slow
 def test_a_killed_sweep_leaves_no_worker_running(tmp_path) -> None:
     """SIGKILL gives the sweep no chance to stop its workers: they stop themselves (their parent died)."""
@@ -173,8 +213,13 @@ def test_a_sweep_worker_leaves_every_signal_to_the_sweep() -> None:
     handlers = {sig: signal.getsignal(sig) for sig in interrupt.SIGNALS}
     interrupt.leave_signals_to_the_parent()
     try:
-        with interrupt.Interrupt().installed():
+        assert not interrupt.request_stop("SIGTERM")  # no run listens
+        with interrupt.Interrupt().installed() as request:
             assert {sig: signal.getsignal(sig) for sig in interrupt.SIGNALS} == handlers
+            assert not request.requested
+            assert interrupt.request_stop("SIGTERM")  # the worker's stop, passed on as a request
+            assert request.requested and request.reason == "SIGTERM"
+        assert not interrupt.request_stop("SIGTERM")
     finally:
         interrupt._worker = False
     with interrupt.Interrupt().installed() as request:  # an ordinary process: each of them is a request

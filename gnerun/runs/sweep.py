@@ -258,7 +258,7 @@ def run_point(task: dict[str, Any]) -> list[dict[str, Any]]:
             message = str(e) if isinstance(e, InputError) else f"{out}: cannot write the point: {e.strerror or e}"
             return [_row(task, K=None, status="error", message=message, wall=time.perf_counter() - t0)]
         return _run_point(task, out, t0)
-    except _Stopped:
+    except (_Stopped, KeyboardInterrupt):  # stopped: the point ended (interrupted) or was cut short
         _abandon(143)
     finally:
         _point_in_progress = False
@@ -358,25 +358,33 @@ STOP_GRACE_S = 5.0  # a stopped worker closes its point within this time, or exi
 
 
 class _Stopped(BaseException):
-    """SIGTERM in a worker: unwinds the point in progress (its log closed, its lock released), then the worker
+    """SIGTERM in a worker before its run listens for a stop: unwinds the point (its lock released), then the worker
     exits (the executor would otherwise take it as the point's result and go on to the next)."""
 
 
 def _worker_start(parent: int) -> None:
-    """A worker leaves Ctrl-C and a terminal's hang-up to the sweep, which stops it with SIGTERM: the point in
-    progress then closes its log and its directory's lock on the way out (no summary: it runs again on resume).
-    On Linux a worker also dies with the sweep when the sweep is killed (SIGKILL): no worker outlives it."""
+    """A worker leaves Ctrl-C and a terminal's hang-up to the sweep, which stops it with SIGTERM: the run in progress
+    then ends as a stopped run does (at the end of its iterate or sampling time: a finished log, a summary of status
+    interrupted, so that the point runs again on resume), its directory's lock is released, and the worker exits.
+    A run that does not end within ``STOP_GRACE_S`` is left as a killed run's log is. On Linux a worker also dies
+    with the sweep when the sweep is killed (SIGKILL): no worker outlives it."""
     import signal
     import threading
 
-    from .interrupt import leave_signals_to_the_parent
+    from .interrupt import leave_signals_to_the_parent, request_stop
+
+    stopping = []
 
     def stop(signum, frame) -> None:
         if not _point_in_progress:  # idle: nothing to close (and the executor's exit would wait on a dead sweep)
             os._exit(128 + signum)
-        # the exception may land where Python ignores it (a finalizer): the worker then ends after a grace time
+        if stopping:  # a stop on top (the sweep's, after the process group's): the point is ending already
+            return
+        stopping.append(signum)
         threading.Timer(STOP_GRACE_S, _abandon, (128 + signum,)).start()
-        raise _Stopped
+        # a request, not an exception: one raised here could land inside a write of the log and leave half a record
+        if not request_stop(signal.Signals(signum).name):
+            raise _Stopped  # no run is listening yet (its config is being loaded or its game compiled)
 
     leave_signals_to_the_parent()
     signal.signal(signal.SIGINT, signal.SIG_IGN)
@@ -389,6 +397,19 @@ def _worker_start(parent: int) -> None:
             ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
     if os.getppid() != parent:  # the sweep died before the line above
         os._exit(1)
+
+
+def stop_resource_tracker() -> None:
+    """Stop multiprocessing's resource tracker, if the sweep started one, and wait until it has exited: the command
+    line calls this once its pool is gone, so that the sweep ends after every process it started (the tracker
+    otherwise exits only once the sweep has, outside it). Not for a library caller, whose own resources may still
+    be registered with the tracker."""
+    from multiprocessing import resource_tracker
+
+    stop = getattr(getattr(resource_tracker, "_resource_tracker", None), "_stop", None)
+    if stop is not None:
+        with contextlib.suppress(Exception):
+            stop()
 
 
 def available_cpus() -> int:
@@ -405,10 +426,12 @@ def _local(tasks: list[dict[str, Any]], workers: int) -> Completed:
 
     # spawn: workers start clean (no forked BLAS or CasADi state), as on any platform; they stay in the sweep's
     # process group, so that a signal to the group (a terminal's Ctrl-C, a scheduler's stop) reaches them too
-    pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
-                               initializer=_worker_start, initargs=(os.getpid(),))
+    with _hangups_blocked():  # the pool's helpers start with a hang-up blocked (see _hangups_blocked)
+        pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
+                                   initializer=_worker_start, initargs=(os.getpid(),))
     try:
-        futures = {pool.submit(run_point, t): t for t in tasks}
+        with _hangups_blocked():
+            futures = {pool.submit(run_point, t): t for t in tasks}
         for f in as_completed(futures):
             task = futures[f]
             try:
@@ -430,6 +453,24 @@ def _local(tasks: list[dict[str, Any]], workers: int) -> Completed:
         raise
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
+
+
+@contextlib.contextmanager
+def _hangups_blocked() -> Iterator[None]:
+    """SIGHUP blocked while the pool starts its processes, which inherit the block: a closed terminal hangs up the
+    whole process group, and multiprocessing's resource tracker (which ignores SIGINT and SIGTERM only) would die of
+    it and be started again with warnings and tracebacks on stderr; a worker ignores hang-ups once it runs. The sweep
+    itself gets a hang-up sent meanwhile once the block ends."""
+    import signal
+
+    if not hasattr(signal, "pthread_sigmask") or not hasattr(signal, "SIGHUP"):
+        yield
+        return
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGHUP})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
 
 
 def _reaped(proc, grace: float = 2 * STOP_GRACE_S) -> None:
