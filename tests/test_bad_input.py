@@ -63,6 +63,35 @@ def test_a_bad_name_in_a_file_is_located(tmp_path) -> None:
     assert list(tmp_path.iterdir()) == [config]
 
 
+@pytest.mark.parametrize(("name", "fragment"), [("..", "starts with '.'"), (".", "starts with '.'"),
+                                               ("../../escaped", "is not one path component"),
+                                               ("/tmp/escaped", "is not one path component"),
+                                               ("n" * 300, "is 300 bytes long; a name is at most 100"),
+                                               ('"a\\0b"', "contains a NUL character")],
+                         ids=["dotdot", "dot", "relative", "absolute", "300 bytes", "NUL"])
+def test_a_sweep_name_stays_inside_runs(name: str, fragment: str, tmp_path) -> None:
+    """A sweep's name names its default directory runs/<name>/: refused where it is written unless it is one plain
+    path component, by validate and by the sweep (even with --force), which writes nothing anywhere."""
+    work = tmp_path / "work"
+    work.mkdir()
+    spec = tmp_path / "sweep.yaml"
+    spec.write_text(f"name: {name}\nbase: {STUDY2}\nset: {{run.K: [1]}}\ngrid:\n  run.steps: [2, 3]\n")
+    for command in (["validate", str(spec)], ["sweep", str(spec), "--force", "-q"]):
+        line = _one_line_exit_2(run_cli(*command, cwd=work))
+        assert line.startswith(f"error: {spec}:1:7: name: ") and fragment in line, line
+    assert list(work.iterdir()) == [] and sorted(p.name for p in tmp_path.iterdir()) == ["sweep.yaml", "work"]
+    assert not Path("/tmp/escaped").exists()
+
+
+def test_a_sweep_named_by_its_file_gets_a_plain_directory(tmp_path) -> None:
+    from gnerun.runs.sweep import default_sweep_dir, load_sweep
+
+    spec = tmp_path / (".." + "x" * 200 + ".yaml")
+    spec.write_text(f"base: {STUDY2}\ngrid:\n  run.steps: [2, 3]\n")
+    directory = default_sweep_dir(load_sweep(spec))
+    assert directory.parent == Path("runs") and directory.name == "x" * 100
+
+
 def test_huge_values_are_shortened_in_the_message(tmp_path) -> None:
     """A 20,000-digit literal and a 60,000-element list, given with --set or written in the file."""
     digits, items = "1" * 20_000, "[" + ",".join(["1"] * 60_000) + "]"

@@ -31,11 +31,19 @@ from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from ..errors import ConfigError, InputError, Unavailable, shorten
 from ..files import read_json_object, replace_text, replacing, write_text
-from ..language.config import CONFIG_VERSION, Config, document_path, load_config, override_label
+from ..language.config import (
+    CONFIG_VERSION,
+    MAX_NAME_BYTES,
+    Config,
+    document_path,
+    load_config,
+    override_label,
+    safe_name,
+)
 from ..language.yaml_source import SourceMap, dotted, read_yaml
 from .lock import DirectoryLock, contents, locked, release_all
 
@@ -91,9 +99,13 @@ class Range(_Strict):
 Axis = Annotated[list[Any], Field(min_length=1, max_length=MAX_POINTS)] | Logspace | Linspace | Range
 
 
+def _sweep_name(name: str) -> str:
+    return safe_name(name, "the sweep directory runs/<name>/")
+
+
 class SweepSpec(_Strict):
     version: Literal[1] = CONFIG_VERSION
-    name: str = "sweep"
+    name: Annotated[str, AfterValidator(_sweep_name)] = "sweep"
     base: str = Field(description="the base config, relative to the sweep file")
     command: Literal["simulate", "solve"] = "simulate"
     set: dict[str, Any] = Field(default_factory=dict, description="overrides applied to every point")
@@ -166,8 +178,8 @@ def load_sweep(path: str | Path) -> Sweep:
         kind = "a config" if isinstance(data, dict) and "game" in data else "not a sweep"
         raise ConfigError([f"{file}:1:1: {kind}: a sweep spec has `base:` (a config) and `grid:` (field -> values); "
                            "run configs with `gnerun simulate` or `gnerun solve`"])
-    if "name" not in data:
-        data["name"] = Path(file).stem
+    if "name" not in data:  # the file's name, as a name
+        data["name"] = _directory_name(Path(file).stem)
     try:
         spec = SweepSpec.model_validate(data)
     except ValidationError as e:
@@ -731,5 +743,10 @@ def loglog_slope(x: list[float], y: list[float]) -> float | None:
 
 def default_sweep_dir(sweep: Sweep) -> Path:
     """runs/<sweep name>/: one stable place, so that running the sweep again resumes it."""
-    name = re.sub(r"[^A-Za-z0-9._-]+", "-", sweep.spec.name).strip("-") or "sweep"
-    return Path("runs") / name
+    return Path("runs") / _directory_name(sweep.spec.name)
+
+
+def _directory_name(name: str) -> str:
+    """``name`` as one plain path component of letters, digits and ``._-`` (never ``.`` or ``..``)."""
+    plain = re.sub(r"[^A-Za-z0-9._-]+", "-", name).strip("-").lstrip(".")[:MAX_NAME_BYTES].strip("-")
+    return plain or "sweep"
