@@ -81,6 +81,51 @@ def test_a_signal_ends_solve_with_a_summary_and_a_finished_log(sig: signal.Signa
     assert summary["certificate"]["kkt_residual"] is not None
 
 
+CHAIN = """
+name: chain
+game:
+  kind: static
+  parameters: {N: 400}
+  agents:
+    - for: {i: 1..N-1}
+      name: "p{i}"
+      variables: {"x{i}": {lower: 0, upper: 10, start: 1}}
+      cost: "x{i}**2 - x{i}*x{i+1}"
+    - name: "last"
+      variables: {"x{N}": {lower: 0, upper: 10, start: 1}}
+      cost: "x{N}**2"
+"""
+
+
+def test_a_signal_during_the_certificate_ends_solve_too(tmp_path) -> None:
+    """400 agents: the solve converges in one iteration and the certificate (a best response per agent) takes
+    seconds; a signal then stops the certificate between two best responses instead of being ignored."""
+    config = tmp_path / "chain.yaml"
+    config.write_text(CHAIN)
+    out = tmp_path / "run"
+    proc = subprocess.Popen([*gnerun_command(), "solve", str(config), "--out", str(out), "-q"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, stdin=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 120
+        while not (out / "run.mcap").is_file() or len(read_run(out).messages.get("/solve/iterate", [])) < 2:
+            assert time.monotonic() < deadline and proc.poll() is None, proc.communicate()
+            time.sleep(0.1)
+        time.sleep(0.5)  # into the certificate
+        proc.send_signal(signal.SIGTERM)
+        _, stderr = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 130, stderr
+    assert stderr.strip().splitlines() == [f"interrupted: {out} holds a finished log and a summary with status "
+                                           "interrupted"]
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "interrupted" and summary["message"].startswith("interrupted (SIGTERM) after 1 ")
+    assert summary["certificate"]["kkt_residual"] is not None and "best_response_gap" not in summary["certificate"]
+    assert read_run(out).complete
+
+
 SWEEP = f"""
 base: {CONFIGS / "paper_study2.yaml"}
 set:
