@@ -544,6 +544,7 @@ def recover(
         import contextlib
 
         from .errors import InputError
+        from .files import replaceable_file
         from .log.mcap_log import recover as recover_log
         from .log.mcap_log import run_log_path
         from .runs.lock import locked
@@ -552,12 +553,12 @@ def recover(
         target = out if out is not None else source.with_name("run.recovered.mcap")
         if target.resolve() == source.resolve():
             raise InputError(f"{target}: the copy must not overwrite the log it repairs")
-        if target.is_symlink() or target.exists() and not force:
-            raise InputError(f"{target}: exists (use --force to overwrite it)" if not target.is_symlink() else
-                             f"{target}: is a symbolic link; gnerun does not write through one (remove it)")
         # beside the log, the copy is written into the run directory: not while a run writes there
         beside = target.parent.resolve() == source.parent.resolve()
         with locked(source.parent) if beside else contextlib.nullcontext():
+            replaceable_file(target, "repaired copy")  # a link, a directory or a special file: refused, --force or not
+            if target.exists() and not force:
+                raise InputError(f"{target}: exists (use --force to overwrite it)")
             record = recover_log(source, target)
     if not quiet:
         typer.echo(f"{target}: {record.message_count} messages recovered ({one_line(record.note)})")

@@ -190,6 +190,33 @@ def output_directory(path: str | Path, what: str = "output directory", *, create
     return p
 
 
+def replaceable_file(path: str | Path, what: str = "output file") -> Path:
+    """``path`` as a file that :func:`replacing` will put in place whole: what stands there now may only be a regular
+    file (a directory, a device or a FIFO is never replaced by a file, a link never written through), and its
+    directory must exist or be creatable, and take the temporary file beside it (created and removed here)."""
+    p = Path(path)
+    try:
+        mode = os.lstat(p).st_mode
+    except FileNotFoundError:
+        mode = None
+    except OSError as e:
+        raise InputError(f"{p}: cannot write the {what}: {e.strerror or e}") from None
+    if mode is not None and stat.S_ISLNK(mode):
+        raise _refuse_link(p)
+    if mode is not None and not stat.S_ISREG(mode):
+        raise InputError(f"{p}: is {_kind(mode)}; the {what} is a regular file")
+    output_directory(p.parent, f"directory of the {what}")
+    tmp = p.with_name(p.name + ".tmp")
+    try:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp)  # a stale one of gnerun's; never follows a link
+        os.close(open_fd(tmp, exclusive=True))
+        os.unlink(tmp)
+    except OSError as e:
+        raise InputError(f"{p}: cannot write the {what}: {e.strerror or e}") from None
+    return p
+
+
 def output_file(path: str | Path, what: str = "output file") -> Path:
     """``path`` as a file to be written by another library (a recording, an image): it must not be a directory,
     a link or a special file, and its directory must exist or be creatable; it is created (empty) here, so that

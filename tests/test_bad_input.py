@@ -119,11 +119,16 @@ def test_output_targets_that_cannot_work(tmp_path) -> None:
         (["replay", str(run), "--save", "/proc/gnerun-x.rrd"], "cannot write the recording"),
         (["replay", str(run), "--save", str(tmp_path)], "is a directory; the recording (--save) is a file"),
         (["figures", str(run), "--out", "/proc/gnerun-figures"], "cannot create the figures folder"),
+        (["recover", str(run), "--out", str(tmp_path), "--force"], "is a directory; the repaired copy is a regular"),
+        (["recover", str(run), "--out", "/proc/gnerun-x.mcap", "--force"], "cannot write the repaired copy"),
+        (["recover", str(run), "--out", str(a_file / "x.mcap")], "cannot write the repaired copy"),
     ]
     for args, fragment in cases:
         line = _one_line_exit_2(run_cli(*args))
         assert fragment in line, (args, line)
     assert a_file.read_text() == "keep\n" and not Path("/proc/gnerun-x.rrd").exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a-file", "run"]
+    assert sorted(p.name for p in run.iterdir()) == ["config.yaml", "run.mcap", "summary.json"]
 
 
 def _taken_port() -> socket.socket:

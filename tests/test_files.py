@@ -4,6 +4,7 @@ files are refused before they are read (a FIFO never blocks), temporary files ne
 from __future__ import annotations
 
 import os
+import stat
 import subprocess
 from pathlib import Path
 
@@ -90,6 +91,21 @@ def test_special_files_are_refused_unread(tmp_path) -> None:
         assert proc.returncode == 2, (args, proc.stderr)
         [line] = proc.stderr.strip().splitlines()
         assert line == f"error: {message}", line
+
+
+def test_recover_never_replaces_a_special_file(tmp_path) -> None:
+    """--force overwrites a copy, never a FIFO or a device that stands where the copy goes (it used to replace the
+    node with a regular file: `recover --out /dev/null --force` as root)."""
+    run = _run(tmp_path)
+    fifo = tmp_path / "fifo"
+    os.mkfifo(fifo)
+    proc = subprocess.run([*gnerun_command(), "recover", str(run), "--out", str(fifo), "--force"],
+                          capture_output=True, text=True, timeout=60, stdin=subprocess.DEVNULL)
+    assert proc.returncode == 2, proc.stderr
+    [line] = proc.stderr.strip().splitlines()
+    assert line == f"error: {fifo}: is a FIFO; the repaired copy is a regular file", line
+    assert stat.S_ISFIFO(os.lstat(fifo).st_mode)
+    assert not list(tmp_path.glob("*.tmp"))
 
 
 def test_reads_are_capped(tmp_path) -> None:
