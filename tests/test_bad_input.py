@@ -122,6 +122,8 @@ def test_output_targets_that_cannot_work(tmp_path) -> None:
         (["recover", str(run), "--out", str(tmp_path), "--force"], "is a directory; the repaired copy is a regular"),
         (["recover", str(run), "--out", "/proc/gnerun-x.mcap", "--force"], "cannot write the repaired copy"),
         (["recover", str(run), "--out", str(a_file / "x.mcap")], "cannot write the repaired copy"),
+        (["sweep", str(CONFIGS / "k_sweep.yaml"), "--out", "/proc"], "/proc: cannot write the sweep directory"),
+        (["solve", str(CONFIGS / "fk_a12.yaml"), "--out", "/proc"], "/proc: cannot write the run directory"),
     ]
     for args, fragment in cases:
         line = _one_line_exit_2(run_cli(*args))

@@ -45,7 +45,7 @@ from ..language.config import (
     safe_name,
 )
 from ..language.yaml_source import SourceMap, dotted, read_yaml
-from .lock import DirectoryLock, contents, locked, release_all
+from .lock import DirectoryLock, contents, release_all
 
 MAX_POINTS = 10_000  # every point's config is checked before the sweep starts
 INDEX_CSV = "index.csv"
@@ -602,8 +602,14 @@ def run_sweep(sweep: Sweep, out: str | Path, *, executor: str = "local", workers
         sweep_dir.mkdir(parents=True, exist_ok=True)
     except OSError as e:
         raise InputError(f"{sweep_dir}: cannot write the sweep directory: {e.strerror or e}") from None
-    with locked(sweep_dir, "sweep directory"):
+    try:
+        lock = DirectoryLock.acquire(sweep_dir, "sweep directory")
+    except OSError as e:
+        raise InputError(f"{sweep_dir}: cannot write the sweep directory: {e.strerror or e}") from None
+    try:
         return _run_sweep(sweep, sweep_dir, executor, workers, address, force, progress)
+    finally:
+        lock.release()
 
 
 def _run_sweep(sweep: Sweep, sweep_dir: Path, executor: str, workers: int, address: str | None, force: bool,
