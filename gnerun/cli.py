@@ -416,7 +416,8 @@ def figures(
         sweeps = [r for r in runs if is_sweep_dir(r)]
         written = write_figures(_existing_logs([r for r in runs if r not in sweeps]), out, formats, sweeps=sweeps)
         if not written:
-            raise InputError("the runs hold nothing to draw (no /solve/iterate and no /K<k>/mpc topics)")
+            raise InputError("the runs hold nothing to draw (no /solve/iterate and no /K<k>/mpc topics" +
+                             ("; no sweep row on a run.K or disturbance-scale axis)" if sweeps else ")"))
     if not quiet:
         for path in written:
             typer.echo(str(path))

@@ -184,6 +184,36 @@ def test_tampered_summaries_and_sweep_files(tmp_path) -> None:
         assert "damaged sweep.json" in line, line
 
 
+def test_an_edited_sweep_index_is_drawn_in_part_or_refused_in_one_line(tmp_path) -> None:
+    """index.csv edited by hand: rows with values of the wrong type are left out, a file that is not text is a
+    damaged index; a solve sweep over run.K (rows without K) draws no K figure instead of failing."""
+    from typer.testing import CliRunner
+
+    from gnerun.cli import app
+
+    out = tmp_path / "sweep"
+    out.mkdir()
+    (out / "sweep.json").write_text(json.dumps({"name": "s", "axes": ["run.K"]}))
+    header = "point,directory,run.K,K,status,max_e,asymptotic_e"
+    good = ['0,points/a,[1],1,completed,2.5,0.1', '1,points/b,[2],2,completed,1.5,0.1']
+    figures = ["figures", str(out), "--out", str(tmp_path / "figs"), "--format", "png"]
+    for k in ("abc", "[1]", "1e999", '"{""a"": 1}"', "true"):
+        (out / "index.csv").write_text("\n".join([header, f"2,points/c,[3],{k},completed,1,0.1", *good]) + "\n")
+        result = CliRunner().invoke(app, figures)
+        assert result.exit_code == 0 and result.exception is None, (k, result.output)
+    solves = ['0,points/a,[1],,converged,2.5,0.1', '1,points/b,[2],,converged,1.5,0.1']  # a solve has no K
+    for content in (b"\xff\xfe\x00", b"point,max_e\n0,1\n", b"garbage", "\n".join([header, *solves]).encode()):
+        (out / "index.csv").write_bytes(content)
+        result = CliRunner().invoke(app, figures)
+        assert result.exit_code == 2 and isinstance(result.exception, SystemExit), (content, result.output)
+        [line] = result.output.strip().splitlines()
+        assert "damaged index.csv" in line or "nothing to draw" in line, line
+    (out / "index.csv").write_bytes(b"\xff\xfe\x00")
+    line = _one_line_exit_2(run_cli(*figures))  # the real command line too
+    assert line == f"error: {out / 'index.csv'}: damaged index.csv: 'utf-8' codec can't decode byte 0xff in " \
+                   "position 0: invalid start byte", line
+
+
 def test_a_sweep_axis_with_a_value_twice_is_refused(tmp_path) -> None:
     spec = tmp_path / "sweep.yaml"
     spec.write_text(f"base: {CONFIGS / 'paper_study2.yaml'}\ngrid:\n  run.steps: [3, 4, 3]\n")

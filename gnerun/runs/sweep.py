@@ -708,12 +708,19 @@ def _parquet_value(v: Any) -> Any:
 
 
 def read_index(sweep_dir: str | Path) -> list[dict[str, Any]]:
-    """index.csv as rows of typed values (numbers as numbers, empty as None)."""
+    """index.csv as rows of typed values (numbers as numbers, empty as None); a file that is not one (not text, not
+    a regular file, too large) is an InputError that says it is damaged."""
+    from ..files import MAX_JSON_BYTES, read_regular
+
     path = Path(sweep_dir) / INDEX_CSV
-    if not path.is_file():
+    if not path.exists():
         raise InputError(f"{sweep_dir}: no sweep index here (expected {INDEX_CSV})")
-    with path.open(newline="") as f:
-        return [{k: _parse_cell(v) for k, v in r.items()} for r in csv.DictReader(f)]
+    data = read_regular(path, MAX_JSON_BYTES, INDEX_CSV)
+    try:
+        return [{k: _parse_cell(v) for k, v in r.items()}
+                for r in csv.DictReader(io.StringIO(data.decode(), newline=""))]
+    except (UnicodeDecodeError, csv.Error) as e:
+        raise InputError(f"{path}: damaged {INDEX_CSV}: {str(e).splitlines()[0][:80]}") from None
 
 
 def _parse_cell(text: str) -> Any:
