@@ -504,15 +504,20 @@ def replay(
             if not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
                 raise InputError("no display for the viewer: use --save FILE.rrd, --serve or --screenshot DIR")
             spawn = True
-        # every target is checked before any work: a recording, a folder, the ports
-        if save is not None:
-            output_file(save, "recording (--save)")
+        # every target is checked before any work: a folder, the ports, a recording (created empty: checked last)
         if screenshot is not None:
             output_directory(screenshot, "screenshot folder (--screenshot)", create=False)
         if serve:
             rp.check_ports(web_port, grpc_port)
         if save is not None:
-            rp.save(runs, save)
+            new = not save.exists() and not save.is_symlink()
+            output_file(save, "recording (--save)")
+            try:
+                rp.save(runs, save)
+            except BaseException:
+                if new:  # a refused log leaves no recording behind
+                    save.unlink(missing_ok=True)
+                raise
             if not quiet:
                 typer.echo(f"saved {save}")
         if screenshot is not None:

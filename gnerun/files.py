@@ -219,14 +219,15 @@ def replaceable_file(path: str | Path, what: str = "output file") -> Path:
 
 def output_file(path: str | Path, what: str = "output file") -> Path:
     """``path`` as a file to be written by another library (a recording, an image): it must not be a directory,
-    a link or a special file, and its directory must exist or be creatable; it is created (empty) here, so that
-    a target that cannot work is one message before any work is done."""
+    a link or a special file, and its directory must exist or be creatable; it is created (empty) here if it is
+    missing, and left as it is otherwise, so that a target that cannot work is one message before any work is
+    done."""
     p = Path(path)
     if p.is_dir():
         raise InputError(f"{p}: is a directory; the {what} is a file (e.g. {p / 'replay.rrd'})")
     output_directory(p.parent, f"directory of the {what}")
     try:
-        open_for_writing(p).close()
+        os.close(open_fd(p))
     except OSError as e:
         raise InputError(f"{p}: cannot write the {what}: {e.strerror or e}") from None
     return p

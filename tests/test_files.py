@@ -108,6 +108,23 @@ def test_recover_never_replaces_a_special_file(tmp_path) -> None:
     assert not list(tmp_path.glob("*.tmp"))
 
 
+def test_a_refused_log_leaves_no_output_behind(tmp_path) -> None:
+    """replay --save and figures on a damaged log: exit 2, no recording begun (an earlier one left as it was) and
+    no figures folder made."""
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "run.mcap").write_bytes(b"")
+    earlier = tmp_path / "earlier.rrd"
+    earlier.write_text("an earlier recording\n")
+    for args in (["replay", str(run), "--save", str(tmp_path / "new.rrd")],
+                 ["replay", str(run), "--save", str(earlier)], ["figures", str(run), "--out", str(tmp_path / "figs")],
+                 ["replay", str(run), "--save", str(tmp_path / "x.rrd"), "--serve", "--web-port", "0"]):
+        proc = run_cli(*args)
+        assert proc.returncode == 2, proc.stderr
+    assert earlier.read_text() == "an earlier recording\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["earlier.rrd", "run"]
+
+
 def test_reads_are_capped(tmp_path) -> None:
     big = tmp_path / "big"
     big.write_bytes(b"x" * 1001)

@@ -550,11 +550,13 @@ def write_figures(paths: list[str | Path], out: str | Path, formats: list[str],
     """Draw and save; returns the files written."""
     import matplotlib.pyplot as plt
 
-    out = output_directory(out, "figures folder")
+    output_directory(out, "figures folder", create=False)  # checked before any work, made once there is a figure
     written = []
     drawn = make_figures(paths) if paths else {}
     for s in sweeps:
         drawn.update(sweep_figures(s))
+    if drawn:
+        out = output_directory(out, "figures folder")
     for stem, fig in drawn.items():
         for fmt in formats:
             target = out / f"{file_stem(stem)}.{fmt}"
