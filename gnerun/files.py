@@ -42,6 +42,13 @@ def _refuse_link(path: Path) -> LinkRefused:
                        "another output)")
 
 
+def not_a_link(path: str | Path) -> None:
+    """Refuse a symbolic link planted at ``path`` (a directory gnerun writes into, reached through a link, would put
+    its files elsewhere)."""
+    if Path(path).is_symlink():
+        raise _refuse_link(Path(path))
+
+
 def open_fd(path: str | Path, flags: int = os.O_WRONLY, *, exclusive: bool = False) -> int:
     """A file descriptor of ``path`` (created if missing) opened with ``flags``, never through a symbolic link,
     and only if it is (or becomes) a regular file: a planted FIFO or device is refused too."""

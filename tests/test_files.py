@@ -125,6 +125,35 @@ def test_a_refused_log_leaves_no_output_behind(tmp_path) -> None:
     assert sorted(p.name for p in tmp_path.iterdir()) == ["earlier.rrd", "run"]
 
 
+def test_a_sweep_never_writes_a_point_through_a_planted_link(tmp_path) -> None:
+    """A point's directory, or points/, replaced by a link to another directory: the sweep resumes with --force
+    semantics inside its points, so it would have written config.yaml, run.mcap and summary.json there."""
+    from gnerun.runs.sweep import load_sweep, read_index, run_sweep
+
+    spec = tmp_path / "sweep.yaml"
+    spec.write_text(f"base: {CONFIGS / 'paper_study2.yaml'}\nset: {{run.K: [1]}}\ngrid:\n  run.steps: [2, 3]\n")
+    sw = load_sweep(spec)
+    out = tmp_path / "out"
+    victim = tmp_path / "victim"
+    victim.mkdir()
+    (victim / "notes.txt").write_text("mine\n")
+    (out / "points").mkdir(parents=True)
+    (out / sw.points[0].directory).symlink_to(victim)
+    result = run_sweep(sw, out, workers=1, force=True)
+    assert result.failed == 1 and [r["status"] for r in read_index(out)] == ["error", "completed"]
+    assert "is a symbolic link; gnerun does not write through one" in read_index(out)[0]["message"]
+    assert sorted(p.name for p in victim.iterdir()) == ["notes.txt"]
+    (out / sw.points[0].directory).unlink()
+    for point in (out / "points").iterdir():
+        for f in point.iterdir():
+            f.unlink()
+        point.rmdir()
+    (out / "points").rmdir()
+    (out / "points").symlink_to(victim)
+    again = run_sweep(sw, out, workers=1)
+    assert again.failed == 2 and sorted(p.name for p in victim.iterdir()) == ["notes.txt"]
+
+
 def test_reads_are_capped(tmp_path) -> None:
     big = tmp_path / "big"
     big.write_bytes(b"x" * 1001)

@@ -34,7 +34,7 @@ import numpy as np
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from ..errors import ConfigError, InputError, Unavailable, shorten
-from ..files import read_json_object, replace_text, replacing, write_text
+from ..files import not_a_link, read_json_object, replace_text, replacing, write_text
 from ..language.config import (
     CONFIG_VERSION,
     MAX_NAME_BYTES,
@@ -262,6 +262,8 @@ def run_point(task: dict[str, Any]) -> list[dict[str, Any]]:
     _point_in_progress = True
     try:
         try:  # the point's directory is written by this point alone
+            for part in (out.parent, out):  # points/ and the point's own, never a link planted to elsewhere
+                not_a_link(part)
             if out.exists() and not out.is_dir():
                 raise InputError(f"{out}: exists and is not a directory")
             out.mkdir(parents=True, exist_ok=True)
@@ -571,7 +573,7 @@ def _finished(sweep_dir: Path, point: Point) -> tuple[dict[str, Any], dict[str, 
 def _task(sweep: Sweep, sweep_dir: Path, p: Point) -> dict[str, Any]:
     return {"index": p.index, "params": p.params, "overrides": p.overrides, "config_hash": p.config_hash,
             "directory": p.directory, "base": str(sweep.base), "command": sweep.spec.command,
-            "out": str((sweep_dir / p.directory).resolve())}
+            "out": str(sweep_dir.resolve() / p.directory)}  # the point's own components unresolved: see run_point
 
 
 def check_executor(executor: str, workers: int, address: str | None, force_workers: bool = True) -> None:
