@@ -99,6 +99,9 @@ def test_huge_values_are_shortened_in_the_message(tmp_path) -> None:
     for key, value in (("solver.tol", digits), ("solver.kind", digits), ("game.x0", digits)):
         line = _one_line_exit_2(run_cli("validate", STUDY2, "--set", f"{key}={value}"))
         assert f"({len(key) + 20_001} characters)" in line and len(line) < 700, line[:200]
+    for key in (f"game.{digits}", f"game.agents.{digits}.name", "game.agents.\u00b2.name"):  # not list indices
+        line = _one_line_exit_2(run_cli("validate", STUDY2, "--set", f"{key}=1"))
+        assert len(line) < 700 and line.startswith("error: --set game."), line[:200]
     for old, new in (("x0: [1, 3, 5]", f"x0: {items}"), ("x0: [1, 3, 5]", f"x0: [1, 3, {digits}]"),
                      ("kind: ssn", f"kind: {digits}"), ("x0: [1, 3, 5]", f"x0: [1, 3, 5]\n  {digits}: 1")):
         assert old in text

@@ -430,7 +430,9 @@ def override_label(key: str, value: Any) -> str:
 
 def _apply_override(data: dict, key: str, value: Any, smap: SourceMap, shown: str) -> None:
     """Set ``key`` (a dotted path) to ``value``; ``shown`` names the override in messages (``--set a.b=1``)."""
-    parts: list[str | int] = [int(p) if p.isdigit() else p for p in key.split(".")]
+    # a list index is a plain decimal number (Unicode digits and 20,000-digit numbers are names, found nowhere)
+    parts: list[str | int] = [int(p) if p.isascii() and p.isdigit() and len(p.lstrip("0")) <= 18 else p
+                              for p in key.split(".")]
     node: Any = data
     for i, part in enumerate(parts):
         last = i == len(parts) - 1
