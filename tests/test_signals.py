@@ -218,6 +218,35 @@ def test_a_signal_to_the_sweeps_process_group_stops_it_in_one_line(sig: signal.S
 
 
 @pytest.mark.slow
+def test_a_hang_up_of_a_dask_sweeps_process_group_stops_it_in_one_line(tmp_path) -> None:
+    """A closed terminal with a Dask LocalCluster: its processes start with hang-ups blocked as a local pool's do,
+    the sweep stops the cluster, and nothing prints a traceback (the points in progress are left as killed runs')."""
+    pytest.importorskip("dask.distributed")
+    spec = tmp_path / "sweep.yaml"
+    spec.write_text(SWEEP)
+    out = tmp_path / "out"
+    proc = subprocess.Popen([*gnerun_command(), "sweep", str(spec), "--out", str(out), "--workers", "2", "--executor",
+                             "dask"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            stdin=subprocess.DEVNULL, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 120
+        while not (out / "index.csv").is_file() or len(read_index(out)) < 1:
+            assert time.monotonic() < deadline and proc.poll() is None, proc.communicate()
+            time.sleep(0.2)
+        os.killpg(proc.pid, signal.SIGHUP)
+        _, err = proc.communicate(timeout=90)
+    finally:
+        time.sleep(1)  # the cluster's processes end as their parents do
+        left = _group(proc.pid)
+        if left:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 130, err
+    assert err.strip().splitlines() == [f"interrupted: {out} holds the index of the finished points; run again to "
+                                        "resume"]
+    assert not left, left
+
+
+@pytest.mark.slow
 def test_a_killed_sweep_leaves_no_worker_running(tmp_path) -> None:
     """SIGKILL gives the sweep no chance to stop its workers: they stop themselves (their parent died)."""
     proc, out = _sweep_started(tmp_path)

@@ -513,9 +513,10 @@ def _dask(tasks: list[dict[str, Any]], workers: int, address: str | None) -> Com
             import logging
 
             # warnings of its own shutdown (Ctrl-C cancels the tasks in progress) are not the user's business
-            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
-                                   silence_logs=logging.ERROR)
-            client = Client(cluster)
+            with _hangups_blocked():  # its processes, as a local pool's (see _hangups_blocked)
+                cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                       dashboard_address=None, silence_logs=logging.ERROR)
+                client = Client(cluster)
         elif Path(address).is_file():  # a scheduler file (`dask scheduler --scheduler-file F`), as on HPC
             client = Client(scheduler_file=address, timeout="20s")
         else:
