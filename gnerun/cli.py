@@ -73,7 +73,8 @@ SetOpt = Annotated[
 ]
 OutOpt = Annotated[
     Path | None,
-    typer.Option("--out", help="Run directory (default: runs/<config name>-<UTC timestamp>/).", show_default=False,
+    typer.Option("--out", help="Run directory (default: runs/<config name>-<UTC timestamp>/, -2/ for a second run in "
+                 "that second).", show_default=False,
                  metavar="DIR"),
 ]
 QuietOpt = Annotated[bool, typer.Option("--quiet", "-q", help="Print nothing but errors.")]
@@ -246,10 +247,10 @@ def solve(config: ConfigArg, out: OutOpt = None, set_: SetOpt = None, quiet: Qui
     with _reported():
         cfg = _load(config, set_)
         _warn(config, cfg.size_warnings("solve"), quiet)
-        from .runs.rundir import default_run_dir
+        from .runs.rundir import claim_default_run_dir, remove_if_empty
         from .runs.solving import solve as run_solve
 
-        out_dir = out if out is not None else default_run_dir(cfg)
+        out_dir = out if out is not None else claim_default_run_dir(cfg)
 
         def show(state, error_norm: float | None) -> None:
             if quiet:
@@ -267,6 +268,9 @@ def solve(config: ConfigArg, out: OutOpt = None, set_: SetOpt = None, quiet: Qui
         except KeyboardInterrupt:
             typer.echo(_interrupted(out_dir), err=True)
             raise typer.Exit(130) from None
+        finally:
+            if out is None:
+                remove_if_empty(out_dir)
     if quiet:
         return
     cert = result.certificate
@@ -295,9 +299,9 @@ def simulate(config: ConfigArg, out: OutOpt = None, set_: SetOpt = None, quiet: 
                              "for a static game")
         _warn(config, cfg.size_warnings("simulate"), quiet)
         from .runs.closed_loop import simulate as run_simulate
-        from .runs.rundir import default_run_dir
+        from .runs.rundir import claim_default_run_dir, remove_if_empty
 
-        out_dir = out if out is not None else default_run_dir(cfg)
+        out_dir = out if out is not None else claim_default_run_dir(cfg)
         if not quiet:
             typer.echo(f"gnerun simulate {config}: K = {cfg.run.K}, {_plural(cfg.run.steps, 'step')}, "
                        f"{_method(cfg)}, warm start {cfg.run.warm_start}, solver disturbance {cfg.disturbance.kind}, "
@@ -308,6 +312,9 @@ def simulate(config: ConfigArg, out: OutOpt = None, set_: SetOpt = None, quiet: 
         except KeyboardInterrupt:
             typer.echo(_interrupted(out_dir), err=True)
             raise typer.Exit(130) from None
+        finally:
+            if out is None:
+                remove_if_empty(out_dir)
     if quiet:
         return
     typer.echo(f"{'K':>4}  {'max e':>10}  {'final e':>10}  {'median step':>12}  {'max step':>10}  {'failed':>6}"
