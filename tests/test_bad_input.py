@@ -217,6 +217,15 @@ def test_an_edited_sweep_index_is_drawn_in_part_or_refused_in_one_line(tmp_path)
                    "position 0: invalid start byte", line
 
 
+def test_a_bad_sweep_value_of_any_length_is_located_in_the_sweep_file(tmp_path) -> None:
+    """A grid value whose echo is shortened (a list of 105 characters) is still located at its line."""
+    spec = tmp_path / "sweep.yaml"
+    value = "[" + ", ".join(["1.6581975061448995e-28"] * 3) + "]"
+    spec.write_text(f"base: {STUDY2}\ngrid:\n  disturbance.scale: [{value}, 0.01]\n")
+    line = _one_line_exit_2(run_cli("validate", str(spec)))
+    assert line.startswith(f"error: {spec}:3:22: disturbance.scale: Input should be a valid number (point 0: "), line
+
+
 def test_a_sweep_axis_with_a_value_twice_is_refused(tmp_path) -> None:
     spec = tmp_path / "sweep.yaml"
     spec.write_text(f"base: {CONFIGS / 'paper_study2.yaml'}\ngrid:\n  run.steps: [3, 4, 3]\n")

@@ -235,7 +235,7 @@ def _point_config(base: Path, overrides: dict[str, Any], params: dict[str, Any],
         shown = ", ".join(f"{k}={v!r}" for k, v in params.items())
         for p in e.problems:
             for k, v in overrides.items():
-                prefix = f"{override_label(k, v)}: "
+                prefix = f"{shorten(override_label(k, v), 100)}: "  # as SourceMap.locate names it
                 if p.startswith(prefix):
                     where = smap.locate(("grid", k) if k in params else ("set", k))
                     p = f"{where}: {p[len(prefix):]} (point {i}: {shown})"
