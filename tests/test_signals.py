@@ -195,6 +195,10 @@ def test_a_signal_to_the_sweeps_process_group_stops_it_in_one_line(sig: signal.S
     try:
         workers = _workers(proc.pid)
         assert len(workers) == 2
+        deadline = time.monotonic() + 120
+        while sum(f.stat().st_size > 20_000 for f in out.glob("points/*/run.mcap")) < 2:  # both long runs under way
+            assert time.monotonic() < deadline and proc.poll() is None, proc.communicate()
+            time.sleep(0.1)
         os.killpg(proc.pid, sig)
         if twice:
             for pid in workers:
