@@ -420,10 +420,21 @@ def stop_resource_tracker() -> None:
     be registered with the tracker."""
     from multiprocessing import resource_tracker
 
-    stop = getattr(getattr(resource_tracker, "_resource_tracker", None), "_stop", None)
-    if stop is not None:
-        with contextlib.suppress(Exception):
-            stop()
+    tracker = getattr(resource_tracker, "_resource_tracker", None)
+    fd, pid = getattr(tracker, "_fd", None), getattr(tracker, "_pid", None)
+    if fd is None or pid is None:
+        return
+    with contextlib.suppress(OSError):
+        os.close(fd)  # the tracker ends once every copy of this pipe is closed (a worker that lingers holds one)
+    tracker._fd = tracker._pid = None
+    deadline = time.monotonic() + STOP_GRACE_S  # never waits long for it
+    while time.monotonic() < deadline:
+        try:
+            if os.waitpid(pid, os.WNOHANG)[0]:
+                return
+        except ChildProcessError:
+            return
+        time.sleep(0.01)
 
 
 def available_cpus() -> int:
