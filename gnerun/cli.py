@@ -73,7 +73,8 @@ SetOpt = Annotated[
 ]
 OutOpt = Annotated[
     Path | None,
-    typer.Option("--out", help="Run directory (default: runs/<config name>-<UTC timestamp>/).", show_default=False,
+    typer.Option("--out", help="Run directory (default: runs/<config name>-<UTC timestamp>/, -2/ for a second run in "
+                 "that second).", show_default=False,
                  metavar="DIR"),
 ]
 QuietOpt = Annotated[bool, typer.Option("--quiet", "-q", help="Print nothing but errors.")]
@@ -246,10 +247,10 @@ def solve(config: ConfigArg, out: OutOpt = None, set_: SetOpt = None, quiet: Qui
     with _reported():
         cfg = _load(config, set_)
         _warn(config, cfg.size_warnings("solve"), quiet)
-        from .runs.rundir import default_run_dir
+        from .runs.rundir import claim_default_run_dir, remove_if_empty
         from .runs.solving import solve as run_solve
 
-        out_dir = out if out is not None else default_run_dir(cfg)
+        out_dir = out if out is not None else claim_default_run_dir(cfg)
 
         def show(state, error_norm: float | None) -> None:
             if quiet:
@@ -267,6 +268,9 @@ def solve(config: ConfigArg, out: OutOpt = None, set_: SetOpt = None, quiet: Qui
         except KeyboardInterrupt:
             typer.echo(_interrupted(out_dir), err=True)
             raise typer.Exit(130) from None
+        finally:
+            if out is None:
+                remove_if_empty(out_dir)
     if quiet:
         return
     cert = result.certificate
@@ -295,9 +299,9 @@ def simulate(config: ConfigArg, out: OutOpt = None, set_: SetOpt = None, quiet: 
                              "for a static game")
         _warn(config, cfg.size_warnings("simulate"), quiet)
         from .runs.closed_loop import simulate as run_simulate
-        from .runs.rundir import default_run_dir
+        from .runs.rundir import claim_default_run_dir, remove_if_empty
 
-        out_dir = out if out is not None else default_run_dir(cfg)
+        out_dir = out if out is not None else claim_default_run_dir(cfg)
         if not quiet:
             typer.echo(f"gnerun simulate {config}: K = {cfg.run.K}, {_plural(cfg.run.steps, 'step')}, "
                        f"{_method(cfg)}, warm start {cfg.run.warm_start}, solver disturbance {cfg.disturbance.kind}, "
@@ -308,6 +312,9 @@ def simulate(config: ConfigArg, out: OutOpt = None, set_: SetOpt = None, quiet: 
         except KeyboardInterrupt:
             typer.echo(_interrupted(out_dir), err=True)
             raise typer.Exit(130) from None
+        finally:
+            if out is None:
+                remove_if_empty(out_dir)
     if quiet:
         return
     typer.echo(f"{'K':>4}  {'max e':>10}  {'final e':>10}  {'median step':>12}  {'max step':>10}  {'failed':>6}"
@@ -347,7 +354,7 @@ def sweep(
 ) -> None:
     """Run a grid of runs (every point a run directory) and write the index table; resumable."""
     with _reported():
-        from .runs.sweep import check_executor, default_sweep_dir, load_sweep, run_sweep
+        from .runs.sweep import check_executor, default_sweep_dir, load_sweep, run_sweep, stop_resource_tracker
 
         check_executor(executor, workers, address, force_workers)  # before the points are loaded
         sw = load_sweep(spec)
@@ -374,6 +381,8 @@ def sweep(
             typer.echo(f"interrupted: {out_dir} holds the index of the finished points; run again to resume",
                        err=True)
             raise typer.Exit(130) from None
+        finally:
+            stop_resource_tracker()  # the pool is gone: no process of the sweep outlives it
     if not quiet:
         typer.echo(f"{result.ran} run, {result.skipped} already finished (skipped), {result.failed} failed; "
                    f"{result.wall_s:.1f} s with {executor}")
@@ -414,7 +423,8 @@ def figures(
         sweeps = [r for r in runs if is_sweep_dir(r)]
         written = write_figures(_existing_logs([r for r in runs if r not in sweeps]), out, formats, sweeps=sweeps)
         if not written:
-            raise InputError("the runs hold nothing to draw (no /solve/iterate and no /K<k>/mpc topics)")
+            raise InputError("the runs hold nothing to draw (no /solve/iterate and no /K<k>/mpc topics" +
+                             ("; no sweep row on a run.K or disturbance-scale axis)" if sweeps else ")"))
     if not quiet:
         for path in written:
             typer.echo(str(path))
@@ -501,15 +511,20 @@ def replay(
             if not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
                 raise InputError("no display for the viewer: use --save FILE.rrd, --serve or --screenshot DIR")
             spawn = True
-        # every target is checked before any work: a recording, a folder, the ports
-        if save is not None:
-            output_file(save, "recording (--save)")
+        # every target is checked before any work: a folder, the ports, a recording (created empty: checked last)
         if screenshot is not None:
             output_directory(screenshot, "screenshot folder (--screenshot)", create=False)
         if serve:
             rp.check_ports(web_port, grpc_port)
         if save is not None:
-            rp.save(runs, save)
+            new = not save.exists() and not save.is_symlink()
+            output_file(save, "recording (--save)")
+            try:
+                rp.save(runs, save)
+            except BaseException:
+                if new:  # a refused log leaves no recording behind
+                    save.unlink(missing_ok=True)
+                raise
             if not quiet:
                 typer.echo(f"saved {save}")
         if screenshot is not None:
@@ -542,6 +557,7 @@ def recover(
         import contextlib
 
         from .errors import InputError
+        from .files import replaceable_file
         from .log.mcap_log import recover as recover_log
         from .log.mcap_log import run_log_path
         from .runs.lock import locked
@@ -550,12 +566,12 @@ def recover(
         target = out if out is not None else source.with_name("run.recovered.mcap")
         if target.resolve() == source.resolve():
             raise InputError(f"{target}: the copy must not overwrite the log it repairs")
-        if target.is_symlink() or target.exists() and not force:
-            raise InputError(f"{target}: exists (use --force to overwrite it)" if not target.is_symlink() else
-                             f"{target}: is a symbolic link; gnerun does not write through one (remove it)")
         # beside the log, the copy is written into the run directory: not while a run writes there
         beside = target.parent.resolve() == source.parent.resolve()
         with locked(source.parent) if beside else contextlib.nullcontext():
+            replaceable_file(target, "repaired copy")  # a link, a directory or a special file: refused, --force or not
+            if target.exists() and not force:
+                raise InputError(f"{target}: exists (use --force to overwrite it)")
             record = recover_log(source, target)
     if not quiet:
         typer.echo(f"{target}: {record.message_count} messages recovered ({one_line(record.note)})")

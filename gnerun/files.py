@@ -42,6 +42,13 @@ def _refuse_link(path: Path) -> LinkRefused:
                        "another output)")
 
 
+def not_a_link(path: str | Path) -> None:
+    """Refuse a symbolic link planted at ``path`` (a directory gnerun writes into, reached through a link, would put
+    its files elsewhere)."""
+    if Path(path).is_symlink():
+        raise _refuse_link(Path(path))
+
+
 def open_fd(path: str | Path, flags: int = os.O_WRONLY, *, exclusive: bool = False) -> int:
     """A file descriptor of ``path`` (created if missing) opened with ``flags``, never through a symbolic link,
     and only if it is (or becomes) a regular file: a planted FIFO or device is refused too."""
@@ -190,16 +197,44 @@ def output_directory(path: str | Path, what: str = "output directory", *, create
     return p
 
 
+def replaceable_file(path: str | Path, what: str = "output file") -> Path:
+    """``path`` as a file that :func:`replacing` will put in place whole: what stands there now may only be a regular
+    file (a directory, a device or a FIFO is never replaced by a file, a link never written through), and its
+    directory must exist or be creatable, and take the temporary file beside it (created and removed here)."""
+    p = Path(path)
+    try:
+        mode = os.lstat(p).st_mode
+    except FileNotFoundError:
+        mode = None
+    except OSError as e:
+        raise InputError(f"{p}: cannot write the {what}: {e.strerror or e}") from None
+    if mode is not None and stat.S_ISLNK(mode):
+        raise _refuse_link(p)
+    if mode is not None and not stat.S_ISREG(mode):
+        raise InputError(f"{p}: is {_kind(mode)}; the {what} is a regular file")
+    output_directory(p.parent, f"directory of the {what}")
+    tmp = p.with_name(p.name + ".tmp")
+    try:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp)  # a stale one of gnerun's; never follows a link
+        os.close(open_fd(tmp, exclusive=True))
+        os.unlink(tmp)
+    except OSError as e:
+        raise InputError(f"{p}: cannot write the {what}: {e.strerror or e}") from None
+    return p
+
+
 def output_file(path: str | Path, what: str = "output file") -> Path:
     """``path`` as a file to be written by another library (a recording, an image): it must not be a directory,
-    a link or a special file, and its directory must exist or be creatable; it is created (empty) here, so that
-    a target that cannot work is one message before any work is done."""
+    a link or a special file, and its directory must exist or be creatable; it is created (empty) here if it is
+    missing, and left as it is otherwise, so that a target that cannot work is one message before any work is
+    done."""
     p = Path(path)
     if p.is_dir():
         raise InputError(f"{p}: is a directory; the {what} is a file (e.g. {p / 'replay.rrd'})")
     output_directory(p.parent, f"directory of the {what}")
     try:
-        open_for_writing(p).close()
+        os.close(open_fd(p))
     except OSError as e:
         raise InputError(f"{p}: cannot write the {what}: {e.strerror or e}") from None
     return p

@@ -63,6 +63,35 @@ def test_a_bad_name_in_a_file_is_located(tmp_path) -> None:
     assert list(tmp_path.iterdir()) == [config]
 
 
+@pytest.mark.parametrize(("name", "fragment"), [("..", "starts with '.'"), (".", "starts with '.'"),
+                                               ("../../escaped", "is not one path component"),
+                                               ("/tmp/escaped", "is not one path component"),
+                                               ("n" * 300, "is 300 bytes long; a name is at most 100"),
+                                               ('"a\\0b"', "contains a NUL character")],
+                         ids=["dotdot", "dot", "relative", "absolute", "300 bytes", "NUL"])
+def test_a_sweep_name_stays_inside_runs(name: str, fragment: str, tmp_path) -> None:
+    """A sweep's name names its default directory runs/<name>/: refused where it is written unless it is one plain
+    path component, by validate and by the sweep (even with --force), which writes nothing anywhere."""
+    work = tmp_path / "work"
+    work.mkdir()
+    spec = tmp_path / "sweep.yaml"
+    spec.write_text(f"name: {name}\nbase: {STUDY2}\nset: {{run.K: [1]}}\ngrid:\n  run.steps: [2, 3]\n")
+    for command in (["validate", str(spec)], ["sweep", str(spec), "--force", "-q"]):
+        line = _one_line_exit_2(run_cli(*command, cwd=work))
+        assert line.startswith(f"error: {spec}:1:7: name: ") and fragment in line, line
+    assert list(work.iterdir()) == [] and sorted(p.name for p in tmp_path.iterdir()) == ["sweep.yaml", "work"]
+    assert not Path("/tmp/escaped").exists()
+
+
+def test_a_sweep_named_by_its_file_gets_a_plain_directory(tmp_path) -> None:
+    from gnerun.runs.sweep import default_sweep_dir, load_sweep
+
+    spec = tmp_path / (".." + "x" * 200 + ".yaml")
+    spec.write_text(f"base: {STUDY2}\ngrid:\n  run.steps: [2, 3]\n")
+    directory = default_sweep_dir(load_sweep(spec))
+    assert directory.parent == Path("runs") and directory.name == "x" * 100
+
+
 def test_huge_values_are_shortened_in_the_message(tmp_path) -> None:
     """A 20,000-digit literal and a 60,000-element list, given with --set or written in the file."""
     digits, items = "1" * 20_000, "[" + ",".join(["1"] * 60_000) + "]"
@@ -70,6 +99,9 @@ def test_huge_values_are_shortened_in_the_message(tmp_path) -> None:
     for key, value in (("solver.tol", digits), ("solver.kind", digits), ("game.x0", digits)):
         line = _one_line_exit_2(run_cli("validate", STUDY2, "--set", f"{key}={value}"))
         assert f"({len(key) + 20_001} characters)" in line and len(line) < 700, line[:200]
+    for key in (f"game.{digits}", f"game.agents.{digits}.name", "game.agents.\u00b2.name"):  # not list indices
+        line = _one_line_exit_2(run_cli("validate", STUDY2, "--set", f"{key}=1"))
+        assert len(line) < 700 and line.startswith("error: --set game."), line[:200]
     for old, new in (("x0: [1, 3, 5]", f"x0: {items}"), ("x0: [1, 3, 5]", f"x0: [1, 3, {digits}]"),
                      ("kind: ssn", f"kind: {digits}"), ("x0: [1, 3, 5]", f"x0: [1, 3, 5]\n  {digits}: 1")):
         assert old in text
@@ -90,11 +122,18 @@ def test_output_targets_that_cannot_work(tmp_path) -> None:
         (["replay", str(run), "--save", "/proc/gnerun-x.rrd"], "cannot write the recording"),
         (["replay", str(run), "--save", str(tmp_path)], "is a directory; the recording (--save) is a file"),
         (["figures", str(run), "--out", "/proc/gnerun-figures"], "cannot create the figures folder"),
+        (["recover", str(run), "--out", str(tmp_path), "--force"], "is a directory; the repaired copy is a regular"),
+        (["recover", str(run), "--out", "/proc/gnerun-x.mcap", "--force"], "cannot write the repaired copy"),
+        (["recover", str(run), "--out", str(a_file / "x.mcap")], "cannot write the repaired copy"),
+        (["sweep", str(CONFIGS / "k_sweep.yaml"), "--out", "/proc"], "/proc: cannot write the sweep directory"),
+        (["solve", str(CONFIGS / "fk_a12.yaml"), "--out", "/proc"], "/proc: cannot write the run directory"),
     ]
     for args, fragment in cases:
         line = _one_line_exit_2(run_cli(*args))
         assert fragment in line, (args, line)
     assert a_file.read_text() == "keep\n" and not Path("/proc/gnerun-x.rrd").exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a-file", "run"]
+    assert sorted(p.name for p in run.iterdir()) == ["config.yaml", "run.mcap", "summary.json"]
 
 
 def _taken_port() -> socket.socket:
@@ -146,6 +185,45 @@ def test_tampered_summaries_and_sweep_files(tmp_path) -> None:
         (out / "sweep.json").write_text(content)
         line = _one_line_exit_2(run_cli("figures", str(out), "--out", str(tmp_path / "figs")))
         assert "damaged sweep.json" in line, line
+
+
+def test_an_edited_sweep_index_is_drawn_in_part_or_refused_in_one_line(tmp_path) -> None:
+    """index.csv edited by hand: rows with values of the wrong type are left out, a file that is not text is a
+    damaged index; a solve sweep over run.K (rows without K) draws no K figure instead of failing."""
+    from typer.testing import CliRunner
+
+    from gnerun.cli import app
+
+    out = tmp_path / "sweep"
+    out.mkdir()
+    (out / "sweep.json").write_text(json.dumps({"name": "s", "axes": ["run.K"]}))
+    header = "point,directory,run.K,K,status,max_e,asymptotic_e"
+    good = ['0,points/a,[1],1,completed,2.5,0.1', '1,points/b,[2],2,completed,1.5,0.1']
+    figures = ["figures", str(out), "--out", str(tmp_path / "figs"), "--format", "png"]
+    for k in ("abc", "[1]", "1e999", '"{""a"": 1}"', "true"):
+        (out / "index.csv").write_text("\n".join([header, f"2,points/c,[3],{k},completed,1,0.1", *good]) + "\n")
+        result = CliRunner().invoke(app, figures)
+        assert result.exit_code == 0 and result.exception is None, (k, result.output)
+    solves = ['0,points/a,[1],,converged,2.5,0.1', '1,points/b,[2],,converged,1.5,0.1']  # a solve has no K
+    for content in (b"\xff\xfe\x00", b"point,max_e\n0,1\n", b"garbage", "\n".join([header, *solves]).encode()):
+        (out / "index.csv").write_bytes(content)
+        result = CliRunner().invoke(app, figures)
+        assert result.exit_code == 2 and isinstance(result.exception, SystemExit), (content, result.output)
+        [line] = result.output.strip().splitlines()
+        assert "damaged index.csv" in line or "nothing to draw" in line, line
+    (out / "index.csv").write_bytes(b"\xff\xfe\x00")
+    line = _one_line_exit_2(run_cli(*figures))  # the real command line too
+    assert line == f"error: {out / 'index.csv'}: damaged index.csv: 'utf-8' codec can't decode byte 0xff in " \
+                   "position 0: invalid start byte", line
+
+
+def test_a_bad_sweep_value_of_any_length_is_located_in_the_sweep_file(tmp_path) -> None:
+    """A grid value whose echo is shortened (a list of 105 characters) is still located at its line."""
+    spec = tmp_path / "sweep.yaml"
+    value = "[" + ", ".join(["1.6581975061448995e-28"] * 3) + "]"
+    spec.write_text(f"base: {STUDY2}\ngrid:\n  disturbance.scale: [{value}, 0.01]\n")
+    line = _one_line_exit_2(run_cli("validate", str(spec)))
+    assert line.startswith(f"error: {spec}:3:22: disturbance.scale: Input should be a valid number (point 0: "), line
 
 
 def test_a_sweep_axis_with_a_value_twice_is_refused(tmp_path) -> None:

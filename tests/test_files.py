@@ -4,6 +4,7 @@ files are refused before they are read (a FIFO never blocks), temporary files ne
 from __future__ import annotations
 
 import os
+import stat
 import subprocess
 from pathlib import Path
 
@@ -90,6 +91,67 @@ def test_special_files_are_refused_unread(tmp_path) -> None:
         assert proc.returncode == 2, (args, proc.stderr)
         [line] = proc.stderr.strip().splitlines()
         assert line == f"error: {message}", line
+
+
+def test_recover_never_replaces_a_special_file(tmp_path) -> None:
+    """--force overwrites a copy, never a FIFO or a device that stands where the copy goes (it used to replace the
+    node with a regular file: `recover --out /dev/null --force` as root)."""
+    run = _run(tmp_path)
+    fifo = tmp_path / "fifo"
+    os.mkfifo(fifo)
+    proc = subprocess.run([*gnerun_command(), "recover", str(run), "--out", str(fifo), "--force"],
+                          capture_output=True, text=True, timeout=60, stdin=subprocess.DEVNULL)
+    assert proc.returncode == 2, proc.stderr
+    [line] = proc.stderr.strip().splitlines()
+    assert line == f"error: {fifo}: is a FIFO; the repaired copy is a regular file", line
+    assert stat.S_ISFIFO(os.lstat(fifo).st_mode)
+    assert not list(tmp_path.glob("*.tmp"))
+
+
+def test_a_refused_log_leaves_no_output_behind(tmp_path) -> None:
+    """replay --save and figures on a damaged log: exit 2, no recording begun (an earlier one left as it was) and
+    no figures folder made."""
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "run.mcap").write_bytes(b"")
+    earlier = tmp_path / "earlier.rrd"
+    earlier.write_text("an earlier recording\n")
+    for args in (["replay", str(run), "--save", str(tmp_path / "new.rrd")],
+                 ["replay", str(run), "--save", str(earlier)], ["figures", str(run), "--out", str(tmp_path / "figs")],
+                 ["replay", str(run), "--save", str(tmp_path / "x.rrd"), "--serve", "--web-port", "0"]):
+        proc = run_cli(*args)
+        assert proc.returncode == 2, proc.stderr
+    assert earlier.read_text() == "an earlier recording\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["earlier.rrd", "run"]
+
+
+def test_a_sweep_never_writes_a_point_through_a_planted_link(tmp_path) -> None:
+    """A point's directory, or points/, replaced by a link to another directory: the sweep resumes with --force
+    semantics inside its points, so it would have written config.yaml, run.mcap and summary.json there."""
+    from gnerun.runs.sweep import load_sweep, read_index, run_sweep
+
+    spec = tmp_path / "sweep.yaml"
+    spec.write_text(f"base: {CONFIGS / 'paper_study2.yaml'}\nset: {{run.K: [1]}}\ngrid:\n  run.steps: [2, 3]\n")
+    sw = load_sweep(spec)
+    out = tmp_path / "out"
+    victim = tmp_path / "victim"
+    victim.mkdir()
+    (victim / "notes.txt").write_text("mine\n")
+    (out / "points").mkdir(parents=True)
+    (out / sw.points[0].directory).symlink_to(victim)
+    result = run_sweep(sw, out, workers=1, force=True)
+    assert result.failed == 1 and [r["status"] for r in read_index(out)] == ["error", "completed"]
+    assert "is a symbolic link; gnerun does not write through one" in read_index(out)[0]["message"]
+    assert sorted(p.name for p in victim.iterdir()) == ["notes.txt"]
+    (out / sw.points[0].directory).unlink()
+    for point in (out / "points").iterdir():
+        for f in point.iterdir():
+            f.unlink()
+        point.rmdir()
+    (out / "points").rmdir()
+    (out / "points").symlink_to(victim)
+    again = run_sweep(sw, out, workers=1)
+    assert again.failed == 2 and sorted(p.name for p in victim.iterdir()) == ["notes.txt"]
 
 
 def test_reads_are_capped(tmp_path) -> None:

@@ -159,6 +159,24 @@ def test_a_point_directory_written_by_another_process_is_an_error_row_and_runs_a
     assert (again.ran, again.skipped, again.failed) == (1, 1, 0)
 
 
+def test_runs_started_together_without_out_get_a_directory_each(tmp_path) -> None:
+    """The default directory has the second in its name: runs of one config started together are not refused by
+    each other's directory (nor by the lock), and a run that stops before writing leaves no empty one."""
+    procs = [subprocess.Popen([*gnerun_command(), "solve", str(CONFIGS / "fk_a12.yaml"), "-q"], cwd=tmp_path,
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, stdin=subprocess.DEVNULL)
+             for _ in range(3)]
+    results = [(p.wait(timeout=120), p.communicate()[1]) for p in procs]
+    assert [rc for rc, _ in results] == [0, 0, 0], results
+    runs = sorted((tmp_path / "runs").iterdir())
+    assert len(runs) == 3 and all((r / "summary.json").is_file() for r in runs)
+    # refused once its game is built (jn on shared constraints): the directory claimed for it is gone
+    refused = subprocess.run([*gnerun_command(), "solve", str(CONFIGS / "harker.yaml"), "--set", "solver.kind=jn",
+                              "-q"], cwd=tmp_path, capture_output=True, text=True, timeout=120,
+                             stdin=subprocess.DEVNULL)
+    assert refused.returncode == 2 and "needs independent constraint sets" in refused.stderr, refused.stderr
+    assert sorted((tmp_path / "runs").iterdir()) == runs
+
+
 def test_the_lock_is_taken_before_anything_is_written(tmp_path) -> None:
     """A run refused for a busy directory writes nothing there (not even config.yaml)."""
     out = tmp_path / "run"

@@ -81,6 +81,51 @@ def test_a_signal_ends_solve_with_a_summary_and_a_finished_log(sig: signal.Signa
     assert summary["certificate"]["kkt_residual"] is not None
 
 
+CHAIN = """
+name: chain
+game:
+  kind: static
+  parameters: {N: 400}
+  agents:
+    - for: {i: 1..N-1}
+      name: "p{i}"
+      variables: {"x{i}": {lower: 0, upper: 10, start: 1}}
+      cost: "x{i}**2 - x{i}*x{i+1}"
+    - name: "last"
+      variables: {"x{N}": {lower: 0, upper: 10, start: 1}}
+      cost: "x{N}**2"
+"""
+
+
+def test_a_signal_during_the_certificate_ends_solve_too(tmp_path) -> None:
+    """400 agents: the solve converges in one iteration and the certificate (a best response per agent) takes
+    seconds; a signal then stops the certificate between two best responses instead of being ignored."""
+    config = tmp_path / "chain.yaml"
+    config.write_text(CHAIN)
+    out = tmp_path / "run"
+    proc = subprocess.Popen([*gnerun_command(), "solve", str(config), "--out", str(out), "-q"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, stdin=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 120
+        while not (out / "run.mcap").is_file() or len(read_run(out).messages.get("/solve/iterate", [])) < 2:
+            assert time.monotonic() < deadline and proc.poll() is None, proc.communicate()
+            time.sleep(0.1)
+        time.sleep(0.5)  # into the certificate
+        proc.send_signal(signal.SIGTERM)
+        _, stderr = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 130, stderr
+    assert stderr.strip().splitlines() == [f"interrupted: {out} holds a finished log and a summary with status "
+                                           "interrupted"]
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "interrupted" and summary["message"].startswith("interrupted (SIGTERM) after 1 ")
+    assert summary["certificate"]["kkt_residual"] is not None and "best_response_gap" not in summary["certificate"]
+    assert read_run(out).complete
+
+
 SWEEP = f"""
 base: {CONFIGS / "paper_study2.yaml"}
 set:
@@ -132,6 +177,79 @@ def test_a_signal_to_the_sweep_alone_stops_its_workers_too(sig: signal.Signals, 
     assert not list(out.rglob("*.tmp")) and not list(out.rglob(".gnerun.lock"))
 
 
+def _workers(pgid: int) -> list[int]:
+    """The pids of a sweep's workers (its children that run points)."""
+    out = subprocess.run(["ps", "-ww", "-o", "pid=,args=", "--ppid", str(pgid)], capture_output=True, text=True).stdout
+    return [int(line.split()[0]) for line in out.splitlines() if "spawn_main" in line]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("sig", "twice"), [(signal.SIGTERM, False), (signal.SIGHUP, False), (signal.SIGTERM, True)],
+                         ids=["SIGTERM", "SIGHUP", "SIGTERM-twice"])
+def test_a_signal_to_the_sweeps_process_group_stops_it_in_one_line(sig: signal.Signals, twice: bool,
+                                                                    tmp_path) -> None:
+    """As a closed terminal (SIGHUP) or `kill -- -PGID` (SIGTERM) sends it: to the sweep, its workers and the
+    resource tracker at once. A worker gets the sweep's own stop on top (twice: at once): it ends its point once,
+    with a finished log and a summary of status interrupted; no helper process dies loudly on the way."""
+    proc, out = _sweep_started(tmp_path)
+    try:
+        workers = _workers(proc.pid)
+        assert len(workers) == 2
+        deadline = time.monotonic() + 120
+        while sum(f.stat().st_size > 20_000 for f in out.glob("points/*/run.mcap")) < 2:  # both long runs under way
+            assert time.monotonic() < deadline and proc.poll() is None, proc.communicate()
+            time.sleep(0.1)
+        os.killpg(proc.pid, sig)
+        if twice:
+            for pid in workers:
+                os.kill(pid, sig)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        left = _group(proc.pid)
+        if left:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 130, err
+    assert err.strip().splitlines() == [f"interrupted: {out} holds the index of the finished points; run again to "
+                                        "resume"]
+    assert not left, left
+    statuses = []
+    for point in sorted((out / "points").iterdir()):
+        record = read_run(point)
+        assert record.complete and not record.damage, (point.name, record.damage)
+        statuses.append(json.loads((point / "summary.json").read_text())["status"])
+    assert sorted(statuses) == ["completed", "interrupted", "interrupted"]
+    assert not list(out.rglob("*.tmp")) and not list(out.rglob(".gnerun.lock"))
+
+
+@pytest.mark.slow
+def test_a_hang_up_of_a_dask_sweeps_process_group_stops_it_in_one_line(tmp_path) -> None:
+    """A closed terminal with a Dask LocalCluster: its processes start with hang-ups blocked as a local pool's do,
+    the sweep stops the cluster, and nothing prints a traceback (the points in progress are left as killed runs')."""
+    pytest.importorskip("dask.distributed")
+    spec = tmp_path / "sweep.yaml"
+    spec.write_text(SWEEP)
+    out = tmp_path / "out"
+    proc = subprocess.Popen([*gnerun_command(), "sweep", str(spec), "--out", str(out), "--workers", "2", "--executor",
+                             "dask"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            stdin=subprocess.DEVNULL, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 120
+        while not (out / "index.csv").is_file() or len(read_index(out)) < 1:
+            assert time.monotonic() < deadline and proc.poll() is None, proc.communicate()
+            time.sleep(0.2)
+        os.killpg(proc.pid, signal.SIGHUP)
+        _, err = proc.communicate(timeout=90)
+    finally:
+        time.sleep(1)  # the cluster's processes end as their parents do
+        left = _group(proc.pid)
+        if left:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 130, err
+    assert err.strip().splitlines() == [f"interrupted: {out} holds the index of the finished points; run again to "
+                                        "resume"]
+    assert not left, left
+
+
 @pytest.mark.slow
 def test_a_killed_sweep_leaves_no_worker_running(tmp_path) -> None:
     """SIGKILL gives the sweep no chance to stop its workers: they stop themselves (their parent died)."""
@@ -173,8 +291,13 @@ def test_a_sweep_worker_leaves_every_signal_to_the_sweep() -> None:
     handlers = {sig: signal.getsignal(sig) for sig in interrupt.SIGNALS}
     interrupt.leave_signals_to_the_parent()
     try:
-        with interrupt.Interrupt().installed():
+        assert not interrupt.request_stop("SIGTERM")  # no run listens
+        with interrupt.Interrupt().installed() as request:
             assert {sig: signal.getsignal(sig) for sig in interrupt.SIGNALS} == handlers
+            assert not request.requested
+            assert interrupt.request_stop("SIGTERM")  # the worker's stop, passed on as a request
+            assert request.requested and request.reason == "SIGTERM"
+        assert not interrupt.request_stop("SIGTERM")
     finally:
         interrupt._worker = False
     with interrupt.Interrupt().installed() as request:  # an ordinary process: each of them is a request

@@ -96,6 +96,18 @@ def test_validate_stays_fast_on_huge_configs(tmp_path) -> None:
     assert proc.returncode == 2 and "run.K: List should have at most 1000 items" in proc.stderr
 
 
+def test_validate_does_not_build_a_game_of_many_expression_nodes() -> None:
+    """30 cars of the merge: 15,900 unknowns (below the sparse warning) but 147,330 expression nodes, which took
+    validate 13 s to build; now a warning with the estimate, and validate answers without building."""
+    merge = str(CONFIGS / "algames_merge_n.yaml")
+    proc = _validate(merge, "--set", "game.parameters.N=30")
+    assert proc.returncode == 0, proc.stderr
+    [warning] = proc.stderr.strip().splitlines()
+    assert warning.startswith(f"warning: {merge}: a large game: estimated 15,900 unknowns in the sparse formulation") \
+        and "147,330 expression nodes" in warning and "(more than 100,000 expression nodes)" in warning, warning
+    assert "not built, as it is large" in proc.stdout
+
+
 def test_a_config_past_the_limit_is_refused_by_the_library_too() -> None:
     with pytest.raises(ConfigError, match="the game is too large: estimated 70,007 unknowns"):
         load_config(CONFIGS / "paper_study2.yaml", {"game.horizon": 10000, "solver.kind": "distributed"})

@@ -298,7 +298,11 @@ def test_ctrl_c_stops_the_sweep_and_its_workers_and_the_sweep_resumes(tmp_path: 
     assert all(line.strip().startswith("Z") for line in left.splitlines()), left  # no worker runs on
     sw = load_sweep(spec)
     assert json.loads((out / "sweep.json").read_text())["finished"] == 1
-    assert [p.params["run.steps"] for p in sw.points if (out / p.directory / "summary.json").is_file()] == [4]
+    # the points in progress ended as stopped runs, their summaries say so (one stopped before its run began has
+    # none), and they run again
+    summaries = {p.params["run.steps"]: out / p.directory / "summary.json" for p in sw.points}
+    assert json.loads(summaries.pop(4).read_text())["status"] == "completed"
+    assert all(json.loads(f.read_text())["status"] == "interrupted" for f in summaries.values() if f.exists())
     short = load_sweep(_spec(tmp_path, spec.read_text().replace("[4, 200000, 300000]", "[4, 6]"), "short.yaml"))
     again = run_sweep(short, out)
     assert (again.ran, again.skipped) == (1, 1)

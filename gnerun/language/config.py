@@ -303,24 +303,22 @@ class RunConfig(Strict):
 MAX_NAME_BYTES = 100  # runs/<name>-<UTC timestamp>/ stays well inside a file name's 255 bytes
 
 
-def _safe_name(name: str) -> str:
-    """A config's name is one plain path component: it names the run directory runs/<name>-<time>/."""
+def safe_name(name: str, names: str = "the run directory runs/<name>-<time>/") -> str:
+    """A config's name (or a sweep's) is one plain path component: it ``names`` a directory under runs/."""
     shown = repr(name) if len(name) <= 40 else repr(name[:37] + "...")
     if not name:
-        raise ValueError("the name is empty; it names the run directory runs/<name>-<time>/")
+        raise ValueError(f"the name is empty; it names {names}")
     if "\x00" in name:
         raise ValueError(f"{shown} contains a NUL character; a name is one file name")
     if "/" in name or "\\" in name:
-        raise ValueError(f"{shown} is not one path component (no / or \\): it names the run directory "
-                         "runs/<name>-<time>/")
+        raise ValueError(f"{shown} is not one path component (no / or \\): it names {names}")
     if name.startswith("."):
         raise ValueError(f"{shown} starts with '.'; a name is a visible file name (not . or .. or hidden)")
     if not name.isprintable():
         raise ValueError(f"{shown} contains control characters; a name is one printable file name")
     size = len(name.encode())
     if size > MAX_NAME_BYTES:
-        raise ValueError(f"{shown} is {size} bytes long; a name is at most {MAX_NAME_BYTES} (it names the run "
-                         "directory runs/<name>-<time>/)")
+        raise ValueError(f"{shown} is {size} bytes long; a name is at most {MAX_NAME_BYTES} (it names {names})")
     return name
 
 
@@ -329,7 +327,7 @@ Seed = Annotated[int, Field(ge=0, le=2**64 - 1, description="seed of numpy's ran
 
 class Config(Strict):
     version: Literal[1] = CONFIG_VERSION
-    name: Annotated[str, AfterValidator(_safe_name)] = "run"
+    name: Annotated[str, AfterValidator(safe_name)] = "run"
     game: Game
     solver: SolverConfig = Field(default_factory=SolverConfig)
     disturbance: DisturbanceConfig = Field(default_factory=DisturbanceConfig)
@@ -432,7 +430,9 @@ def override_label(key: str, value: Any) -> str:
 
 def _apply_override(data: dict, key: str, value: Any, smap: SourceMap, shown: str) -> None:
     """Set ``key`` (a dotted path) to ``value``; ``shown`` names the override in messages (``--set a.b=1``)."""
-    parts: list[str | int] = [int(p) if p.isdigit() else p for p in key.split(".")]
+    # a list index is a plain decimal number (Unicode digits and 20,000-digit numbers are names, found nowhere)
+    parts: list[str | int] = [int(p) if p.isascii() and p.isdigit() and len(p.lstrip("0")) <= 18 else p
+                              for p in key.split(".")]
     node: Any = data
     for i, part in enumerate(parts):
         last = i == len(parts) - 1

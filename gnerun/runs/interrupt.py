@@ -22,21 +22,32 @@ class Stopped(Exception):
 
 
 _worker = False  # this process is a sweep's worker: the sweep stops it
+_listening: list[Interrupt] = []  # in a sweep's worker: the run in progress, which the worker's stop asks to end
 
 
 def leave_signals_to_the_parent() -> None:
-    """In a sweep's worker: runs install no handlers (the sweep stops its workers itself, and a worker must not race
-    it to write a summary of an interrupted point)."""
+    """In a sweep's worker: runs install no handlers (the sweep stops its workers itself, with SIGTERM, and the
+    worker's own handler passes that on with :func:`request_stop`)."""
     global _worker
     _worker = True
+
+
+def request_stop(signal_name: str) -> bool:
+    """In a sweep's worker: ask the run in progress to end as a signal would (at the end of its iterate or sampling
+    time: a finished log and a summary of status interrupted); False if no run is listening."""
+    for interrupt in _listening:
+        interrupt.requested = True
+        interrupt.signal = signal_name
+    return bool(_listening)
 
 
 class Interrupt:
     """A stop request from SIGINT, SIGTERM or SIGHUP (see the module docstring).
 
-    Outside the main thread (where signals cannot be handled) and in a sweep's worker this does nothing and the
-    signals keep their handlers. A signal that the process ignores stays ignored (a job started in the background
-    by a script ignores Ctrl-C; one started by nohup ignores SIGHUP): the others still ask the run to stop.
+    Outside the main thread (where signals cannot be handled) this does nothing; in a sweep's worker the signals keep
+    their handlers and the worker's stop reaches the run through :func:`request_stop`. A signal that the process
+    ignores stays ignored (a job started in the background by a script ignores Ctrl-C; one started by nohup ignores
+    SIGHUP): the others still ask the run to stop.
     """
 
     def __init__(self) -> None:
@@ -55,8 +66,15 @@ class Interrupt:
 
     @contextlib.contextmanager
     def installed(self) -> Iterator[Interrupt]:
-        if threading.current_thread() is not threading.main_thread() or _worker:
+        if threading.current_thread() is not threading.main_thread():
             yield self
+            return
+        if _worker:
+            _listening.append(self)
+            try:
+                yield self
+            finally:
+                _listening.remove(self)
             return
 
         def handler(signum, frame) -> None:

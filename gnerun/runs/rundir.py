@@ -26,6 +26,29 @@ def default_run_dir(cfg: Config, root: str | Path = "runs") -> Path:
     return Path(root) / f"{cfg.name}-{stamp}"
 
 
+def claim_default_run_dir(cfg: Config, root: str | Path = "runs") -> Path:
+    """:func:`default_run_dir`, claimed by creating it: a run of the same config started in the same second (in
+    parallel, or just after) gets ``<name>-<timestamp>-2/`` and so on, instead of being refused by the other's
+    directory. Where no directory can be made, the path is returned for the run to say why."""
+    base = default_run_dir(cfg, root)
+    for i in range(1, 1000):
+        path = base if i == 1 else base.with_name(f"{base.name}-{i}")
+        try:
+            path.mkdir(parents=True)
+            return path
+        except FileExistsError:
+            continue
+        except OSError:
+            return path
+    return path
+
+
+def remove_if_empty(path: Path) -> None:
+    """Remove a claimed run directory that the run left empty (it stopped before writing anything)."""
+    with contextlib.suppress(OSError):
+        path.rmdir()  # only ever removes an empty directory
+
+
 @functools.lru_cache(maxsize=1)
 def git_describe() -> str:
     """``git describe`` of the gnerun sources, or "unknown" outside a checkout."""

@@ -328,6 +328,7 @@ def _solve(cfg: Config, game: CompiledGame, solver: SemismoothNewton, run: RunDi
 
     from ..solvers.certificate import NewtonResponses
 
+    responses = _StoppableResponses(NewtonResponses(cfg, game), interrupt)
     try:
         if exact:
             if on_stage is not None:
@@ -338,7 +339,7 @@ def _solve(cfg: Config, game: CompiledGame, solver: SemismoothNewton, run: RunDi
                 run.log("warning", f"the undisturbed reference solve did not converge ({ref.message}); "
                                    "error norms are not available")
         outcome = certified_solve(game, solver, solver.init(z0, x), x, record, note,
-                                  best_responses=cfg.run.certificate, responses=NewtonResponses(cfg, game),
+                                  best_responses=cfg.run.certificate, responses=responses,
                                   on_stage=on_stage)
     except Stopped:
         return _interrupted(cfg, game, run, history, z_star, ref, interrupt,
@@ -385,6 +386,19 @@ def _solve(cfg: Config, game: CompiledGame, solver: SemismoothNewton, run: RunDi
         run.log("info" if result.success else "warning", f"status {result.status}: {result.message}")
         run.write_summary(result.summary())
     return result
+
+
+class _StoppableResponses:
+    """The certificate's best responses (a NewtonResponses), with a stop request honoured between two of them: the
+    certificate of many agents takes as long as their solve."""
+
+    def __init__(self, responses, interrupt: Interrupt):
+        self.responses = responses
+        self.interrupt = interrupt
+
+    def best_response(self, *args, **kwargs):
+        self.interrupt.check()
+        return self.responses.best_response(*args, **kwargs)
 
 
 def _interrupted(cfg: Config, game: CompiledGame, run: RunDirectory | None, history: list[SSNState],

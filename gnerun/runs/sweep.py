@@ -31,13 +31,21 @@ from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from ..errors import ConfigError, InputError, Unavailable, shorten
-from ..files import read_json_object, replace_text, replacing, write_text
-from ..language.config import CONFIG_VERSION, Config, document_path, load_config, override_label
+from ..files import not_a_link, read_json_object, replace_text, replacing, write_text
+from ..language.config import (
+    CONFIG_VERSION,
+    MAX_NAME_BYTES,
+    Config,
+    document_path,
+    load_config,
+    override_label,
+    safe_name,
+)
 from ..language.yaml_source import SourceMap, dotted, read_yaml
-from .lock import DirectoryLock, contents, locked, release_all
+from .lock import DirectoryLock, contents, release_all
 
 MAX_POINTS = 10_000  # every point's config is checked before the sweep starts
 INDEX_CSV = "index.csv"
@@ -91,9 +99,13 @@ class Range(_Strict):
 Axis = Annotated[list[Any], Field(min_length=1, max_length=MAX_POINTS)] | Logspace | Linspace | Range
 
 
+def _sweep_name(name: str) -> str:
+    return safe_name(name, "the sweep directory runs/<name>/")
+
+
 class SweepSpec(_Strict):
     version: Literal[1] = CONFIG_VERSION
-    name: str = "sweep"
+    name: Annotated[str, AfterValidator(_sweep_name)] = "sweep"
     base: str = Field(description="the base config, relative to the sweep file")
     command: Literal["simulate", "solve"] = "simulate"
     set: dict[str, Any] = Field(default_factory=dict, description="overrides applied to every point")
@@ -166,8 +178,8 @@ def load_sweep(path: str | Path) -> Sweep:
         kind = "a config" if isinstance(data, dict) and "game" in data else "not a sweep"
         raise ConfigError([f"{file}:1:1: {kind}: a sweep spec has `base:` (a config) and `grid:` (field -> values); "
                            "run configs with `gnerun simulate` or `gnerun solve`"])
-    if "name" not in data:
-        data["name"] = Path(file).stem
+    if "name" not in data:  # the file's name, as a name
+        data["name"] = _directory_name(Path(file).stem)
     try:
         spec = SweepSpec.model_validate(data)
     except ValidationError as e:
@@ -223,7 +235,7 @@ def _point_config(base: Path, overrides: dict[str, Any], params: dict[str, Any],
         shown = ", ".join(f"{k}={v!r}" for k, v in params.items())
         for p in e.problems:
             for k, v in overrides.items():
-                prefix = f"{override_label(k, v)}: "
+                prefix = f"{shorten(override_label(k, v), 100)}: "  # as SourceMap.locate names it
                 if p.startswith(prefix):
                     where = smap.locate(("grid", k) if k in params else ("set", k))
                     p = f"{where}: {p[len(prefix):]} (point {i}: {shown})"
@@ -250,6 +262,8 @@ def run_point(task: dict[str, Any]) -> list[dict[str, Any]]:
     _point_in_progress = True
     try:
         try:  # the point's directory is written by this point alone
+            for part in (out.parent, out):  # points/ and the point's own, never a link planted to elsewhere
+                not_a_link(part)
             if out.exists() and not out.is_dir():
                 raise InputError(f"{out}: exists and is not a directory")
             out.mkdir(parents=True, exist_ok=True)
@@ -258,7 +272,7 @@ def run_point(task: dict[str, Any]) -> list[dict[str, Any]]:
             message = str(e) if isinstance(e, InputError) else f"{out}: cannot write the point: {e.strerror or e}"
             return [_row(task, K=None, status="error", message=message, wall=time.perf_counter() - t0)]
         return _run_point(task, out, t0)
-    except _Stopped:
+    except (_Stopped, KeyboardInterrupt):  # stopped: the point ended (interrupted) or was cut short
         _abandon(143)
     finally:
         _point_in_progress = False
@@ -358,25 +372,33 @@ STOP_GRACE_S = 5.0  # a stopped worker closes its point within this time, or exi
 
 
 class _Stopped(BaseException):
-    """SIGTERM in a worker: unwinds the point in progress (its log closed, its lock released), then the worker
+    """SIGTERM in a worker before its run listens for a stop: unwinds the point (its lock released), then the worker
     exits (the executor would otherwise take it as the point's result and go on to the next)."""
 
 
 def _worker_start(parent: int) -> None:
-    """A worker leaves Ctrl-C and a terminal's hang-up to the sweep, which stops it with SIGTERM: the point in
-    progress then closes its log and its directory's lock on the way out (no summary: it runs again on resume).
-    On Linux a worker also dies with the sweep when the sweep is killed (SIGKILL): no worker outlives it."""
+    """A worker leaves Ctrl-C and a terminal's hang-up to the sweep, which stops it with SIGTERM: the run in progress
+    then ends as a stopped run does (at the end of its iterate or sampling time: a finished log, a summary of status
+    interrupted, so that the point runs again on resume), its directory's lock is released, and the worker exits.
+    A run that does not end within ``STOP_GRACE_S`` is left as a killed run's log is. On Linux a worker also dies
+    with the sweep when the sweep is killed (SIGKILL): no worker outlives it."""
     import signal
     import threading
 
-    from .interrupt import leave_signals_to_the_parent
+    from .interrupt import leave_signals_to_the_parent, request_stop
+
+    stopping = []
 
     def stop(signum, frame) -> None:
         if not _point_in_progress:  # idle: nothing to close (and the executor's exit would wait on a dead sweep)
             os._exit(128 + signum)
-        # the exception may land where Python ignores it (a finalizer): the worker then ends after a grace time
+        if stopping:  # a stop on top (the sweep's, after the process group's): the point is ending already
+            return
+        stopping.append(signum)
         threading.Timer(STOP_GRACE_S, _abandon, (128 + signum,)).start()
-        raise _Stopped
+        # a request, not an exception: one raised here could land inside a write of the log and leave half a record
+        if not request_stop(signal.Signals(signum).name):
+            raise _Stopped  # no run is listening yet (its config is being loaded or its game compiled)
 
     leave_signals_to_the_parent()
     signal.signal(signal.SIGINT, signal.SIG_IGN)
@@ -389,6 +411,30 @@ def _worker_start(parent: int) -> None:
             ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
     if os.getppid() != parent:  # the sweep died before the line above
         os._exit(1)
+
+
+def stop_resource_tracker() -> None:
+    """Stop multiprocessing's resource tracker, if the sweep started one, and wait until it has exited: the command
+    line calls this once its pool is gone, so that the sweep ends after every process it started (the tracker
+    otherwise exits only once the sweep has, outside it). Not for a library caller, whose own resources may still
+    be registered with the tracker."""
+    from multiprocessing import resource_tracker
+
+    tracker = getattr(resource_tracker, "_resource_tracker", None)
+    fd, pid = getattr(tracker, "_fd", None), getattr(tracker, "_pid", None)
+    if fd is None or pid is None:
+        return
+    with contextlib.suppress(OSError):
+        os.close(fd)  # the tracker ends once every copy of this pipe is closed (a worker that lingers holds one)
+    tracker._fd = tracker._pid = None
+    deadline = time.monotonic() + STOP_GRACE_S  # never waits long for it
+    while time.monotonic() < deadline:
+        try:
+            if os.waitpid(pid, os.WNOHANG)[0]:
+                return
+        except ChildProcessError:
+            return
+        time.sleep(0.01)
 
 
 def available_cpus() -> int:
@@ -405,10 +451,12 @@ def _local(tasks: list[dict[str, Any]], workers: int) -> Completed:
 
     # spawn: workers start clean (no forked BLAS or CasADi state), as on any platform; they stay in the sweep's
     # process group, so that a signal to the group (a terminal's Ctrl-C, a scheduler's stop) reaches them too
-    pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
-                               initializer=_worker_start, initargs=(os.getpid(),))
+    with _hangups_blocked():  # the pool's helpers start with a hang-up blocked (see _hangups_blocked)
+        pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
+                                   initializer=_worker_start, initargs=(os.getpid(),))
     try:
-        futures = {pool.submit(run_point, t): t for t in tasks}
+        with _hangups_blocked():
+            futures = {pool.submit(run_point, t): t for t in tasks}
         for f in as_completed(futures):
             task = futures[f]
             try:
@@ -430,6 +478,24 @@ def _local(tasks: list[dict[str, Any]], workers: int) -> Completed:
         raise
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
+
+
+@contextlib.contextmanager
+def _hangups_blocked() -> Iterator[None]:
+    """SIGHUP blocked while the pool starts its processes, which inherit the block: a closed terminal hangs up the
+    whole process group, and multiprocessing's resource tracker (which ignores SIGINT and SIGTERM only) would die of
+    it and be started again with warnings and tracebacks on stderr; a worker ignores hang-ups once it runs. The sweep
+    itself gets a hang-up sent meanwhile once the block ends."""
+    import signal
+
+    if not hasattr(signal, "pthread_sigmask") or not hasattr(signal, "SIGHUP"):
+        yield
+        return
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGHUP})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
 
 
 def _reaped(proc, grace: float = 2 * STOP_GRACE_S) -> None:
@@ -458,9 +524,10 @@ def _dask(tasks: list[dict[str, Any]], workers: int, address: str | None) -> Com
             import logging
 
             # warnings of its own shutdown (Ctrl-C cancels the tasks in progress) are not the user's business
-            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
-                                   silence_logs=logging.ERROR)
-            client = Client(cluster)
+            with _hangups_blocked():  # its processes, as a local pool's (see _hangups_blocked)
+                cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                       dashboard_address=None, silence_logs=logging.ERROR)
+                client = Client(cluster)
         elif Path(address).is_file():  # a scheduler file (`dask scheduler --scheduler-file F`), as on HPC
             client = Client(scheduler_file=address, timeout="20s")
         else:
@@ -518,7 +585,7 @@ def _finished(sweep_dir: Path, point: Point) -> tuple[dict[str, Any], dict[str, 
 def _task(sweep: Sweep, sweep_dir: Path, p: Point) -> dict[str, Any]:
     return {"index": p.index, "params": p.params, "overrides": p.overrides, "config_hash": p.config_hash,
             "directory": p.directory, "base": str(sweep.base), "command": sweep.spec.command,
-            "out": str((sweep_dir / p.directory).resolve())}
+            "out": str(sweep_dir.resolve() / p.directory)}  # the point's own components unresolved: see run_point
 
 
 def check_executor(executor: str, workers: int, address: str | None, force_workers: bool = True) -> None:
@@ -549,8 +616,14 @@ def run_sweep(sweep: Sweep, out: str | Path, *, executor: str = "local", workers
         sweep_dir.mkdir(parents=True, exist_ok=True)
     except OSError as e:
         raise InputError(f"{sweep_dir}: cannot write the sweep directory: {e.strerror or e}") from None
-    with locked(sweep_dir, "sweep directory"):
+    try:
+        lock = DirectoryLock.acquire(sweep_dir, "sweep directory")
+    except OSError as e:
+        raise InputError(f"{sweep_dir}: cannot write the sweep directory: {e.strerror or e}") from None
+    try:
         return _run_sweep(sweep, sweep_dir, executor, workers, address, force, progress)
+    finally:
+        lock.release()
 
 
 def _run_sweep(sweep: Sweep, sweep_dir: Path, executor: str, workers: int, address: str | None, force: bool,
@@ -649,12 +722,19 @@ def _parquet_value(v: Any) -> Any:
 
 
 def read_index(sweep_dir: str | Path) -> list[dict[str, Any]]:
-    """index.csv as rows of typed values (numbers as numbers, empty as None)."""
+    """index.csv as rows of typed values (numbers as numbers, empty as None); a file that is not one (not text, not
+    a regular file, too large) is an InputError that says it is damaged."""
+    from ..files import MAX_JSON_BYTES, read_regular
+
     path = Path(sweep_dir) / INDEX_CSV
-    if not path.is_file():
+    if not path.exists():
         raise InputError(f"{sweep_dir}: no sweep index here (expected {INDEX_CSV})")
-    with path.open(newline="") as f:
-        return [{k: _parse_cell(v) for k, v in r.items()} for r in csv.DictReader(f)]
+    data = read_regular(path, MAX_JSON_BYTES, INDEX_CSV)
+    try:
+        return [{k: _parse_cell(v) for k, v in r.items()}
+                for r in csv.DictReader(io.StringIO(data.decode(), newline=""))]
+    except (UnicodeDecodeError, csv.Error) as e:
+        raise InputError(f"{path}: damaged {INDEX_CSV}: {str(e).splitlines()[0][:80]}") from None
 
 
 def _parse_cell(text: str) -> Any:
@@ -690,5 +770,10 @@ def loglog_slope(x: list[float], y: list[float]) -> float | None:
 
 def default_sweep_dir(sweep: Sweep) -> Path:
     """runs/<sweep name>/: one stable place, so that running the sweep again resumes it."""
-    name = re.sub(r"[^A-Za-z0-9._-]+", "-", sweep.spec.name).strip("-") or "sweep"
-    return Path("runs") / name
+    return Path("runs") / _directory_name(sweep.spec.name)
+
+
+def _directory_name(name: str) -> str:
+    """``name`` as one plain path component of letters, digits and ``._-`` (never ``.`` or ``..``)."""
+    plain = re.sub(r"[^A-Za-z0-9._-]+", "-", name).strip("-").lstrip(".")[:MAX_NAME_BYTES].strip("-")
+    return plain or "sweep"

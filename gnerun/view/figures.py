@@ -562,15 +562,29 @@ def sweep_figures(sweep_dir: str | Path) -> dict[str, object]:
     axes, name = meta.get("axes"), meta.get("name")
     if not isinstance(axes, list) or not all(isinstance(a, str) for a in axes) or not isinstance(name, str):
         raise InputError(f"{Path(sweep_dir) / SWEEP_JSON}: damaged {SWEEP_JSON}: no sweep name and axes in it")
-    rows = read_index(sweep_dir)
+    rows = [r for r in read_index(sweep_dir) if _as_written(r, axes)]
     figures: dict[str, object] = {}
     for scale_axis in SCALE_AXES:
-        if scale_axis in axes:
-            figures[f"{name}-iss"] = iss_figure(name, rows, axes, scale_axis)
+        scaled = [r for r in rows if r.get(scale_axis) is not None]
+        if scale_axis in axes and scaled:
+            figures[f"{name}-iss"] = iss_figure(name, scaled, axes, scale_axis)
             break
-    if "run.K" in axes:
-        figures[f"{name}-k"] = k_figure(name, rows, axes)
+    budgets = [r for r in rows if r.get("K") is not None]  # a solve's rows have no K
+    if "run.K" in axes and budgets:
+        figures[f"{name}-k"] = k_figure(name, budgets, axes)
     return figures
+
+
+def _as_written(row: dict, axes: list[str]) -> bool:
+    """A row of the index with the types gnerun writes (an edited one is left out, as a damaged message is): K an
+    integer or empty, the drawn errors and a disturbance scale numbers or empty, the parameters' values hashable."""
+    def number(v) -> bool:
+        return v is None or isinstance(v, int | float) and not isinstance(v, bool)
+
+    K = row.get("K")
+    return ((K is None or isinstance(K, int) and not isinstance(K, bool))
+            and all(number(row.get(k)) for k in ("max_e", "asymptotic_e", *SCALE_AXES))
+            and all(isinstance(row.get(a), str | int | float | list | type(None)) for a in axes))
 
 
 def file_stem(name: str) -> str:
@@ -584,11 +598,13 @@ def write_figures(paths: list[str | Path], out: str | Path, formats: list[str],
     """Draw and save; returns the files written."""
     import matplotlib.pyplot as plt
 
-    out = output_directory(out, "figures folder")
+    output_directory(out, "figures folder", create=False)  # checked before any work, made once there is a figure
     written = []
     drawn = make_figures(paths) if paths else {}
     for s in sweeps:
         drawn.update(sweep_figures(s))
+    if drawn:
+        out = output_directory(out, "figures folder")
     for stem, fig in drawn.items():
         for fmt in formats:
             target = out / f"{file_stem(stem)}.{fmt}"

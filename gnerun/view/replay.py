@@ -389,12 +389,13 @@ def blueprint(contents: Contents):
     return rrb.Blueprint(*parts, collapse_panels=False)
 
 
-def record(paths: list[str | Path], rec) -> Contents:
-    """Log every run into the recording ``rec``; returns what the figure views should show."""
+def record(paths: list[str | Path | RunRecord], rec) -> Contents:
+    """Log every run (a path, or a log read already) into the recording ``rec``; returns what the figure views
+    should show."""
     contents = Contents()
     used: set[str] = set()
     for path in paths:
-        run = read_run(path)
+        run = path if isinstance(path, RunRecord) else read_run(path)
         base = _entity_name(_names(run)[0])
         prefix, i = base, 2
         while prefix in used:
@@ -413,10 +414,11 @@ def _stream():
 
 def save(paths: list[str | Path], target: str | Path) -> Path:
     """Write a Rerun recording (.rrd) of the runs, with the figure blueprint."""
+    runs = [read_run(path) for path in paths]  # a damaged log is refused before the recording is begun
     target = output_file(target, "recording")
     rec = _stream()
     rec.save(target)
-    rec.send_blueprint(blueprint(record(paths, rec)))
+    rec.send_blueprint(blueprint(record(runs, rec)))
     rec.flush()
     rec.disconnect()
     return target
