@@ -251,6 +251,25 @@ def fresh_solve(cfg, game: CompiledGame, repeats: int) -> tuple[float, object]:
     return statistics.median(samples[1:]), state
 
 
+def paired_fresh_solves(cfgs: list, game: CompiledGame, repeats: int) -> list[tuple[float, object]]:
+    """:func:`fresh_solve` for several configs of one game, their solves taken in turn (a slow moment of a shared
+    machine then slows each of them alike, not the one measured at that time): per config, the median time and the
+    final state."""
+    samples: list[list[float]] = [[] for _ in cfgs]
+    states: list = [None] * len(cfgs)
+    for r in range(repeats + 1):
+        for i, cfg in enumerate(cfgs):
+            solver = make_solver(cfg, game)
+            t0 = time.perf_counter()
+            state = solver.init()
+            while not solver.terminate(state)[0]:
+                state = solver.step(state)
+            if r:  # the first round warms up
+                samples[i].append(time.perf_counter() - t0)
+            states[i] = solver.finish(state)
+    return [(statistics.median(ts), st) for ts, st in zip(samples, states, strict=True)]
+
+
 def robust_rows(row, reps: int, quick: bool) -> None:
     """The globalized default where the local method converges too (its cost per solve, target <= 2x), the bounded
     LQ family against nashopt (target: at least as fast as its fastest successful method), and the time per
@@ -266,10 +285,10 @@ def robust_rows(row, reps: int, quick: bool) -> None:
     worst = 0.0
     for name, cfg in cases:
         game = compile_game(cfg)
-        t_local, s_local = fresh_solve(with_method(cfg, "none"), game, max(3, reps // 3))
+        (t_local, s_local), (t_default, s_default) = paired_fresh_solves(
+            [with_method(cfg, "none"), with_method(cfg, "auto")], game, max(5, reps))
         if s_local.status != Status.CONVERGED:
             continue
-        t_default, s_default = fresh_solve(with_method(cfg, "auto"), game, max(3, reps // 3))
         per = (t_default / max(s_default.k, 1)) / (t_local / max(s_local.k, 1))
         worst = max(worst, t_default / t_local)
         row(f"globalized (default) vs local, where both converge: {name}", t_default, "local", t_local,

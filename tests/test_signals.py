@@ -161,20 +161,30 @@ def _sweep_started(tmp_path: Path) -> tuple[subprocess.Popen, Path]:
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP], ids=["SIGTERM", "SIGHUP"])
 def test_a_signal_to_the_sweep_alone_stops_its_workers_too(sig: signal.Signals, tmp_path) -> None:
     proc, out = _sweep_started(tmp_path)
+    err, left = _stopped(proc, lambda: proc.send_signal(sig))  # to the sweep's process only, as `kill PID` does
+    _assert_stopped_in_one_line(proc, out, err, left)
+    assert json.loads((out / "sweep.json").read_text())["finished"] == 1
+    assert [r["run.steps"] for r in read_index(out)] == [4]
+    assert not list(out.rglob("*.tmp")) and not list(out.rglob(".gnerun.lock"))
+
+
+def _stopped(proc: subprocess.Popen, stop) -> tuple[str, list]:
+    """``stop()`` a running sweep and wait for it: its stderr, and the processes of its group left (then killed)."""
     try:
-        proc.send_signal(sig)  # to the sweep's process only, as `kill PID` or a scheduler does
+        stop()
         _, err = proc.communicate(timeout=60)
     finally:
         left = _group(proc.pid)
         if left:
             os.killpg(proc.pid, signal.SIGKILL)
+    return err, left
+
+
+def _assert_stopped_in_one_line(proc: subprocess.Popen, out: Path, err: str, left: list) -> None:
     assert proc.returncode == 130, err
     assert err.strip().splitlines() == [f"interrupted: {out} holds the index of the finished points; run again to "
                                         "resume"]
     assert not left, left
-    assert json.loads((out / "sweep.json").read_text())["finished"] == 1
-    assert [r["run.steps"] for r in read_index(out)] == [4]
-    assert not list(out.rglob("*.tmp")) and not list(out.rglob(".gnerun.lock"))
 
 
 def _workers(pgid: int) -> list[int]:
@@ -199,19 +209,18 @@ def test_a_signal_to_the_sweeps_process_group_stops_it_in_one_line(sig: signal.S
         while sum(f.stat().st_size > 20_000 for f in out.glob("points/*/run.mcap")) < 2:  # both long runs under way
             assert time.monotonic() < deadline and proc.poll() is None, proc.communicate()
             time.sleep(0.1)
+    except BaseException:
+        _stopped(proc, lambda: os.killpg(proc.pid, signal.SIGKILL))
+        raise
+
+    def stop() -> None:
         os.killpg(proc.pid, sig)
         if twice:
             for pid in workers:
                 os.kill(pid, sig)
-        _, err = proc.communicate(timeout=60)
-    finally:
-        left = _group(proc.pid)
-        if left:
-            os.killpg(proc.pid, signal.SIGKILL)
-    assert proc.returncode == 130, err
-    assert err.strip().splitlines() == [f"interrupted: {out} holds the index of the finished points; run again to "
-                                        "resume"]
-    assert not left, left
+
+    err, left = _stopped(proc, stop)
+    _assert_stopped_in_one_line(proc, out, err, left)
     statuses = []
     for point in sorted((out / "points").iterdir()):
         record = read_run(point)
