@@ -89,6 +89,28 @@ def test_the_demo_stays_safe_at_every_budget_and_reports_its_violations(tmp_path
         assert len(s["constraint_violation"]) == len(s["status"]) == 50
 
 
+def test_a_violation_made_by_the_plant_disturbance_is_reported(tmp_path) -> None:
+    """The violation at t is measured at the state the plant reached, w(t) included: the demo's players meet at their
+    distance of 1, where the noise on their positions pushes them closer than any plan did."""
+    from gnerun.log.mcap_log import read_messages
+
+    noise = {"kind": "gaussian", "scale": [0.02, 0.02, 0, 0, 0.02, 0.02, 0, 0], "seed": 1}
+    r = simulate(load_config(DEMO, {"run.K": [3], "run.steps": 30, "run.reference": "none",
+                                    "disturbance.plant": noise}), out=tmp_path / "run")[3]
+    states = [m for topic, m, _ in read_messages(tmp_path / "run" / "run.mcap") if topic == "/K3/mpc/state"]
+    xs = np.array([m["x"] for m in states])
+    np.testing.assert_array_equal(xs, r.x)
+    assert np.abs(r.w).max() > 0
+    expected = np.maximum(1.0 - _distances(xs[1:]) ** 2, 0.0)
+    expected = np.maximum(expected, np.max(np.abs(xs[1:, [0, 1, 4, 5]]) - EDGE, axis=1).clip(min=0.0))
+    np.testing.assert_allclose([m["constraint_violation"] for m in states[:-1]], expected, atol=1e-12)
+    assert expected.max() > 1e-3 and r.max_constraint_violation == pytest.approx(expected.max(), abs=1e-12)
+    # what the model alone would have reached from x(t) with u(t) is not what is reported
+    game = compile_game(load_config(DEMO))
+    model = np.array([game.step_dynamics(xs[t], r.u[t]) for t in range(30)])
+    assert not np.allclose(np.maximum(1.0 - _distances(model) ** 2, 0.0), expected, atol=1e-6)
+
+
 def test_under_the_papers_rule_the_demo_flies_off_at_K1() -> None:
     """The paper's rule on the same game: K = 1 applies iterates whose inputs drive the players out of the arena."""
     sim = simulate(load_config(DEMO, {"run.K": [1], "run.steps": 50, "run.reference": "none", **PAPER_RULE}))
