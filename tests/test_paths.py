@@ -99,3 +99,32 @@ def test_a_vehicles_own_position_constraints_are_found_and_no_others() -> None:
     cfg["game"]["agents"][0]["constraints"] += ["v1 <= 1", "px1 + w1 <= 3", "px1 - px2 >= 0", "py1 <= tau + 1"]
     again = [(c, con.text) for c, con in position_constraints(cfg, cars)]
     assert again == [*found[:3], (0, "py1 <= tau + 1"), *found[3:]]
+
+
+def _loop_log(path: Path, config: str) -> None:
+    from gnerun.log.mcap_log import RunLog
+    from gnerun.log.messages import MpcState
+
+    with RunLog(path, config_yaml=config, metadata={"version": "0", "log_time": "simulated"}) as log:
+        for t in range(5):
+            log.write("/K1/mpc/state", MpcState(t=t, x=[0.1 * t, 0.0, 1.0, 0.2], u=[0.0]), log_time=t * 10**9)
+
+
+def test_a_logs_config_of_the_wrong_shape_is_left_out_and_odd_constraints_are_not_drawn(tmp_path: Path) -> None:
+    """A log's config is data: fields of the wrong type leave the config out (noted as damage: no paths figure),
+    and constraints that do not parse or evaluate, or are no text, are not drawn; the others are."""
+    from gnerun.log.mcap_log import read_run
+
+    for n, game in enumerate(["{states: [px1, py1], agents: ab}", "{states: [px1, py1], parameters: [1, 2]}",
+                              "{states: [px1, py1], agents: [{name: a, constraints: 5}]}",
+                              "{states: [px1, py1], shared_constraints: 7}"]):
+        _loop_log(tmp_path / f"wrong{n}.mcap", f"name: w\ngame: {game}\n")
+        assert any("has the wrong type" in d for d in read_run(tmp_path / f"wrong{n}.mcap").damage), game
+        assert not any(k.endswith("-paths") for k in make_figures([tmp_path / f"wrong{n}.mcap"]))
+    config = ("name: odd\ngame: {kind: dynamic, states: [px1, py1, px2, py2], parameters: {e: 1.5, s: text},\n"
+              "  agents: [{name: a, constraints: [5, {stages: [0]}, 'px1 <= (', 'px1 <= log(-1) + e', 'px1 <= s',\n"
+              "                                   {expr: 'px1 <= e'}]}]}\n")
+    _loop_log(tmp_path / "odd.mcap", config)
+    ax_p, _ = make_figures([tmp_path / "odd.mcap"])["odd-paths"].axes
+    [edge] = _edges(ax_p)
+    np.testing.assert_allclose(edge.get_xdata(), 1.5, atol=1e-9)  # px1 <= e, the only one drawn
