@@ -16,6 +16,7 @@ _API = {
     "simulate": "gnerun.runs.closed_loop",
     "Simulation": "gnerun.runs.closed_loop",
     "ClosedLoopResult": "gnerun.runs.closed_loop",
+    "StepReport": "gnerun.runs.closed_loop",
     "SemismoothNewton": "gnerun.solvers.ssn",
     "Status": "gnerun.solvers.ssn",
     "ConfigError": "gnerun.errors",

@@ -17,7 +17,7 @@ from gnerun.log.mcap_log import read_messages
 from gnerun.runs.closed_loop import simulate
 from gnerun.runs.solving import solve
 
-from .conftest import CONFIGS, run_cli
+from .conftest import CONFIGS, gnerun_command, run_cli
 
 STUDY2 = CONFIGS / "paper_study2.yaml"
 
@@ -306,8 +306,108 @@ def test_without_reference_and_certificate_the_same_solution_and_loop(tmp_path: 
         assert set(b[K].reference_status) == {"skipped"}
 
 
+def test_reference_none_never_solves_for_z_star(monkeypatch: pytest.MonkeyPatch) -> None:
+    """run.reference: none pays for no exact solution: neither simulate nor solve calls the reference solve (which
+    fails here), and the certificate without best responses computes none."""
+    from gnerun.runs import closed_loop, solving
+    from gnerun.solvers import certificate
+
+    def refused(*args, **kwargs):
+        raise AssertionError("the reference solve was called")
+
+    monkeypatch.setattr(closed_loop, "reference_solution", refused)
+    monkeypatch.setattr(solving, "reference_solution", refused)
+    monkeypatch.setattr(certificate, "best_response", refused)
+    monkeypatch.setattr(certificate.NewtonResponses, "best_response", refused)
+    cfg = load_config(CONFIGS / "vehicles.yaml", {"run.steps": 4, "run.K": [2], "run.reference": "none",
+                                                  "run.certificate": False})
+    assert set(simulate(cfg)[2].reference_status) == {"skipped"}
+    assert solve(cfg).status == "converged"
+    with pytest.raises(AssertionError, match="reference solve was called"):  # and the default does call it
+        simulate(load_config(CONFIGS / "vehicles.yaml", {"run.steps": 4, "run.K": [2]}))
+
+
 def test_cli_says_the_best_responses_were_not_checked(tmp_path: Path) -> None:
     proc = run_cli("solve", str(CONFIGS / "harker.yaml"), "--set", "run.certificate=false", "--set",
                    "run.reference=none", "--out", str(tmp_path / "run"))
     assert proc.returncode == 0, proc.stderr
     assert "best responses not checked (run.certificate: false)" in proc.stdout
+
+
+def test_cli_end_table_gives_each_Ks_fallbacks_and_worst_violation(tmp_path: Path) -> None:
+    """The end table's fallback and violation columns, and the row and time of each violation above rounding, are
+    those of summary.json: the demo (two fallback steps at K = 1) and Study 2 (the paper's rule breaks agent 1's
+    constraint at K = 1)."""
+    for config, K, steps in (("mcp_demo.yaml", "[1,3]", 12), ("paper_study2.yaml", "[1,3]", 6)):
+        out = tmp_path / config
+        proc = run_cli("simulate", str(CONFIGS / config), "--out", str(out), "--set", f"run.K={K}", "--set",
+                       f"run.steps={steps}", "--set", "run.reference=none")
+        assert proc.returncode == 0, proc.stderr
+        by_K = json.loads((out / "summary.json").read_text())["by_K"]
+        lines = proc.stdout.splitlines()
+        header = next(i for i, s in enumerate(lines) if s.split()[:3] == ["K", "max", "e"])
+        assert lines[header].split()[-4:] == ["failed", "fallback", "max", "violation"]
+        for row in (s.split() for s in lines[header + 1: header + 3]):
+            summary = by_K[row[0]]
+            assert int(row[-3]) == len(summary["failed_steps"]) and int(row[-2]) == len(summary["fallback_steps"])
+            assert float(row[-1]) == pytest.approx(summary["max_constraint_violation"], rel=1e-3, abs=1e-300)
+        worst = [s for s in lines if s.startswith("K=") and "largest violation" in s]
+        expected = []
+        for k, summary in by_K.items():
+            v = summary["constraint_violation"]
+            if max(v) > 1e-9:
+                t = int(np.argmax(v))
+                expected.append(f"K={k}: largest violation {max(v):.3e} at t = {t}: {summary['worst_constraint'][t]}")
+        assert worst == expected
+    assert "K=1: largest violation 1.518e+00 at t = 1: agent1: u1 + u2 + u3 <= 1 [tau=0]" in worst
+
+
+def _in_a_terminal(*args: str, timeout: float = 120) -> tuple[int, str]:
+    """The CLI with its output on a pseudo-terminal (stdout and stderr), as a user at a terminal sees it."""
+    import os
+    import pty
+    import subprocess
+    import threading
+
+    master, slave = pty.openpty()
+    proc = subprocess.Popen([*gnerun_command(), *args], stdin=subprocess.DEVNULL, stdout=slave, stderr=slave,
+                            env={**os.environ, "COLUMNS": "120", "TERM": "xterm"})
+    os.close(slave)
+    chunks: list[bytes] = []
+
+    def read() -> None:
+        while True:
+            try:
+                data = os.read(master, 65536)
+            except OSError:  # the process has ended and closed the terminal
+                return
+            if not data:
+                return
+            chunks.append(data)
+
+    reader = threading.Thread(target=read)
+    reader.start()
+    try:
+        code = proc.wait(timeout)
+    finally:
+        reader.join(10)
+        os.close(master)
+    return code, b"".join(chunks).decode(errors="replace")
+
+
+def test_a_terminal_sees_progress_of_simulate_and_of_a_long_solve(tmp_path: Path) -> None:
+    """At a terminal, simulate shows a progress bar per K, and solve says what it does besides iterating (the exact
+    solution, the certificate) as it starts it; --quiet shows neither."""
+    code, text = _in_a_terminal("simulate", str(STUDY2), "--out", str(tmp_path / "s"), "--set", "run.K=[1,3]",
+                                "--set", "run.steps=6")
+    assert code == 0, text
+    assert "━" in text and "K=1" in text and "K=3" in text and "6/6" in text
+    code, text = _in_a_terminal("solve", str(CONFIGS / "harker.yaml"), "--out", str(tmp_path / "h"))
+    assert code == 0, text
+    stages = [s.strip() for s in text.splitlines() if s.startswith("... ")]
+    assert stages == ["... solving for the exact solution z* of the error norms (run.reference: none skips it)",
+                      "... checking the best response of each of 2 agents (run.certificate: false skips it)"]
+    assert text.index("... checking") < text.index("status: converged")
+    code, text = _in_a_terminal("simulate", str(STUDY2), "--out", str(tmp_path / "q"), "--set", "run.steps=2",
+                                "--quiet")
+    assert code == 0 and text.strip() == "", text

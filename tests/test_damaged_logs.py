@@ -144,7 +144,9 @@ def edited() -> Iterator[tuple[str, bytes]]:
         yield f"edited message {i} alone, unchunked", _written([item], chunked=False)
     configs = [b"!!python/object/apply:os.system ['echo hi']", b"- a\n- b\n", b"[" * 20000 + b"]" * 20000,
                b"a: " + b"{b: " * 5000 + b"1" + b"}" * 5000, b"\xff\xfe", b"", b"name: [1, 2", b"x: *nope",
-               b"a: &a [*a]", b"game: {kind: dynamic, states: 7, agents: {x: 1}}"]
+               b"a: &a [*a]", b"game: {kind: dynamic, states: 7, agents: {x: 1}}", b"game: {states: [x1], agents: ab}",
+               b"game: {states: [px1, py1], parameters: [1, 2], agents: [{name: a, constraints: 5}]}",
+               b"game: {states: [px1, py1], agents: [{name: a, constraints: ['px1 <= ']}], shared_constraints: 7}"]
     for i, config in enumerate(configs):
         yield f"edited config {i}", _written(good, config=config)
 

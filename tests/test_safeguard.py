@@ -89,12 +89,51 @@ def test_the_demo_stays_safe_at_every_budget_and_reports_its_violations(tmp_path
         assert len(s["constraint_violation"]) == len(s["status"]) == 50
 
 
-def test_without_the_safeguard_the_demo_flies_off_at_K1() -> None:
+def test_a_violation_made_by_the_plant_disturbance_is_reported(tmp_path) -> None:
+    """The violation at t is measured at the state the plant reached, w(t) included: the demo's players meet at their
+    distance of 1, where the noise on their positions pushes them closer than any plan did."""
+    from gnerun.log.mcap_log import read_messages
+
+    noise = {"kind": "gaussian", "scale": [0.02, 0.02, 0, 0, 0.02, 0.02, 0, 0], "seed": 1}
+    r = simulate(load_config(DEMO, {"run.K": [3], "run.steps": 30, "run.reference": "none",
+                                    "disturbance.plant": noise}), out=tmp_path / "run")[3]
+    states = [m for topic, m, _ in read_messages(tmp_path / "run" / "run.mcap") if topic == "/K3/mpc/state"]
+    xs = np.array([m["x"] for m in states])
+    np.testing.assert_array_equal(xs, r.x)
+    assert np.abs(r.w).max() > 0
+    expected = np.maximum(1.0 - _distances(xs[1:]) ** 2, 0.0)
+    expected = np.maximum(expected, np.max(np.abs(xs[1:, [0, 1, 4, 5]]) - EDGE, axis=1).clip(min=0.0))
+    np.testing.assert_allclose([m["constraint_violation"] for m in states[:-1]], expected, atol=1e-12)
+    assert expected.max() > 1e-3 and r.max_constraint_violation == pytest.approx(expected.max(), abs=1e-12)
+    # what the model alone would have reached from x(t) with u(t) is not what is reported
+    game = compile_game(load_config(DEMO))
+    model = np.array([game.step_dynamics(xs[t], r.u[t]) for t in range(30)])
+    assert not np.allclose(np.maximum(1.0 - _distances(model) ** 2, 0.0), expected, atol=1e-6)
+
+
+def test_under_the_papers_rule_the_demo_flies_off_at_K1() -> None:
     """The paper's rule on the same game: K = 1 applies iterates whose inputs drive the players out of the arena."""
     sim = simulate(load_config(DEMO, {"run.K": [1], "run.steps": 50, "run.reference": "none", **PAPER_RULE}))
     r = sim[1]
     assert np.abs(r.x[:, [0, 1, 4, 5]]).max() > 2 * EDGE
     assert r.max_constraint_violation > 1.0 and not r.fallback_steps
+
+
+@pytest.mark.parametrize("safeguard", ["none", "fallback"])
+def test_the_safeguard_keeps_the_demo_in_its_arena_from_the_previous_iterate(safeguard: str) -> None:
+    """Warm-started from the last iterate as it is (warm_start: previous), the demo's budgeted iterates at K = 2 and 5
+    drive the players out of the arena (to |p| = 37 at K = 2); the safeguard applies another plan at those sampling
+    times, and the players keep their distance inside the arena."""
+    sim = simulate(load_config(DEMO, {"run.K": [2, 5], "run.steps": 50, "run.reference": "none",
+                                      "run.warm_start": "previous", "run.safeguard": safeguard}))
+    for K, r in sim.items():
+        reach = np.abs(r.x[:, [0, 1, 4, 5]]).max()
+        if safeguard == "none":
+            assert reach > EDGE and r.max_constraint_violation > 0.1 and not r.fallback_steps, K
+        else:
+            assert reach <= EDGE and r.max_constraint_violation <= 1e-9, K
+            assert 1.0 - _distances(r.x[1:]).min() ** 2 <= 1e-9, K
+            assert r.fallback_steps and all(r.status[t] != "converged" for t in r.fallback_steps), K
 
 
 def test_a_fallback_step_applies_the_shifted_previous_plan(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -151,10 +190,24 @@ def test_the_mpc_merge_keeps_its_distances_at_K2() -> None:
     assert sum(s == "converged" for s in r.status) >= 5  # the merge itself (t = 2..15) is where K = 2 falls short
 
 
-def test_the_progress_callback_sees_every_step_as_it_happens() -> None:
+def test_the_progress_callback_sees_every_step_as_it_happens(tmp_path) -> None:
+    """The callback sees each sampling time once it is done and logged, before the next one is run."""
+    from gnerun.log.mcap_log import read_messages
+
     seen: list[StepReport] = []
-    sim = simulate(load_config(DEMO, {"run.K": [1, 3], "run.steps": 8, "run.reference": "none"}), progress=seen.append)
+    logged: list[list[tuple[int, int]]] = []
+
+    def progress(step: StepReport) -> None:
+        seen.append(step)
+        logged.append([(int(topic[2]), m["t"]) for topic, m, _ in read_messages(tmp_path / "run" / "run.mcap")
+                       if topic.endswith("/mpc/state")])
+
+    sim = simulate(load_config(DEMO, {"run.K": [1, 3], "run.steps": 8, "run.reference": "none"}), out=tmp_path / "run",
+                   progress=progress)
     assert [(s.K, s.t) for s in seen] == [(K, t) for K in (1, 3) for t in range(8)]
+    order = [(1, t) for t in range(9)] + [(3, t) for t in range(9)]  # each loop ends with its last state x(8)
+    for n, (s, states) in enumerate(zip(seen, logged, strict=True)):
+        assert sorted(states) == order[: n + 1 + (s.K == 3)], (s.K, s.t)  # every state so far, none beyond
     for s in seen:
         r = sim[s.K]
         np.testing.assert_array_equal(s.x, r.x[s.t])

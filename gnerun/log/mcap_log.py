@@ -209,8 +209,9 @@ def _config_mapping(text: str | None) -> tuple[dict, str | None]:
 
 
 def _config_shape(data: dict) -> str | None:
-    """What of the fields the readers use (name, states, agents and their inputs, solver and disturbance kinds,
-    the disturbance scale) has the wrong type in a config read from a log (None: all are right)."""
+    """What of the fields the readers use (name, states, parameters, agents with their inputs and constraints, the
+    shared constraints, solver and disturbance kinds, the disturbance scale) has the wrong type in a config read from
+    a log (None: all are right)."""
     def names(v: object) -> bool:
         return isinstance(v, list) and all(isinstance(x, str) for x in v)
 
@@ -219,15 +220,18 @@ def _config_shape(data: dict) -> str | None:
               ("solver", isinstance(solver, dict)), ("disturbance", isinstance(dist, dict))]
     if all(ok for _, ok in checks):
         agents = game.get("agents", [])
-        checks += [("game.states", names(game.get("states", []))), ("game.agents", isinstance(agents, list)
-                                                                    and all(isinstance(a, dict) for a in agents)),
+        agents_ok = isinstance(agents, list) and all(isinstance(a, dict) for a in agents)
+        checks += [("game.states", names(game.get("states", []))), ("game.agents", agents_ok),
+                   ("game.parameters", isinstance(game.get("parameters", {}), dict)),
+                   ("game.shared_constraints", isinstance(game.get("shared_constraints", []), list)),
                    ("solver.kind", isinstance(solver.get("kind", ""), str)),
                    ("disturbance.kind", isinstance(dist.get("kind", ""), str)),
                    ("disturbance.scale", isinstance(dist.get("scale", 0), int | float)
                     and not isinstance(dist.get("scale", 0), bool))]
-        if checks[-5][1]:
+        if agents_ok:
             checks += [("game.agents.inputs", all(isinstance(a.get("inputs", {}), dict) or names(a.get("inputs"))
-                                                  for a in agents))]
+                                                  for a in agents)),
+                       ("game.agents.constraints", all(isinstance(a.get("constraints", []), list) for a in agents))]
     return next((f"{key} has the wrong type" for key, ok in checks if not ok), None)
 
 

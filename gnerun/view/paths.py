@@ -3,8 +3,10 @@
 A game has positions when its states come in pairs ``px<i>``, ``py<i>`` (or ``x<i>``, ``y<i>``), one pair per
 vehicle. A shared constraint written as a distance, ``(px1 - px2)**2 + (py1 - py2)**2 >= R`` with R an expression
 of the parameters and the stage tau, gives the pair's required distance sqrt(R), drawn at tau = 0 (the step the
-plant takes). Sampling times whose solver step failed and those where the safeguard applied a fallback plan are
-marked on both panels. Everything is read from the log.
+plant takes). The constraints on one vehicle's position alone (a road's or a lane's edges, an arena) are drawn where
+they hold with equality, in the vehicle's colour (grey where they are the same for every vehicle, their outside
+shaded), and the panel reaches the nearest edge on each side of the paths. Sampling times whose solver step failed
+and those where the safeguard applied a fallback plan are marked on both panels. Everything is read from the log.
 """
 
 from __future__ import annotations
@@ -12,7 +14,7 @@ from __future__ import annotations
 import math
 import re
 
-from ..language.expr import evaluate, numpy_functions, parse_constraint
+from ..language.expr import CONSTANTS, Constraint, evaluate, numpy_functions, parse_constraint
 from ..log.mcap_log import RunRecord
 
 _X = re.compile(r"^p?x(\d+)$")
@@ -55,6 +57,30 @@ def required_distances(config: dict) -> dict[tuple[str, str], float]:
             continue
         if rhs > 0:
             out[(m.group(1), m.group(2))] = math.sqrt(rhs)
+    return out
+
+
+def position_constraints(config: dict, cars: list[tuple[str, int, int]]) -> list[tuple[int, Constraint]]:
+    """The constraints on one vehicle's position alone (every agent's own and the shared ones whose names, besides
+    the parameters and tau, are one vehicle's x and y positions), with the index of that vehicle in ``cars``."""
+    game = config.get("game") or {}
+    names = list(game.get("states") or [])
+    params = {k for k, v in (game.get("parameters") or {}).items() if isinstance(v, int | float)}
+    specs = [spec for agent in game.get("agents") or [] if isinstance(agent, dict)
+             for spec in agent.get("constraints") or []] + list(game.get("shared_constraints") or [])
+    out = []
+    for spec in specs:
+        text = spec.get("expr") if isinstance(spec, dict) else spec
+        if not isinstance(text, str):
+            continue
+        try:
+            con = parse_constraint(text)
+        except Exception:  # a log's config is data: one that does not parse is not drawn
+            continue
+        free = con.names - params - set(CONSTANTS) - {"tau"}
+        for c, (_, ix, iy) in enumerate(cars):
+            if free and free <= {names[ix], names[iy]}:
+                out.append((c, con))
     return out
 
 
@@ -106,6 +132,7 @@ def paths_figure(run: RunRecord, loops: dict[int, dict[str, list[dict]]]):
         ax_d.plot([], [], color="0.4", lw=0.8, ls=(0, (1, 1)), label="required")
     if any_marked:  # (in the paths' legend: the distances' marks are the same)
         ax_p.plot([], [], "x", color="k", ms=3, mew=0.6, label="fallback / failed step")
+    _edges(ax_p, run.config, cars, colors, loops)
     ax_p.set_xlabel("x")
     ax_p.set_ylabel("y")
     xlo, xhi = ax_p.get_xlim()
@@ -119,6 +146,78 @@ def paths_figure(run: RunRecord, loops: dict[int, dict[str, list[dict]]]):
     for ax in (ax_p, ax_d):
         _legend(ax, width)
     return fig
+
+
+GRID = 600  # points per side of the grid the edges are traced on
+
+
+def _edges(ax, config: dict, cars: list[tuple[str, int, int]], colors: list[str],
+           loops: dict[int, dict[str, list[dict]]]) -> None:
+    """The vehicles' own position constraints where they hold with equality (:func:`position_constraints`), traced on
+    a grid three times the paths' extent; the axes then reach from the paths to the nearest edge on each side."""
+    import contourpy
+    import numpy as np
+
+    xs, ys = [], []
+    for topics in loops.values():
+        for m in topics.get("state", []):
+            if m.get("x") is not None:
+                xs += [_num(m["x"][ix]) for _, ix, _ in cars]
+                ys += [_num(m["x"][iy]) for _, _, iy in cars]
+    xs = [v for v in xs if math.isfinite(v)]
+    ys = [v for v in ys if math.isfinite(v)]
+    constraints = position_constraints(config, cars)
+    if not xs or not ys or not constraints:
+        return
+    x0, x1, y0, y1 = min(xs), max(xs), min(ys), max(ys)
+    floor = max(x1 - x0, y1 - y0, 1e-3) / 20  # a path along one axis still gets a band across it
+    sx, sy = max(x1 - x0, floor), max(y1 - y0, floor)
+    gx = np.linspace(x0 - sx, x1 + sx, GRID)
+    gy = np.linspace(y0 - sy, y1 + sy, GRID)
+    X, Y = np.meshgrid(gx, gy)
+    game = config.get("game") or {}
+    names = list(game.get("states") or [])
+    params = {k: float(v) for k, v in (game.get("parameters") or {}).items() if isinstance(v, int | float)}
+    groups: list[tuple[np.ndarray, set[int]]] = []  # g(X, Y) (<= 0 where it holds) and the vehicles it binds
+    for c, con in constraints:
+        _, ix, iy = cars[c]
+        try:
+            with np.errstate(all="ignore"):
+                g = np.broadcast_to(np.asarray(con.residual({**params, "tau": 0.0, names[ix]: X, names[iy]: Y},
+                                                            numpy_functions()), dtype=float), X.shape)
+        except Exception:  # a log's config is data: a constraint that cannot be evaluated is not drawn
+            continue
+        same = next((group for group in groups if np.array_equal(group[0], g, equal_nan=True)), None)
+        if same is None:
+            groups.append((g, {c}))
+        else:
+            same[1].add(c)
+    lo_x, hi_x, lo_y, hi_y = x0, x1, y0, y1
+    drawn = False
+    for g, who in groups:
+        common = len(who) == len(cars)
+        color = "0.35" if common else colors[min(who) % len(colors)]
+        if common and np.any(g > 0):  # outside the road (or the arena) of every vehicle
+            ax.contourf(X, Y, np.where(np.isfinite(g), g > 0, False).astype(float), levels=[0.5, 1.5],
+                        colors=["0.88"], zorder=0)
+        for line in contourpy.contour_generator(gx, gy, np.where(np.isfinite(g), g, np.nan)).lines(0.0):
+            ax.plot(line[:, 0], line[:, 1], color=color, lw=2.2, alpha=0.35, solid_capstyle="butt", zorder=1)
+            drawn = True
+            # the nearest edge on each side, where it crosses the paths' band
+            across_y = line[(line[:, 0] >= x0) & (line[:, 0] <= x1), 1]
+            across_x = line[(line[:, 1] >= y0) & (line[:, 1] <= y1), 0]
+            below, above = across_y[across_y < y0], across_y[across_y > y1]
+            left, right = across_x[across_x < x0], across_x[across_x > x1]
+            lo_y = min(lo_y, below.max()) if below.size else lo_y
+            hi_y = max(hi_y, above.min()) if above.size else hi_y
+            lo_x = min(lo_x, left.max()) if left.size else lo_x
+            hi_x = max(hi_x, right.min()) if right.size else hi_x
+    if not drawn:
+        return
+    ax.plot([], [], color="0.35", lw=2.2, alpha=0.35, label="constraint edge")
+    mx, my = 0.05 * max(hi_x - lo_x, floor), 0.05 * max(hi_y - lo_y, floor)
+    ax.set_xlim(lo_x - mx, hi_x + mx)
+    ax.set_ylim(lo_y - my, hi_y + my)
 
 
 def _num(v) -> float:
