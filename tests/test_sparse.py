@@ -237,3 +237,25 @@ def test_the_globalized_sparse_method_takes_the_condensed_iterates() -> None:
         singular += a.search.phase == "newton" and a.rcond < cfg.solver.min_rcond  # a Levenberg-Marquardt step
         interior += a.search.phase == "interior"
     assert singular >= 3 and interior >= 5
+
+
+def test_a_sparse_solve_without_best_responses_builds_no_condensed_derivatives() -> None:
+    """The condensed KKT derivatives nest through the dynamics and take seconds to build on a long horizon; a solve in
+    the sparse formulation whose certificate is the KKT residual alone (run.certificate: false) must not build them,
+    and its KKT residual is the one the condensed derivatives' evaluation gives."""
+    from gnerun.runs.solving import certified_solve
+    from gnerun.solvers.certificate import kkt_residuals
+
+    cfg = load_config(text=family_yaml(3, 60), overrides={"solver.formulation": "sparse"})
+    game = compile_game(cfg)
+    solver = make_solver(cfg, game)
+    out = certified_solve(game, solver, solver.init(), best_responses=False)
+    assert out.state.status == Status.CONVERGED
+    assert "_derivatives" not in game.__dict__
+    residual = out.certificate["kkt_residual"]
+    assert residual <= cfg.solver.tol
+    assert kkt_residuals(game, out.state.z) == out.certificate
+    parts = game.kkt_parts(out.state.z)  # builds them: the same L and c
+    L, c = game.kkt_residual(out.state.z)
+    np.testing.assert_allclose(L, parts.L, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(c, parts.c, rtol=0, atol=1e-12)

@@ -341,9 +341,10 @@ class CompiledGame:
         return KKTParts(L.reshape(-1), c.reshape(-1), dL, dc)
 
     def kkt_residual(self, z: np.ndarray, x: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """L(z; x) and c(a; x) alone (no derivatives)."""
+        """L(z; x) and c(a; x) alone (no derivatives, and none built: a sparse formulation's solve or a certificate
+        without best responses never needs the condensed ones)."""
         n = self.n
-        if self.affine:
+        if "_derivatives" in self.__dict__ and self.affine:  # an LQ game's constant map, where it is known already
             v = self._affine_cache["W"] @ z
             v += self.offsets(self._x(x))
             return v[:n], v[n:]
