@@ -239,16 +239,7 @@ def cli_help_time(repeats: int = 5) -> float:
 
 def fresh_solve(cfg, game: CompiledGame, repeats: int) -> tuple[float, object]:
     """Median time of a whole solve by a fresh solver (nothing kept from an earlier solve), and its final state."""
-    samples, state = [], None
-    for _ in range(repeats + 1):
-        solver = make_solver(cfg, game)
-        t0 = time.perf_counter()
-        state = solver.init()
-        while not solver.terminate(state)[0]:
-            state = solver.step(state)
-        samples.append(time.perf_counter() - t0)
-        state = solver.finish(state)
-    return statistics.median(samples[1:]), state
+    return paired_fresh_solves([cfg], game, repeats)[0]
 
 
 def paired_fresh_solves(cfgs: list, game: CompiledGame, repeats: int) -> list[tuple[float, object]]:

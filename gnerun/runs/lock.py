@@ -41,8 +41,15 @@ class DirectoryLock:
 
     @classmethod
     def acquire(cls, directory: str | Path, what: str = "run directory") -> DirectoryLock:
-        """Lock ``directory`` (which exists) or raise :class:`DirectoryBusy` naming the holder's pid."""
-        directory = Path(directory)
+        """Lock ``directory`` (which exists) or raise :class:`DirectoryBusy` naming the holder's pid; a directory
+        where the lock file cannot be made (/proc, a read-only disk) is an :class:`InputError` that says so."""
+        try:
+            return cls._acquire(Path(directory), what)
+        except OSError as e:
+            raise InputError(f"{directory}: cannot write the {what}: {e.strerror or e}") from None
+
+    @classmethod
+    def _acquire(cls, directory: Path, what: str) -> DirectoryLock:
         st = os.stat(directory)
         key = (st.st_dev, st.st_ino)
         held = _held.get(key)

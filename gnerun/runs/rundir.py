@@ -78,10 +78,7 @@ class RunDirectory:
             path.mkdir(parents=True, exist_ok=True)
         except OSError as e:
             raise InputError(f"{path}: cannot write the run directory: {e.strerror or e}") from None
-        try:
-            lock = DirectoryLock.acquire(path)
-        except OSError as e:
-            raise InputError(f"{path}: cannot write the run directory: {e.strerror or e}") from None
+        lock = DirectoryLock.acquire(path)
         try:
             if contents(path) and not force:
                 raise InputError(f"{path}: the run directory exists and is not empty (force=True overwrites it)",

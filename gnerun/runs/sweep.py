@@ -34,7 +34,7 @@ import numpy as np
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from ..errors import ConfigError, InputError, Unavailable, shorten
-from ..files import not_a_link, read_json_object, replace_text, replacing, write_text
+from ..files import MAX_JSON_BYTES, not_a_link, read_json_object, read_regular, replace_text, replacing, write_text
 from ..language.config import (
     CONFIG_VERSION,
     MAX_NAME_BYTES,
@@ -45,7 +45,7 @@ from ..language.config import (
     safe_name,
 )
 from ..language.yaml_source import SourceMap, dotted, read_yaml
-from .lock import DirectoryLock, contents, release_all
+from .lock import DirectoryLock, contents, locked, release_all
 
 MAX_POINTS = 10_000  # every point's config is checked before the sweep starts
 INDEX_CSV = "index.csv"
@@ -616,14 +616,8 @@ def run_sweep(sweep: Sweep, out: str | Path, *, executor: str = "local", workers
         sweep_dir.mkdir(parents=True, exist_ok=True)
     except OSError as e:
         raise InputError(f"{sweep_dir}: cannot write the sweep directory: {e.strerror or e}") from None
-    try:
-        lock = DirectoryLock.acquire(sweep_dir, "sweep directory")
-    except OSError as e:
-        raise InputError(f"{sweep_dir}: cannot write the sweep directory: {e.strerror or e}") from None
-    try:
+    with locked(sweep_dir, "sweep directory"):
         return _run_sweep(sweep, sweep_dir, executor, workers, address, force, progress)
-    finally:
-        lock.release()
 
 
 def _run_sweep(sweep: Sweep, sweep_dir: Path, executor: str, workers: int, address: str | None, force: bool,
@@ -724,8 +718,6 @@ def _parquet_value(v: Any) -> Any:
 def read_index(sweep_dir: str | Path) -> list[dict[str, Any]]:
     """index.csv as rows of typed values (numbers as numbers, empty as None); a file that is not one (not text, not
     a regular file, too large) is an InputError that says it is damaged."""
-    from ..files import MAX_JSON_BYTES, read_regular
-
     path = Path(sweep_dir) / INDEX_CSV
     if not path.exists():
         raise InputError(f"{sweep_dir}: no sweep index here (expected {INDEX_CSV})")

@@ -123,6 +123,7 @@ class NewtonResponses:
         xv = game.x0 if x is None else np.asarray(x, dtype=float)
         p = np.concatenate([xv, a[: sl.start], a[sl.stop:], a[sl]])
         best_val, best_x, counted = None, None, 0
+        own = float(game.costs(a, x)[agent])  # the candidate's cost: a start that did not converge must beat it
         for k, s in enumerate(starts):
             lam = np.zeros(problem.m)
             if k == 0 and multipliers is not None and (order >= 0).all():
@@ -145,7 +146,7 @@ class NewtonResponses:
             counted += converged
             # a start that did not converge still counts where it ended feasible and better: a feasible point of
             # lower cost proves that the agent can improve (a player whose cost is unbounded below diverges)
-            if math.isfinite(val) and (converged or val < float(game.costs(a, x)[agent])) and (
+            if math.isfinite(val) and (converged or val < own) and (
                     best_val is None or val < best_val):
                 best_val, best_x = val, ai
         return best_val, best_x, counted

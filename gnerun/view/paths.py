@@ -60,12 +60,17 @@ def required_distances(config: dict) -> dict[tuple[str, str], float]:
     return out
 
 
+def _parameters(game: dict) -> dict[str, float]:
+    """The game's scalar parameters, as a log's config gives them (vectors and matrices are not positions' data)."""
+    return {k: float(v) for k, v in (game.get("parameters") or {}).items() if isinstance(v, int | float)}
+
+
 def position_constraints(config: dict, cars: list[tuple[str, int, int]]) -> list[tuple[int, Constraint]]:
     """The constraints on one vehicle's position alone (every agent's own and the shared ones whose names, besides
     the parameters and tau, are one vehicle's x and y positions), with the index of that vehicle in ``cars``."""
     game = config.get("game") or {}
     names = list(game.get("states") or [])
-    params = {k for k, v in (game.get("parameters") or {}).items() if isinstance(v, int | float)}
+    params = set(_parameters(game))
     specs = [spec for agent in game.get("agents") or [] if isinstance(agent, dict)
              for spec in agent.get("constraints") or []] + list(game.get("shared_constraints") or [])
     out = []
@@ -177,7 +182,7 @@ def _edges(ax, config: dict, cars: list[tuple[str, int, int]], colors: list[str]
     X, Y = np.meshgrid(gx, gy)
     game = config.get("game") or {}
     names = list(game.get("states") or [])
-    params = {k: float(v) for k, v in (game.get("parameters") or {}).items() if isinstance(v, int | float)}
+    params = _parameters(game)
     groups: list[tuple[np.ndarray, set[int]]] = []  # g(X, Y) (<= 0 where it holds) and the vehicles it binds
     for c, con in constraints:
         _, ix, iy = cars[c]

@@ -210,6 +210,9 @@ def log_run(rec, run: RunRecord, prefix: str, contents: Contents, several: bool 
         x_view = "fig2_x" if K == max(loops) and kind != "distributed" else None
         states_K = topics.get("state", [])
         failed, fallback = failed_steps(states_K), fallback_steps(states_K)
+        # without z*: the residual of each sampling time's last iterate, drawn in Fig. 2b or 3 instead
+        residuals = [] if with_errors else [(t, number(v)) for t, v in
+                                            zip(*final_residuals(topics.get("iterate", [])), strict=True)]
         for m in states_K:
             for j, v in enumerate(m.get("x") or []):
                 entity = f"{base}/x/{states[j] if j < len(states) else f'x{j + 1}'}"
@@ -241,7 +244,7 @@ def log_run(rec, run: RunRecord, prefix: str, contents: Contents, several: bool 
                 tr.points = [(m["t"], number(m.get("e_norm"))) for m in errors]
             else:
                 tr = trace("fig2_e", "fig2_e", f"{base}/log10_residual_norm", label + " (||Phi||)", "t")
-                tr.points = [(t, number(v)) for t, v in zip(*final_residuals(topics.get("iterate", [])), strict=True)]
+                tr.points = residuals
             tr.failed, tr.fallback, tr.marks = failed, fallback, base
         else:
             view = f"fig3:{name}: K = {K}"
@@ -255,7 +258,7 @@ def log_run(rec, run: RunRecord, prefix: str, contents: Contents, several: bool 
                     tr.failed, tr.fallback, tr.marks, tr.on_trace = failed, fallback, base, False
             if not with_errors:
                 tr = trace(view, "fig3", f"{base}/log10_residual_norm", "||Phi||", "t")
-                tr.points = [(t, number(v)) for t, v in zip(*final_residuals(topics.get("iterate", [])), strict=True)]
+                tr.points = residuals
                 tr.failed, tr.fallback, tr.marks = failed, fallback, base
     rec.reset_time()
 
