@@ -17,7 +17,7 @@ import numpy as np
 class Problem:
     """One problem and one start point."""
 
-    family: str  # "fk" | "lq" | "merge" | "intersection" | "mcp-demo"
+    family: str  # "fk" | "lq" | "merge" | "intersection" | "mcp-demo" | "nonconvex"
     name: str  # e.g. "A.1"
     start: str  # e.g. "x0 = 0.01" (the literature's label of the start point)
     config_yaml: str  # a complete gnerun config; the start point is in its start values
@@ -32,3 +32,6 @@ class Problem:
     best_response_gaps: Callable[[np.ndarray], dict[str, float]] | None = field(default=None, repr=False)
     published: dict[str, str] = field(default_factory=dict)  # the anchors' published results for this pair
     notes: str = ""
+    kind: str = ""  # what makes the problem hard (the nonconvex family: "nonconvex", "unbounded", ...)
+    # each agent's cost at a, written without gnerun (the scale of the gaps); None: gnerun's costs are used
+    costs: Callable[[np.ndarray], np.ndarray] | None = field(default=None, repr=False)
