@@ -11,6 +11,16 @@ known, the solution is within the problem's tolerance of it. Time is the solver'
 steps), without compilation and without the certificate; games that differ only in their initial state (the
 random merges) are compiled once and solved from each state, as a user of the Python API would.
 
+The nonconvex family (``benchmarks/problems/nonconvex.py``: nonconvex, nonsmooth, unbounded, infeasible, NaN games and
+games with no pure equilibrium) is solved as a user solves a config, ``gnerun.solve(cfg, out=None)`` with
+``run.reference: none`` and the certificate on, and each outcome is put in one of five classes (:func:`classify`):
+**certified** (converged, and the problem's own check agrees: every gap at most ``GAP_TOL`` max(1, |J_i|) and the
+reference matched where known), **false certificate** (converged, but the game has no equilibrium or the check finds a
+player who improves alone: must be 0), **miss** (the game has an equilibrium and none was certified), **named refusal**
+(no equilibrium, and the status says why: ``NAMED_REFUSALS``) and **unnamed refusal** (no equilibrium, and a generic
+failure status, or a name that gives another reason). Its time is the whole ``solve`` (compile and certificate
+included); the independent check's time is not counted.
+
 Prints markdown tables (the README's robustness section) and writes JSON to benchmarks/results/.
 """
 
@@ -18,6 +28,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import statistics
 import sys
 import time
@@ -26,6 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
+import gnerun
 from gnerun import __version__, compile_game, load_config, make_solver
 from gnerun.runs.solving import certified_solve
 from gnerun.solvers.certificate import NewtonResponses
@@ -60,6 +72,14 @@ class Outcome:
     size: tuple[int, int]
     restarts: int  # restarts from best responses at KKT points that were not equilibria
     note: str = ""
+    # the nonconvex family
+    kind: str = ""  # the problem's kind ("nonconvex", "unbounded", ...)
+    outcome_class: str = ""  # one of CLASSES
+    has_gne: bool = True
+    gaps: dict[str, float] | None = None  # the problem's own check, per agent
+    certificate_gaps: dict[str, float | None] | None = None  # gnerun's certificate, per agent
+    certificate_kind: dict[str, str] | None = None  # what gnerun's certificate says each gap is ("global on the box")
+    wall_s: float | None = None  # the whole solve: compile, iterations, certificate
 
 
 def problems(which: set[str], count: int, seed: int) -> list[Problem]:
@@ -76,6 +96,10 @@ def problems(which: set[str], count: int, seed: int) -> list[Problem]:
         out += trajectory.intersection_problems(count, seed=seed)
     if "mcp-demo" in which:
         out.append(trajectory.mcp_demo_problem())
+    if "nonconvex" in which:
+        from .problems import nonconvex
+
+        out += nonconvex.problems()
     return out
 
 
@@ -130,6 +154,137 @@ def run(problem: Problem, method: str, compiled: _Compiled, certify: bool = True
                 note = f"{ref_err:.1e} from the literature's solution"
     return Outcome(problem.family, problem.name, problem.start, method, str(state.status), state.k, elapsed,
                    state.residual_norm, certified, max_gap, ref_err, (game.n, game.m), outcome.restarts, note)
+
+
+# ------------------------------------------------------------------------------------------------
+# the nonconvex family: five classes of outcome
+
+CLASSES = ("certified", "false certificate", "miss", "named refusal", "unnamed refusal")
+# the statuses that say why a game without an equilibrium has none, by the game's kind; not_an_equilibrium (a KKT
+# point at which a player improves alone) is true of every point of such a game, the others name the reason
+NAMED_REFUSALS = {
+    "unbounded": frozenset({"unbounded_player", "not_an_equilibrium"}),
+    "infeasible": frozenset({"infeasible", "infeasible_stage_constraint"}),
+    "nan": frozenset({"nan", "not_an_equilibrium"}),
+    "no pure NE": frozenset({"not_an_equilibrium"}),
+}
+NAMED = frozenset().union(*NAMED_REFUSALS.values())
+
+
+def classify(problem: Problem, status: str, gaps: dict[str, float] | None, costs: np.ndarray | None,
+             reference_error: float | None) -> tuple[str, str]:
+    """(class, why) of one outcome; ``gaps`` and ``costs`` are the problem's own check at gnerun's answer."""
+    if status == "converged":
+        if not problem.has_gne:
+            return "false certificate", f"converged on a game with no equilibrium ({problem.kind})"
+        if gaps is None or costs is None:
+            return "false certificate", "converged at a point that is not finite"
+        scale = np.maximum(1.0, np.abs(costs))
+        bad = [name for (name, g), s in zip(gaps.items(), scale, strict=True) if not g <= GAP_TOL * s]
+        if bad:
+            return "false certificate", "; ".join(f"{name} improves alone by {gaps[name]:.3g}" for name in bad)
+        if problem.reference is not None and not (reference_error is not None
+                                                  and reference_error <= problem.reference_tol):
+            return "false certificate", f"{reference_error:.1e} from the equilibrium"
+        return "certified", ""
+    if problem.has_gne:
+        return "miss", f"{status} on a game with an equilibrium"
+    if status in NAMED_REFUSALS.get(problem.kind, frozenset()):
+        return "named refusal", ""
+    if status in NAMED:
+        return "unnamed refusal", f"{status}, but the game is {problem.kind}"
+    return "unnamed refusal", status
+
+
+def run_as_user(problem: Problem, method: str) -> Outcome:
+    """Solve ``problem`` as ``gnerun solve`` does (the config's own run block: no reference solve, the certificate on;
+    the method's overrides only), then classify the outcome by the problem's own check."""
+    cfg = load_config(text=problem.config_yaml, overrides=METHODS[method] or None)
+    t0 = time.perf_counter()
+    try:
+        res = gnerun.solve(cfg, out=None)
+    except Exception as e:  # a crash is an outcome too
+        wall = time.perf_counter() - t0
+        status = f"error: {type(e).__name__}"
+        cls, why = classify(problem, status, None, None, None)
+        return Outcome(problem.family, problem.name, problem.start, method, status, 0, wall, math.nan, False, None,
+                       None, (0, 0), 0, f"{why}: {e}"[:300], kind=problem.kind, outcome_class=cls,
+                       has_gne=problem.has_gne, wall_s=wall)
+    wall = time.perf_counter() - t0
+    a = np.asarray(res.a, dtype=float)
+    gaps = costs = ref_err = None
+    if np.all(np.isfinite(a)):
+        gaps = problem.best_response_gaps(a) if problem.best_response_gaps is not None else None
+        costs = problem.costs(a) if problem.costs is not None else np.asarray(res.game.costs(a, res.x), dtype=float)
+    if problem.reference is not None:
+        ref_err = float(np.max(np.abs(a - problem.reference)))
+    status = str(res.status)
+    cls, why = classify(problem, status, gaps, costs, ref_err)
+    values = list((gaps or {}).values())
+    max_gap = (math.nan if any(math.isnan(g) for g in values) else max(values)) if values else None
+    restarts = re.search(r"after (\d+) restart", res.message)
+    cert = res.certificate or {}
+    note = why if cls != "certified" else ""
+    if status != "converged":
+        note = f"{note}: {res.message}" if note and note != status else res.message
+    return Outcome(problem.family, problem.name, problem.start, method, status, res.iterations, res.time_s,
+                   res.residual_norm, cls == "certified", max_gap, ref_err, (res.game.n, res.game.m),
+                   int(restarts.group(1)) if restarts else 0, note[:300], kind=problem.kind, outcome_class=cls,
+                   has_gne=problem.has_gne, gaps=gaps, certificate_gaps=cert.get("best_response_gap"),
+                   certificate_kind=cert.get("best_response_kind"), wall_s=wall)
+
+
+def _gap(g: float | None) -> str:
+    if g is None:
+        return "-"
+    if math.isnan(g):
+        return "nan"
+    if math.isinf(g):
+        return "inf"
+    return f"{g:.1e}"
+
+
+def _kinds(o: Outcome) -> str:
+    if not o.certificate_kind:
+        return "-"
+    return "; ".join(sorted(set(map(str, o.certificate_kind.values()))))
+
+
+def nonconvex_tables(outcomes: list[Outcome], methods: list[str]) -> str:
+    lines: list[str] = []
+    for m in methods:
+        rows = [o for o in outcomes if o.family == "nonconvex" and o.method == m]
+        if not rows:
+            continue
+        lines += [f"Nonconvex family, method {m}:", "",
+                  "| problem | kind | status | class | max gap (own check) | gnerun's certificate | time |",
+                  "|---|---|---|---|---|---|---|"]
+        for o in rows:
+            cls = o.outcome_class if o.outcome_class in ("certified", "named refusal") else f"**{o.outcome_class}**"
+            why = f" ({o.note})" if o.outcome_class not in ("certified", "named refusal") and o.note else ""
+            lines.append(f"| {o.name} | {o.kind} | {o.status} | {cls}{why} | {_gap(o.max_gap)} | {_kinds(o)} | "
+                         f"{_ms(o.wall_s or 0.0)} |")
+        lines += ["", "| kind | problems | " + " | ".join(CLASSES) + " |", "|---|---|" + "---|" * len(CLASSES)]
+        for kind in dict.fromkeys(o.kind for o in rows):
+            group = [o for o in rows if o.kind == kind]
+            lines.append(f"| {kind} | {len(group)} | "
+                         + " | ".join(str(sum(o.outcome_class == c for o in group)) for c in CLASSES) + " |")
+        counts = {c: sum(o.outcome_class == c for o in rows) for c in CLASSES}
+        total = sum(o.wall_s or 0.0 for o in rows)
+        lines += ["", f"- {m}: nonconvex family, {len(rows)} problems: {counts['certified']} certified, "
+                      f"{counts['false certificate']} false certificates (must be 0), {counts['miss']} misses, "
+                      f"{counts['named refusal']} named refusals, {counts['unnamed refusal']} unnamed refusals; "
+                      f"{_ms(total)} in all", ""]
+    return "\n".join(lines)
+
+
+def nonconvex_summary(outcomes: list[Outcome], methods: list[str]) -> dict[str, dict[str, int]]:
+    out = {}
+    for m in methods:
+        rows = [o for o in outcomes if o.family == "nonconvex" and o.method == m]
+        if rows:
+            out[m] = {c: sum(o.outcome_class == c for o in rows) for c in CLASSES} | {"problems": len(rows)}
+    return out
 
 
 # ------------------------------------------------------------------------------------------------
@@ -195,8 +350,8 @@ def main(argv: list[str]) -> int:
     import argparse
 
     parser = argparse.ArgumentParser(prog="python -m benchmarks robustness", description=__doc__.splitlines()[0])
-    parser.add_argument("--families", default="fk,lq,merge,intersection,mcp-demo",
-                        help="comma-separated: fk, lq, merge, intersection, mcp-demo")
+    parser.add_argument("--families", default="fk,lq,merge,intersection,mcp-demo,nonconvex",
+                        help="comma-separated: fk, lq, merge, intersection, mcp-demo, nonconvex")
     parser.add_argument("--methods", default="default,local,FB + line search",
                         help=f"comma-separated, of: {', '.join(METHODS)}")
     parser.add_argument("--count", type=int, default=100, help="random initial states per trajectory scenario")
@@ -219,21 +374,40 @@ def main(argv: list[str]) -> int:
         if problem.published:
             published.setdefault(key, {}).update(problem.published)
         for m in methods:
+            if problem.family == "nonconvex":
+                o = run_as_user(problem, m)
+                outcomes.append(o)
+                print(f"{o.family} {o.name} [{m}]: {o.status} in {o.iterations} it, {_ms(o.wall_s or 0.0)}: "
+                      f"{o.outcome_class}" + (f" ({o.note})" if o.note else ""), file=sys.stderr, flush=True)
+                continue
             o = run(problem, m, compiled)
             outcomes.append(o)
             print(f"{o.family} {o.name} {o.start} [{m}]: {o.status} in {o.iterations} it, {_ms(o.time_s)}"
                   + ("" if o.certified else f" -- not certified: {o.note}"), file=sys.stderr, flush=True)
-    text = tables(outcomes, published, methods)
+    text = tables([o for o in outcomes if o.family != "nonconvex"], published, methods)
+    family = nonconvex_tables(outcomes, methods)
+    text = f"{text}\n{family}" if text and family else text or family
     print(text)
     if not args.no_json:
         RESULTS.mkdir(parents=True, exist_ok=True)
         stamp = time.strftime("%Y%m%dT%H%M%SZ", time.gmtime())
         out = RESULTS / f"robustness-{stamp}.json"
         out.write_text(json.dumps({"gnerun": __version__, "count": count, "seed": args.seed, "methods": methods,
+                                   "nonconvex": nonconvex_summary(outcomes, methods),
                                    "outcomes": [_jsonable(asdict(o)) for o in outcomes]}, indent=1))
         print(f"\nJSON: {out.relative_to(RESULTS.parent.parent)}")
     return 0
 
 
-def _jsonable(d: dict) -> dict:
-    return {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in d.items()}
+def _jsonable(d):
+    """JSON without NaN and infinities: a non-finite number becomes its name ("nan", "inf") inside the nonconvex
+    family's gap dictionaries, None elsewhere (as before)."""
+    if isinstance(d, dict):
+        return {k: (_finite_or_name(v) if isinstance(v, dict) else _jsonable(v)) for k, v in d.items()}
+    if isinstance(d, float) and not math.isfinite(d):
+        return None
+    return d
+
+
+def _finite_or_name(d: dict) -> dict:
+    return {k: (str(v) if isinstance(v, float) and not math.isfinite(v) else v) for k, v in d.items()}
