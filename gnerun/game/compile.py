@@ -42,6 +42,9 @@ from ..language.config import (
     constraint_text,
 )
 from ..language.expr import casadi_functions, evaluate, parse_constraint, parse_expression
+from .tape import kink_function, piecewise_outputs
+
+_BATCHES = (8, 64, 512)  # block sizes of CompiledGame.evaluate_many's mapped functions
 
 
 class Evaluator:
@@ -127,6 +130,7 @@ class CompiledGame:
     _costs: Evaluator = field(repr=False)
     _agent_constraints: list[np.ndarray]  # per agent: row indices of c that constrain its own problem
     _dynamics: Evaluator | None = field(default=None, repr=False)
+    _domain: tuple | None = field(default=None, repr=False)  # where each cost's log, sqrt... are defined
     derived: dict = field(default_factory=dict, repr=False)  # what is built from this game once (sparse system)
 
     # The dense derivatives are built on first use: the sparse formulation of a long horizon never needs
@@ -141,6 +145,8 @@ class CompiledGame:
         # derivative set-up of the 5-car merge was the test on dL)
         affine = not ca.depends_on(ca.vec(dc), ca.vertcat(a, x)) and not ca.depends_on(ca.vec(dL),
                                                                                         ca.vertcat(a, lam, x))
+        # abs, min, max of the decisions have a zero second derivative almost everywhere, and are not affine
+        affine = affine and not self.piecewise
         kkt = ca.Function("kkt", [a, lam, x], [ca.densify(v) for v in (L, c, dL, dc)], ["a", "lam", "x"],
                           ["L", "c", "dL_dz", "dc_da"])
         offset_map = None
@@ -205,6 +211,25 @@ class CompiledGame:
         rows.flags.writeable = False
         return rows
 
+    @functools.cached_property
+    def piecewise_parts(self) -> tuple[np.ndarray, np.ndarray]:
+        """Which costs and which constraint rows pass through a piecewise function of the decisions (abs, min, max,
+        sign, a comparison): (per agent, per row of c). Their derivatives jump at kinks, so they are never affine,
+        and a KKT point at a kink uses one branch's derivative."""
+        sym = self._symbolic
+        f = ca.Function("pieces", [sym.a, sym.x], [ca.vertcat(sym.J, sym.c)])
+        flags = piecewise_outputs(f)
+        N = len(self.agent_names)
+        costs, rows = flags[:N].copy(), flags[N:].copy()
+        costs.flags.writeable = rows.flags.writeable = False
+        return costs, rows
+
+    @property
+    def piecewise(self) -> bool:
+        """Some cost or constraint is piecewise in the decisions (see :attr:`piecewise_parts`)."""
+        costs, rows = self.piecewise_parts
+        return bool(costs.any() or rows.any())
+
     @property
     def _sparsity(self) -> tuple[ca.Sparsity, ca.Sparsity]:
         return self._derivatives["sparsity"]
@@ -243,8 +268,8 @@ class CompiledGame:
 
     @functools.cached_property
     def linear_rows(self) -> np.ndarray:
-        """Rows of c that are affine in a (polyhedral constraints)."""
-        return _affine_rows(self._symbolic.c, self._symbolic.a, self.m)
+        """Rows of c that are affine in a (polyhedral constraints): no second derivative, and no kink."""
+        return _affine_rows(self._symbolic.c, self._symbolic.a, self.m) & ~self.piecewise_parts[1]
 
     @functools.cached_property
     def _pseudo(self) -> Evaluator:
@@ -383,6 +408,101 @@ class CompiledGame:
     def constraint_rows(self, agent: int) -> np.ndarray:
         """Indices of c that make up agent ``agent``'s own feasible set (for its best response)."""
         return self._agent_constraints[agent]
+
+    def outside_domain(self, a: np.ndarray, x: np.ndarray | None = None) -> np.ndarray:
+        """Per agent: some log, sqrt, asin or acos of its cost is evaluated outside its domain at a, so the cost is
+        not a number there, even where the compiled expression simplified the term away (0 * log(v) is 0 to
+        CasADi)."""
+        out = np.zeros(len(self.agent_names), dtype=bool)
+        if self._domain is not None:
+            f, strict, owner = self._domain
+            v = f(a, self._x(x))[0].reshape(-1)
+            bad = np.isnan(v) | np.where(strict, v <= 0, v < 0)
+            out[owner[bad]] = True
+        return out
+
+    def evaluate_many(self, A: np.ndarray, x: np.ndarray | None = None,
+                      V: np.ndarray | None = None) -> tuple[np.ndarray, ...]:
+        """Every cost and constraint value at many points at once: ``A`` is (k, n), one point a per row; returns
+        J (k, N) and c (k, m), and with ``V`` (k, n) also each cost's directional derivative along the row of V at
+        its point, dJ (k, N) (forward-mode AD). One mapped CasADi call per block of points (what a certificate's
+        start points, rays and probes need: hundreds of points, each as cheap as one evaluation)."""
+        A = np.atleast_2d(np.asarray(A, dtype=float))
+        k = A.shape[0]
+        N, m = len(self.agent_names), self.m
+        J, C = np.empty((k, N)), np.empty((k, m))
+        dJ = np.empty((k, N)) if V is not None else None
+        xv = self._x(x)
+        done = 0
+        while done < k:
+            size = next((s for s in _BATCHES if s >= k - done), _BATCHES[-1])
+            f = self._batch(size, V is not None)
+            rows = min(size, k - done)
+            cols = np.zeros((self.n, size))
+            cols[:, :rows] = A[done:done + rows].T
+            args = [cols.ravel(order="F"), xv]  # CasADi stores matrices column by column
+            if V is not None:
+                dirs = np.zeros((self.n, size))
+                dirs[:, :rows] = np.asarray(V, dtype=float)[done:done + rows].T
+                args.append(dirs.ravel(order="F"))
+            out = f(*args)
+            J[done:done + rows] = out[0].T[:rows]
+            if m:
+                C[done:done + rows] = out[1].T[:rows]
+            if dJ is not None:
+                dJ[done:done + rows] = out[2].T[:rows]
+            done += rows
+        return (J, C) if dJ is None else (J, C, dJ)
+
+    def _batch(self, size: int, directional: bool = False) -> Evaluator:
+        cache = self.derived.setdefault("batches", {})
+        if (size, directional) not in cache:
+            sym = self._symbolic
+            c = ca.densify(sym.c) if self.m else ca.densify(ca.SX(1, 1))
+            if directional:
+                v = ca.SX.sym("v", self.n)
+                one = ca.Function("values", [sym.a, sym.x, v],
+                                  [ca.densify(sym.J), c, ca.densify(ca.jtimes(sym.J, sym.a, v))])
+            else:
+                one = ca.Function("values", [sym.a, sym.x], [ca.densify(sym.J), c])
+            cache[(size, directional)] = Evaluator(one.map(f"values_{size}", "serial", size, [1], []))
+        return cache[(size, directional)]
+
+    def agent_kinks(self, agent: int) -> tuple[ca.Function, list[str]] | None:
+        """The distances from their kinks of the piecewise functions of the decisions in agent ``agent``'s cost and
+        rows, as one Function of (a, x), and the functions' names (gnerun.game.tape.kink_function); None if none.
+        Built once per agent."""
+        cache = self.derived.setdefault("kinks", {})
+        if agent not in cache:
+            sym = self._symbolic
+            rows = self.constraint_rows(agent).tolist()
+            parts = ca.vertcat(sym.J[agent], sym.c[rows]) if rows else sym.J[agent]
+            cache[agent] = kink_function(ca.Function("parts", [sym.a, sym.x], [parts]))
+        return cache[agent]
+
+    def agent_hessian(self, agent: int, a: np.ndarray, x: np.ndarray | None = None) -> np.ndarray:
+        """The Hessian of J_i in the agent's own decisions at a (its block of the game Hessian H; the function is
+        built once per agent)."""
+        cache = self.derived.setdefault("hessians", {})
+        if agent not in cache:
+            sym = self._symbolic
+            ai = sym.a[self.agent_slices[agent]]
+            cache[agent] = Evaluator(ca.Function("H_ii", [sym.a, sym.x],
+                                                 [ca.densify(ca.hessian(sym.J[agent], ai)[0])]))
+        return cache[agent](a, self._x(x))[0]
+
+    def agent_functions(self, agent: int) -> tuple[ca.Function, ca.Function, ca.Function]:
+        """Agent ``agent``'s cost J_i(a; x), its gradient in the agent's own decisions, and the rows of its own
+        problem c_i(a; x) (``constraint_rows``), as SX Functions of (a, x): what a best response's box search reads
+        as instruction tapes (gnerun.game.tape)."""
+        sym = self._symbolic
+        sl = self.agent_slices[agent]
+        Ji = sym.J[agent]
+        rows = self.constraint_rows(agent).tolist()
+        ci = sym.c[rows] if rows else ca.SX(0, 1)
+        return (ca.Function("J", [sym.a, sym.x], [Ji]),
+                ca.Function("dJ", [sym.a, sym.x], [ca.densify(ca.gradient(Ji, sym.a[sl]))]),
+                ca.Function("c", [sym.a, sym.x], [ca.densify(ci)]))
 
     def step_dynamics(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
         """The plant model f(x, u) (dynamic games)."""
@@ -617,6 +737,7 @@ class _Expressions:
     shared_common: list[_Row]  # variational shared constraints (one common multiplier each)
     dynamics: ca.Function | None
     defects: list[ca.SX] = field(default_factory=list)  # with given states: f(xi(tau), u(tau)) - xi(tau+1)
+    domain: dict = field(default_factory=dict)  # per agent: (kind, margin) of each log, sqrt, asin, acos of its cost
 
 
 def _expressions(g: StaticGame | DynamicGame, lay: _Layout, a: ca.SX, x: ca.SX, agents: list[int],
@@ -632,7 +753,10 @@ def _expressions(g: StaticGame | DynamicGame, lay: _Layout, a: ca.SX, x: ca.SX, 
     states xi(1), ..., xi(T+1) as variables (stage-major): then the dynamics become the defects
     f(xi(tau), u(tau)) - xi(tau+1), with xi(0) = x (the sparse formulation).
     """
-    fns = casadi_functions()
+    # where the log, sqrt, asin, acos of each agent's cost are defined is recorded (gnerun.language.expr)
+    domain: dict[int, list] = {i: [] for i in agents}
+    cost_fns = {i: casadi_functions(domain[i]) for i in agents}
+    fns = fns_f = casadi_functions()
     params = dict(g.parameters)
     slices, names = lay.agent_slices, lay.variable_names
     own_shared = g.equilibrium == "generalized" or shared_as_own
@@ -658,9 +782,9 @@ def _expressions(g: StaticGame | DynamicGame, lay: _Layout, a: ca.SX, x: ca.SX, 
         for i, vars_ in enumerate(names):
             env.update({v: a[slices[i].start + j] for j, v in enumerate(vars_)})
         for i in agents:
-            costs[i] = ca.SX(evaluate(parse_expression(g.agents[i].cost), env, fns))
+            costs[i] = ca.SX(evaluate(parse_expression(g.agents[i].cost), env, cost_fns[i]))
         constrain(env, None)
-        return _Expressions(costs, own, common, None)
+        return _Expressions(costs, own, common, None, domain=domain)
 
     inputs = [(i, j, u) for i, vars_ in enumerate(names) for j, u in enumerate(vars_)]
     continuous = isinstance(g.dynamics, ContinuousDynamics)
@@ -671,7 +795,7 @@ def _expressions(g: StaticGame | DynamicGame, lay: _Layout, a: ca.SX, x: ca.SX, 
         env_f = dict(params)
         env_f.update({s: xi[k] for k, s in enumerate(g.states)})
         env_f.update({name: u[k] for k, (_, _, name) in enumerate(inputs)})
-        return ca.vertcat(*[ca.SX(evaluate(dyn[s], env_f, fns)) for s in g.states])
+        return ca.vertcat(*[ca.SX(evaluate(dyn[s], env_f, fns_f)) for s in g.states])
 
     def f(xi: ca.SX, u: ca.SX) -> ca.SX:
         if isinstance(g.dynamics, LinearDynamics):
@@ -700,13 +824,13 @@ def _expressions(g: StaticGame | DynamicGame, lay: _Layout, a: ca.SX, x: ca.SX, 
         env.update({s: xi[k] for k, s in enumerate(g.states)})
         env.update({name: u[k] for k, (_, _, name) in enumerate(inputs)})
         for i in agents:
-            total[i] += evaluate(stage_cost[i], env, fns)
+            total[i] += evaluate(stage_cost[i], env, cost_fns[i])
         constrain(env, tau)
     env_T = dict(params)
     env_T.update({s: xi[k] for k, s in enumerate(g.states)})
     for i in agents:
-        costs[i] = ca.SX(total[i] + evaluate(terminal_cost[i], env_T, fns))
-    return _Expressions(costs, own, common, dynamics, defects)
+        costs[i] = ca.SX(total[i] + evaluate(terminal_cost[i], env_T, cost_fns[i]))
+    return _Expressions(costs, own, common, dynamics, defects, domain)
 
 
 def shared_rows_carried(common: list, start: int, agent: int) -> np.ndarray:
@@ -737,7 +861,7 @@ def runge_kutta(rhs, x, u, dt: float, method: str):
 
 def _assemble(*, kind: str, a: ca.SX, x: ca.SX, costs: list[ca.SX], own_rows: list[list[_Row]],
               shared_common: list[_Row], agent_names: list[str], lay: _Layout, equilibrium: str, n_shared: int,
-              state_names: list[str], dynamics: ca.Function | None) -> CompiledGame:
+              state_names: list[str], dynamics: ca.Function | None, domain: dict | None = None) -> CompiledGame:
     """The KKT system of the agents' problems [KKT_concatenated]; its exact derivatives are built on first use."""
     N = len(costs)
     agent_slices = lay.agent_slices
@@ -786,7 +910,19 @@ def _assemble(*, kind: str, a: ca.SX, x: ca.SX, costs: list[ca.SX], own_rows: li
         _costs=Evaluator(costs_fn),
         _agent_constraints=agent_rows,
         _dynamics=Evaluator(dynamics) if dynamics is not None else None,
+        _domain=_domain_function(a, x, [(i, kind, m) for i in sorted(domain or {}) for kind, m in domain[i]]),
     )
+
+
+def _domain_function(a: ca.SX, x: ca.SX, domain: list) -> tuple[Evaluator, np.ndarray, np.ndarray] | None:
+    """The recorded domain conditions (agent, kind, margin) as one function of (a, x), which of them are strict
+    (> 0) and whose cost each belongs to."""
+    if not domain:
+        return None
+    margins = ca.vertcat(*[m for _, _, m in domain])
+    strict = np.array([kind == "positive" for _, kind, _ in domain], dtype=bool)
+    owner = np.array([i for i, _, _ in domain], dtype=int)
+    return Evaluator(ca.Function("domain", [a, x], [ca.densify(margins)])), strict, owner
 
 
 def compile_game(cfg: Config) -> CompiledGame:
@@ -801,7 +937,8 @@ def compile_game(cfg: Config) -> CompiledGame:
                      own_rows=[ex.own_rows[i] for i in range(N)], shared_common=ex.shared_common,
                      agent_names=[ag.name for ag in g.agents], lay=lay, equilibrium=g.equilibrium,
                      n_shared=len(g.shared_constraints),
-                     state_names=list(g.states) if isinstance(g, DynamicGame) else [], dynamics=ex.dynamics)
+                     state_names=list(g.states) if isinstance(g, DynamicGame) else [], dynamics=ex.dynamics,
+                     domain=ex.domain)
 
 
 @dataclass(frozen=True)

@@ -419,23 +419,39 @@ def numpy_functions() -> dict[str, Callable]:
     return table
 
 
-def casadi_functions() -> dict[str, Callable]:
-    """The function table for CasADi symbols (exact derivatives by automatic differentiation)."""
+def casadi_functions(domain: list | None = None) -> dict[str, Callable]:
+    """The function table for CasADi symbols (exact derivatives by automatic differentiation).
+
+    With ``domain``, every call of a function with a restricted domain on a symbolic argument appends what must
+    hold for the call to be defined: ("positive", v) for log, log2, log10 (v > 0), ("nonnegative", v) for sqrt
+    (v >= 0) and for asin, acos (1 - v^2 >= 0). CasADi simplifies 0 * log(v) to 0, so a term that is undefined
+    everywhere can vanish from the compiled expression; the recorded conditions keep it checkable."""
     import casadi as ca
 
+    def guarded(f: Callable, kind: str, margin: Callable = lambda v: v) -> Callable:
+        if domain is None:
+            return f
+
+        def g(v: Any) -> Any:
+            if isinstance(v, ca.SX) and not v.is_constant():
+                domain.append((kind, margin(v)))
+            return f(v)
+
+        return g
+
     return {
-        "sqrt": ca.sqrt,
+        "sqrt": guarded(ca.sqrt, "nonnegative"),
         "exp": ca.exp,
-        "log": ca.log,
+        "log": guarded(ca.log, "positive"),
         "sin": ca.sin,
         "cos": ca.cos,
         "tan": ca.tan,
         "tanh": ca.tanh,
         "abs": ca.fabs,
-        "log2": lambda v: ca.log(v) / math.log(2.0),
-        "log10": ca.log10,
-        "asin": ca.asin,
-        "acos": ca.acos,
+        "log2": guarded(lambda v: ca.log(v) / math.log(2.0), "positive"),
+        "log10": guarded(ca.log10, "positive"),
+        "asin": guarded(ca.asin, "nonnegative", lambda v: 1 - v * v),
+        "acos": guarded(ca.acos, "nonnegative", lambda v: 1 - v * v),
         "atan": ca.atan,
         "sinh": ca.sinh,
         "cosh": ca.cosh,
