@@ -278,7 +278,9 @@ def solve(config: ConfigArg, out: OutOpt = None, set_: SetOpt = None, quiet: Qui
     for line in _solution_lines(result.solution):
         typer.echo(line)
     if "best_response_gap" in cert:
-        gaps = ", ".join(f"{k} {_fmt(v, '.1e')}" for k, v in cert["best_response_gap"].items())
+        kinds = cert.get("best_response_kind", {})
+        gaps = ", ".join(f"{k} {_fmt(v, '.1e')}" + (f" ({kinds[k]})" if k in kinds else "")
+                         for k, v in cert["best_response_gap"].items())
         checked = f"best-response gaps: {gaps}"
     else:
         checked = "best responses not checked (run.certificate: false)"

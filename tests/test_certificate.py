@@ -113,7 +113,7 @@ def test_gaps_vanish_at_the_known_equilibrium(name: str) -> None:
     cert = certificate(game, _z(game, a))
     assert set(cert["best_response_gap"]) == set(game.agent_names)
     assert all(abs(g) <= GAP_TOL for g in cert["best_response_gap"].values())
-    assert all(note == "ok" for note in cert["best_response_note"].values())
+    assert all(note.startswith("ok") for note in cert["best_response_note"].values())
 
 
 def game_limit(name: str) -> float:
@@ -274,7 +274,7 @@ def test_certificate_of_the_solved_paper_game() -> None:
     assert cert["kkt_residual"] <= 1e-10
     assert set(cert["best_response_gap"]) == {"agent1", "agent2", "agent3"}
     assert all(abs(g) <= GAP_TOL for g in cert["best_response_gap"].values()), cert["best_response_gap"]
-    assert all(note == "ok" for note in cert["best_response_note"].values())
+    assert all(note.startswith("ok") for note in cert["best_response_note"].values())
     assert res.certificate["kkt_residual"] == pytest.approx(cert["kkt_residual"], abs=1e-14)
     # moving agent 2 off its equilibrium plan (feasibly: u2 <= 1/2 still holds) gives it a positive gap,
     # and leaves the KKT residual positive

@@ -144,28 +144,32 @@ CERTIFY_RESTARTS = 3  # restarts from the improving players' best responses befo
 
 @dataclass
 class Certified:
-    """The end of :func:`certified_solve`."""
+    """The end of :func:`certified_solve`: the last iterate, its certificate, and what the two together say."""
 
     state: SSNState
     certificate: dict
     improving: dict[str, float]  # agents that can still improve alone (empty: an equilibrium, or not converged)
     restarts: int
     time_s: float  # the solver's time (the certificates excluded)
+    status: str = ""  # the solve's status: the solver's, or what the certificate concludes (see conclude)
+    message: str = ""
+    diagnosis: dict = field(default_factory=dict)  # a failed solve's phase 1 (``infeasibility``), when run
 
 
 def certified_solve(game: CompiledGame, solver: SemismoothNewton, state: SSNState, x: np.ndarray | None = None,
                     on_iterate: Callable[[SSNState], None] | None = None,
                     note: Callable[[str], None] | None = None, restarts: int | None = None,
                     best_responses: bool = True, responses=None,
-                    on_stage: Callable[[str], None] | None = None) -> Certified:
+                    on_stage: Callable[[str], None] | None = None, check=None) -> Certified:
     """Iterate from ``state`` to the end and certify: converged means that no agent can improve alone. At a KKT
     point where some can (a nonconvex player's saddle or a worse local minimum), those agents move to the best
     responses the certificate found, the multipliers are reset, and the solver starts again from there (one
     iteration), up to ``restarts`` times (default ``CERTIFY_RESTARTS``). ``best_responses=False``: the KKT
-    residuals alone (``run.certificate: false``), no best responses and no restarts. ``responses``: a
-    :class:`~gnerun.solvers.certificate.NewtonResponses` for the best responses (SLSQP without); ``on_stage`` is told
-    when the certificate starts."""
-    from ..solvers.certificate import certificate, improving_agents, kkt_residuals
+    residuals alone (``run.certificate: false``), no best responses and no restarts: a KKT point then ends
+    ``kkt_point``. ``responses``: a :class:`~gnerun.solvers.certificate.NewtonResponses` for the best responses
+    (SLSQP without); ``on_stage`` is told when the certificate starts; ``check`` is called between agents (a stop
+    request may raise there). The status and message are :func:`conclude`'s."""
+    from ..solvers.certificate import assess, certificate, kkt_residuals
 
     restarts = CERTIFY_RESTARTS if restarts is None else restarts
     elapsed = 0.0
@@ -175,15 +179,18 @@ def certified_solve(game: CompiledGame, solver: SemismoothNewton, state: SSNStat
         state = iterate(solver, state, on_iterate)
         elapsed += time.perf_counter() - t
         if not best_responses:
-            return Certified(state, kkt_residuals(game, state.z, x), {}, used, elapsed)
+            return conclude(game, Certified(state, kkt_residuals(game, state.z, x), {}, used, elapsed), x,
+                            certified=False)
         best: dict[str, np.ndarray] = {}
         if on_stage is not None:
             on_stage(f"checking the best response of each of {len(game.agent_names)} agents (run.certificate: "
                      "false skips it)")
-        cert = certificate(game, state.z, x, best, responses)
-        improving = improving_agents(game, cert, state.z[: game.n], x) if state.status == Status.CONVERGED else {}
-        if not improving or used >= restarts or not all(name in best for name in improving):
-            return Certified(state, cert, improving, used, elapsed)
+        cert = certificate(game, state.z, x, best, responses, check)
+        verdict = assess(game, cert, state.z[: game.n], x)
+        improving = verdict.improving if state.status == Status.CONVERGED else {}
+        if (not improving or verdict.unbounded or verdict.not_finite or used >= restarts
+                or not all(name in best for name in improving)):
+            return conclude(game, Certified(state, cert, improving, used, elapsed), x)
         used += 1
         z = state.z.copy()
         for i, name in enumerate(game.agent_names):
@@ -197,6 +204,70 @@ def certified_solve(game: CompiledGame, solver: SemismoothNewton, state: SSNStat
         start = (solver.restart if hasattr(solver, "restart") else solver.init)(z, x, state.rng)
         elapsed += time.perf_counter() - t
         state = replace(start, k=state.k + 1)
+
+
+def conclude(game: CompiledGame, out: Certified, x: np.ndarray | None = None, certified: bool = True) -> Certified:
+    """The solve's status and message from the last iterate and its certificate.
+
+    A KKT point (the solver's ``converged``) is ``converged`` only when every player's best response was checked
+    and none improves; otherwise ``nan`` (a cost that is not finite there), ``unbounded_player`` (a player has no
+    best response: its cost keeps decreasing along a feasible ray), ``not_an_equilibrium`` (a player improves alone)
+    or ``kkt_point`` (best responses not checked: ``run.certificate: false``, or a player's could not be computed).
+    A failed solve (the solver's failure statuses and ``max_iter``) is checked for its cause: ``infeasible`` when
+    the game's constraints cannot all hold (gnerun.solvers.feasibility), ``unbounded_player`` when the certificate
+    at the last iterate found a player without a best response; otherwise the solver's own status stays."""
+    from ..solvers.certificate import assess
+    from ..solvers.feasibility import phase_one
+    from ..solvers.ssn import FAILURES
+
+    state, cert = out.state, out.certificate
+    status, message = Status(state.status), state.message
+    if status == Status.CONVERGED:
+        it = f"{state.k} iteration{'s' * (state.k != 1)}"
+        kkt = f"a KKT point (||Phi|| = {state.residual_norm:.2e} after {it})"
+        if not certified:
+            out.status, out.message = str(Status.KKT_POINT), (
+                f"{kkt}, not certified: best responses not checked (run.certificate: false); a KKT point of a game "
+                "with nonconvex players may be a saddle or a maximum")
+            return out
+        verdict = assess(game, cert, state.z[: game.n], x)
+        if verdict.not_finite:
+            status, message = Status.NAN, (f"{kkt} at which the cost of {', '.join(verdict.not_finite)} is not "
+                                           "finite: no equilibrium there")
+        elif verdict.unbounded:
+            who = "; ".join(f"{name}: {why}" for name, why in verdict.unbounded.items())
+            status, message = Status.UNBOUNDED_PLAYER, (
+                f"{kkt} at which {', '.join(verdict.unbounded)} has no best response ({who}): not an equilibrium, "
+                "and no equilibrium has the other players' decisions as here")
+        elif out.improving:
+            who = ", ".join(f"{name} by {gap:.2e}" for name, gap in out.improving.items())
+            status, message = Status.NOT_AN_EQUILIBRIUM, (
+                f"{kkt} that is not an equilibrium: alone, {who} (best response found by the certificate), after "
+                f"{out.restarts} restart(s) from the players' best responses; a nonconvex player's stationary point, "
+                "not its minimum (try other start values)")
+        elif verdict.unchecked:
+            who = "; ".join(f"{name}: {why}" for name, why in verdict.unchecked.items())
+            status, message = Status.KKT_POINT, f"{kkt}, not certified: a best response could not be checked ({who})"
+        elif out.restarts:
+            message += (f" (after {out.restarts} restart(s) from the best responses of players who could improve "
+                        "alone at a KKT point)")
+    elif status in FAILURES or status == Status.MAX_ITER:
+        if status != Status.INFEASIBLE_STAGE_CONSTRAINT:
+            a = state.z[: game.n]
+            p1 = phase_one(game, x, [a] if np.all(np.isfinite(a)) else [])
+            if p1 is not None:
+                out.diagnosis["infeasibility"] = {"violation": p1.violation, "rows": p1.rows, "proven": p1.proven,
+                                                  "method": p1.method}
+                if p1.infeasible:
+                    status, message = Status.INFEASIBLE, f"{p1.describe()} (the solver: {message})"
+        if status != Status.INFEASIBLE and cert.get("unbounded"):
+            verdict = assess(game, cert, state.z[: game.n], x)
+            who = "; ".join(f"{name}: {why}" for name, why in verdict.unbounded.items())
+            status, message = Status.UNBOUNDED_PLAYER, (
+                f"at the last iterate, {', '.join(verdict.unbounded)} has no best response ({who}); the solver: "
+                f"{message}")
+    out.status, out.message = str(status), message
+    return out
 
 
 @dataclass
@@ -328,7 +399,7 @@ def _solve(cfg: Config, game: CompiledGame, solver: SemismoothNewton, run: RunDi
 
     from ..solvers.certificate import NewtonResponses
 
-    responses = _StoppableResponses(NewtonResponses(cfg, game), interrupt)
+    responses = NewtonResponses(cfg, game)
     try:
         if exact:
             if on_stage is not None:
@@ -340,7 +411,7 @@ def _solve(cfg: Config, game: CompiledGame, solver: SemismoothNewton, run: RunDi
                                    "error norms are not available")
         outcome = certified_solve(game, solver, solver.init(z0, x), x, record, note,
                                   best_responses=cfg.run.certificate, responses=responses,
-                                  on_stage=on_stage)
+                                  on_stage=on_stage, check=interrupt.check)
     except Stopped:
         return _interrupted(cfg, game, run, history, z_star, ref, interrupt,
                             time.perf_counter() - started - sink_time, compile_time)
@@ -350,17 +421,9 @@ def _solve(cfg: Config, game: CompiledGame, solver: SemismoothNewton, run: RunDi
         ref = reference_solution(game, cfg, state.z, x)
         z_star = ref.z if ref.converged else None
     errors = None if z_star is None else [float(np.linalg.norm(s.z - z_star)) for s in history]
-    status, message = str(state.status), state.message
-    if outcome.improving:
-        status = str(Status.NOT_AN_EQUILIBRIUM)
-        who = ", ".join(f"{name} by {gap:.2e}" for name, gap in outcome.improving.items())
-        message = (f"a KKT point (||Phi|| = {state.residual_norm:.2e} after {state.k} "
-                   f"iteration{'s' * (state.k != 1)}) that is not an equilibrium: alone, {who} (best response "
-                   f"found by the certificate), after {outcome.restarts} restart(s) from the players' best "
-                   "responses; a nonconvex player's stationary point, not its minimum (try other start values)")
-    elif outcome.restarts:
-        message += (f" (after {outcome.restarts} restart(s) from the best responses of players who could improve "
-                    "alone at a KKT point)")
+    status, message = outcome.status, outcome.message
+    if outcome.diagnosis:
+        cert = {**cert, **outcome.diagnosis}
     result = SolveResult(
         status=status,
         message=message,
@@ -386,19 +449,6 @@ def _solve(cfg: Config, game: CompiledGame, solver: SemismoothNewton, run: RunDi
         run.log("info" if result.success else "warning", f"status {result.status}: {result.message}")
         run.write_summary(result.summary())
     return result
-
-
-class _StoppableResponses:
-    """The certificate's best responses (a NewtonResponses), with a stop request honoured between two of them: the
-    certificate of many agents takes as long as their solve."""
-
-    def __init__(self, responses, interrupt: Interrupt):
-        self.responses = responses
-        self.interrupt = interrupt
-
-    def best_response(self, *args, **kwargs):
-        self.interrupt.check()
-        return self.responses.best_response(*args, **kwargs)
 
 
 def _interrupted(cfg: Config, game: CompiledGame, run: RunDirectory | None, history: list[SSNState],

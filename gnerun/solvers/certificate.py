@@ -5,34 +5,66 @@ problem
 
     min_{a_i} J_i(a_i, a_-i)  s.t. its own constraints g_i(a_i, a_-i) <= 0 (and h_i = 0)
 
-with the other agents fixed at a_-i, from the candidate (warm: with its multipliers), from the config's start
-values, where the agent's decisions are bounded from the corners of their box (the lower and the upper bounds; a
-nonconvex player's better choices often lie there), and from seeded perturbations of the candidate (other basins),
-and gap_i = J_i(a) - (best value found) is reported. A gap near zero (or slightly negative, at the level of the
-solver's tolerance) says that no agent can improve unilaterally from these starts; for nonconvex agent problems it
-is a local statement.
+with the other agents fixed at a_-i, and gap_i = J_i(a) - (best value found) is reported, with the kind of
+statement it is (``best_response_kind``):
 
-The agent's problem is solved by Newton steps on its own compiled problem (:class:`NewtonResponses`: the
-interior-point method, gnerun.game.compile_agent_problem with tau = 0: its own cost and constraints, the others as
-parameters), where a start's solve converges to a feasible point; by scipy's SLSQP, which shares nothing with
-the Newton machinery, from the same starts otherwise (or for every start, without ``responses``). Measured on
-ALGAMES's 3-car merge (40 decisions and 100 constraint rows per car): 16 s for the three agents by SLSQP, 0.7 s
-by Newton, most of it the compilation of the agents' problems.
+- **global on the box**: for a player with at most three decisions, an interval branch and bound over its box
+  (its bounds; where a decision is unbounded, a box of radius ``BOX_RADIUS`` times the point's size around the
+  candidate) proves that no feasible point of the box has a cost below J_i(a) - tol, or finds one that has
+  (:mod:`gnerun.solvers.global_response`);
+- **global (convex problem)**: in an LQ game, a player whose own Hessian block is positive semidefinite has a
+  convex problem (its rows are affine), whose KKT points are its minima: the candidate, a KKT point, is its best
+  response, and the local solves confirm the gap;
+- **over N starts**: otherwise, the best of local solves from the starts below, a statement about those starts.
+
+Every start is first compared as it is, before any local solve (a start better than the candidate is a proof
+already, wherever a local solve from it goes). The starts cover the player's feasible set: the candidate (warm,
+with its multipliers), the config's start values, the corners of bounded decisions, the other players' decisions
+and start values where they have as many decisions (symmetric games), seeded perturbations of the candidate
+scaled per decision to its box (or to its size, where unbounded), and a scrambled Sobol design in the box
+(scipy.stats.qmc), seeded by the agent and the candidate. Local solves run from the candidate, the start values,
+the two extreme corners, the perturbations, the best design points and any start already better than the
+candidate: Newton steps on the agent's own compiled problem (:class:`NewtonResponses`, the interior-point method,
+whose direction makes the player's block positive definite so that it descends to a minimum, never to a maximum),
+and scipy's SLSQP, which shares nothing with the Newton machinery, where no Newton start ends feasible (or for
+every start, without ``responses``).
+
+Three more things make a point fail the certificate, whatever the gaps:
+
+- **a player without a best response** (:mod:`gnerun.solvers.unbounded`): along a ray from the candidate, feasible
+  for the player's rows, its cost keeps decreasing over eight decades of the step (unbounded below, or towards an
+  infimum it never attains). ``unbounded`` records the direction and the costs seen;
+- **a cost that is not finite** at the candidate (nan, inf, or a non-finite gradient): ``not_finite``;
+- **a kink**: where a piecewise function of the decisions (abs, min, max) is at its kink in a player's cost or
+  rows, the KKT conditions used one branch's derivative. The branches are then compared directly: points a small
+  step away along every coordinate (both signs) and along seeded random directions join the compared starts;
+  ``kinks`` names the functions.
 """
 
 from __future__ import annotations
 
 import math
 import warnings
+import zlib
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import minimize
+from scipy.stats import qmc
 
 from ..game.compile import CompiledGame
+from ..game.tape import Tape, UnsupportedTape
+from . import global_response, unbounded
+from .unbounded import Ray
 
 FEASIBILITY_TOL = 1e-9
-PERTURBATIONS = (0.1, 1.0)  # relative sizes of the perturbed starts of a best response
+PERTURBATIONS = (0.1, 1.0)  # relative sizes of the perturbed starts of a best response (of the box, or of |a_i|)
 GAP_TOL = 1e-6  # a best-response gap above this (relative to max(1, |J_i|)) means the agent can improve alone
+KINK_TOL = 1e-6  # a piecewise function this close to its kink (relative) is at its kink
+KINK_STEPS = (1e-6, 1e-4, 1e-2)  # the probes' steps away from a kink, times max(1, |a_i|)
+BOX_RADIUS = 100.0  # the box search's half-width on unbounded decisions, times max(1, |a_i|, |start|)
+SOBOL_SMALL, SOBOL_LARGE = 64, 16  # design points compared as they are (players of <= MAX_DIM decisions; others)
+LOCAL_FROM_DESIGN = 4  # players of <= MAX_DIM decisions: local solves start from the best compared points too
 
 
 def kkt_residuals(game: CompiledGame, z: np.ndarray, x: np.ndarray | None = None) -> dict[str, float]:
@@ -48,6 +80,8 @@ def kkt_residuals(game: CompiledGame, z: np.ndarray, x: np.ndarray | None = None
     comp = float(np.max(np.abs(lam[ineq] * c[ineq]), initial=0.0))
     natural = float(max(stationarity, np.max(np.abs(np.minimum(-c[ineq], lam[ineq])), initial=0.0),
                         np.max(np.abs(c[eq]), initial=0.0)))
+    if not all(math.isfinite(v) for v in (stationarity, primal, comp)) or not np.all(np.isfinite(L)):
+        natural = math.nan
     return {
         "kkt_residual": natural,
         "stationarity": stationarity,
@@ -57,21 +91,114 @@ def kkt_residuals(game: CompiledGame, z: np.ndarray, x: np.ndarray | None = None
     }
 
 
-def response_starts(game: CompiledGame, agent: int, a: np.ndarray) -> list[np.ndarray]:
-    """Where a best response is sought from: the candidate, the start values, the box's corners (when bounded) and
-    seeded perturbations of the candidate inside the box."""
+def _seed(agent: int, a: np.ndarray) -> list[int]:
+    """A seed for an agent's random starts at candidate a: reproducible, and different at every candidate."""
+    return [agent, zlib.crc32(np.ascontiguousarray(a, dtype=float).tobytes())]
+
+
+def _scales(game: CompiledGame, agent: int, a: np.ndarray) -> np.ndarray:
+    """Per decision of the agent, the size its starts are spread over: its box where bounded on both sides, else the
+    size of the candidate, its start value and its finite bound's distance (at least 1)."""
     sl = game.agent_slices[agent]
+    lo, hi, y, s = game.a_lower[sl], game.a_upper[sl], a[sl], game.a_start[sl]
+    size = np.maximum.reduce([np.ones_like(y), np.abs(y), np.abs(s),
+                              np.where(np.isfinite(lo), np.abs(y - lo), 0.0),
+                              np.where(np.isfinite(hi), np.abs(hi - y), 0.0)])
+    return np.where(np.isfinite(lo) & np.isfinite(hi), hi - lo, size)
+
+
+def search_box(game: CompiledGame, agent: int, a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The box a player's design points and box search cover: its bounds, and ``BOX_RADIUS`` times its size around
+    the candidate where a decision is unbounded."""
+    sl = game.agent_slices[agent]
+    lo, hi, y = game.a_lower[sl], game.a_upper[sl], a[sl]
+    r = BOX_RADIUS * max(1.0, float(np.max(np.abs(y), initial=0.0)),
+                         float(np.max(np.abs(game.a_start[sl]), initial=0.0)))
+    return np.where(np.isfinite(lo), lo, y - r), np.where(np.isfinite(hi), hi, y + r)
+
+
+@dataclass
+class Starts:
+    """Where an agent's best response is sought from: ``compare`` is every point compared as it is; ``local`` the
+    subset local solves start from (``local[0]`` is the candidate)."""
+
+    compare: list[np.ndarray]
+    local: list[np.ndarray]
+    kinks: list[str] = field(default_factory=list)
+
+
+def response_starts(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | None = None) -> Starts:
+    """The candidate, the start values, the box's corners, the others' decisions and starts of the same size, scaled
+    perturbations, a Sobol design in the search box, and (at a kink) probes around the candidate."""
+    sl = game.agent_slices[agent]
+    ni = sl.stop - sl.start
     lo, hi = game.a_lower[sl], game.a_upper[sl]
-    starts = [a[sl], game.a_start[sl]]
+    y = a[sl].astype(float)
+    rng = np.random.default_rng(_seed(agent, a))
+    scale = _scales(game, agent, a)
+    local = [y.copy(), np.clip(game.a_start[sl], lo, hi)]
+    corners: list[np.ndarray] = []
     if np.all(np.isfinite(lo)):
-        starts.append(lo.copy())
+        local.append(lo.copy())
     if np.all(np.isfinite(hi)):
-        starts.append(hi.copy())
-    rng = np.random.default_rng(agent)
-    for scale in PERTURBATIONS:
-        shaken = a[sl] + scale * np.maximum(1.0, np.abs(a[sl])) * rng.standard_normal(sl.stop - sl.start)
-        starts.append(np.clip(shaken, lo, hi))
-    return starts
+        local.append(hi.copy())
+    if ni <= global_response.MAX_DIM and np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)):
+        corners = [np.where(np.array([(k >> j) & 1 for j in range(ni)], dtype=bool), hi, lo) for k in range(2**ni)]
+    for frac in PERTURBATIONS:
+        local.append(np.clip(y + frac * scale * rng.standard_normal(ni), lo, hi))
+    others = []
+    for j, sj in enumerate(game.agent_slices):
+        if j != agent and sj.stop - sj.start == ni:
+            others += [np.clip(a[sj], lo, hi), np.clip(game.a_start[sj], lo, hi)]
+    # a scrambled Sobol design over the search box
+    blo, bhi = search_box(game, agent, a)
+    count = SOBOL_SMALL if ni <= global_response.MAX_DIM else SOBOL_LARGE
+    design = qmc.scale(qmc.Sobol(ni, scramble=True, seed=rng).random(count), blo, bhi) if ni else np.zeros((0, 0))
+    compare = local + corners + others + list(design)
+    kinks = _kinks(game, agent, a, x)
+    if kinks:
+        for step in KINK_STEPS:
+            h = step * max(1.0, float(np.max(np.abs(y), initial=0.0)))
+            for k in range(ni):
+                for sign in (1.0, -1.0):
+                    e = y.copy()
+                    e[k] += sign * h
+                    compare.append(np.clip(e, lo, hi))
+            for _ in range(4 * ni):
+                r = rng.standard_normal(ni)
+                compare.append(np.clip(y + h * r / np.linalg.norm(r), lo, hi))
+    small = ni <= global_response.MAX_DIM
+    return Starts(compare, _unique(local + (others if small else [])), kinks)
+
+
+def _unique(points: list[np.ndarray]) -> list[np.ndarray]:
+    out: list[np.ndarray] = []
+    for p in points:
+        if not any(np.array_equal(p, q) for q in out):
+            out.append(p)
+    return out
+
+
+def _kinks(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | None) -> list[str]:
+    """The piecewise functions (abs, min, max...) at their kink in the agent's cost or rows at a."""
+    costs, rows = game.piecewise_parts
+    if not costs[agent] and not rows[game.constraint_rows(agent)].any():
+        return []
+    found = game.agent_kinks(agent)
+    if found is None:
+        return []
+    f, names = found
+    xv = game.x0 if x is None else np.asarray(x, dtype=float)
+    d = np.asarray(f(a, xv), dtype=float).reshape(-1)
+    return list(dict.fromkeys(name for name, v in zip(names, d, strict=True) if v <= KINK_TOL))
+
+
+def _agent_tape(game: CompiledGame, agent: int, f) -> Tape:
+    cache = game.derived.setdefault("tapes", {})
+    key = (agent, f.name())
+    if key not in cache:
+        cache[key] = Tape(f)
+    return cache[key]
 
 
 class NewtonResponses:
@@ -111,10 +238,10 @@ class NewtonResponses:
             self._solvers[agent] = (problem, globalized(SemismoothNewton(problem, opts)), order)
         return self._solvers[agent]
 
-    def best_response(self, agent: int, a: np.ndarray, x: np.ndarray | None, starts: list[np.ndarray],
-                      multipliers: np.ndarray | None = None) -> tuple[float | None, np.ndarray | None, int]:
-        """(best value, its decision, how many starts ended feasible and converged); the first start is warm with
-        ``multipliers`` (the candidate's, in the agent's row order)."""
+    def solve_from(self, agent: int, a: np.ndarray, x: np.ndarray | None, starts: list[np.ndarray],
+                   multipliers: np.ndarray | None = None) -> list[tuple[np.ndarray, bool]]:
+        """Each start's end point and whether its solve converged; the first start is warm with ``multipliers``
+        (the candidate's, in the agent's row order)."""
         from .ssn import FAILURES, Status
 
         problem, solver, order = self._solver(agent)
@@ -122,8 +249,7 @@ class NewtonResponses:
         sl = game.agent_slices[agent]
         xv = game.x0 if x is None else np.asarray(x, dtype=float)
         p = np.concatenate([xv, a[: sl.start], a[sl.stop:], a[sl]])
-        best_val, best_x, counted = None, None, 0
-        own = float(game.costs(a, x)[agent])  # the candidate's cost: a start that did not converge must beat it
+        ends = []
         for k, s in enumerate(starts):
             lam = np.zeros(problem.m)
             if k == 0 and multipliers is not None and (order >= 0).all():
@@ -132,30 +258,71 @@ class NewtonResponses:
             while not solver.terminate(state)[0]:
                 state = solver.step(state)
             converged = solver.terminate(state)[1] == Status.CONVERGED and state.status not in FAILURES
-            ai = state.z[: problem.n]
-            if not np.all(np.isfinite(ai)):
+            ends.append((state.z[: problem.n].copy(), converged))
+        return ends
+
+    def best_response(self, agent: int, a: np.ndarray, x: np.ndarray | None, starts: list[np.ndarray],
+                      multipliers: np.ndarray | None = None) -> tuple[float | None, np.ndarray | None, int]:
+        """(best value, its decision, how many starts ended feasible and converged): a start that did not converge
+        counts where it ended feasible and below the candidate's cost (a feasible point of lower cost proves that the
+        agent can improve)."""
+        game = self.game
+        sl = game.agent_slices[agent]
+        own = float(game.costs(a, x)[agent])
+        ends = self.solve_from(agent, a, x, starts, multipliers)
+        values, feasible = _values(game, agent, a, x, [e for e, _ in ends])
+        best_val, best_x, counted = None, None, 0
+        for (ai, converged), val, ok in zip(ends, values, feasible, strict=True):
+            if not ok or not math.isfinite(val):
                 continue
-            c = problem.constraint(ai, p)
-            eq = problem.equality_mask
-            viol = max(float(np.max(c[~eq], initial=0.0)), float(np.max(np.abs(c[eq]), initial=0.0)))
-            if not viol <= FEASIBILITY_TOL * max(1.0, float(np.max(np.abs(ai), initial=0.0))):
-                continue
-            b = a.copy()
-            b[sl] = ai
-            val = float(game.costs(b, x)[agent])
             counted += converged
-            # a start that did not converge still counts where it ended feasible and better: a feasible point of
-            # lower cost proves that the agent can improve (a player whose cost is unbounded below diverges)
-            if math.isfinite(val) and (converged or val < own) and (
-                    best_val is None or val < best_val):
-                best_val, best_x = val, ai
+            if (converged or val < own) and (best_val is None or val < best_val):
+                best_val, best_x = float(val), ai
+        del sl
         return best_val, best_x, counted
+
+
+def _values(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | None, points: list[np.ndarray],
+            prices: np.ndarray | None = None, strict: bool = False, directions: np.ndarray | None = None):
+    """The agent's cost at each of its decisions ``points`` (the others at a) and whether each satisfies the agent's
+    rows within ``FEASIBILITY_TOL`` (``strict``: exactly); with ``prices``, each violation is charged at its price;
+    with ``directions`` (one per point, in the agent's decisions), also the cost's derivative along each."""
+    sl = game.agent_slices[agent]
+    if not points:
+        empty = (np.zeros(0), np.zeros(0, dtype=bool))
+        return empty if directions is None else (*empty, np.zeros(0))
+    Y = np.asarray(points, dtype=float).reshape(len(points), sl.stop - sl.start)
+    A = np.repeat(a.reshape(1, -1).astype(float), len(points), axis=0)
+    A[:, sl] = Y
+    finite = np.all(np.isfinite(A), axis=1)
+    A[~finite] = 0.0
+    V = None
+    if directions is not None:
+        V = np.zeros_like(A)
+        V[:, sl] = directions
+    J, C, *rest = game.evaluate_many(A, x, V)
+    rows = game.constraint_rows(agent)
+    c = C[:, rows]
+    eq = game.equality_mask[rows]
+    over = np.where(eq, np.abs(c), np.maximum(c, 0.0))
+    viol = np.max(over, axis=1, initial=0.0)
+    size = np.maximum(1.0, np.max(np.abs(Y), axis=1, initial=0.0))
+    feasible = finite & ((viol <= 0.0) if strict else (viol <= FEASIBILITY_TOL * size))
+    value = J[:, agent].copy()
+    if prices is not None and rows.size:
+        with np.errstate(all="ignore"):
+            value += over @ np.abs(prices)
+    value[~finite] = math.nan
+    if directions is None:
+        return value, feasible
+    return value, feasible, rest[0][:, agent]
 
 
 def best_response(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | None = None,
                   starts: list[np.ndarray] | None = None,
                   prices: np.ndarray | None = None) -> tuple[float | None, np.ndarray | None, str]:
-    """Agent ``agent``'s best response to a_-i: (value, its decision, a note).
+    """Agent ``agent``'s best response to a_-i by SLSQP from ``starts`` (default: the local starts of
+    :func:`response_starts`): (value, its decision, a note).
 
     SLSQP's answers may violate the constraints within ``FEASIBILITY_TOL``; with ``prices`` (the candidate's
     multipliers of the agent's rows, in ``constraint_rows`` order) such a point is charged for its violations at
@@ -192,7 +359,7 @@ def best_response(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray |
     if eq_rows.size:
         constraints.append({"type": "eq", "fun": lambda ai: values(ai)[0][eq_rows],
                             "jac": lambda ai: values(ai)[1][eq_rows]})
-    candidates = response_starts(game, agent, a) if starts is None else starts
+    candidates = response_starts(game, agent, a, x).local if starts is None else starts
     best_val, best_x, notes = None, None, []
     for s in candidates:
         with warnings.catch_warnings():
@@ -200,6 +367,9 @@ def best_response(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray |
             res = minimize(objective, np.array(s, dtype=float), jac=True, method="SLSQP", constraints=constraints,
                            options={"ftol": 1e-15, "maxiter": 300})
         ai = np.asarray(res.x, dtype=float)
+        if not np.all(np.isfinite(ai)):
+            notes.append("SLSQP from a start ended at a non-finite point")
+            continue
         c = values(ai)[0]
         viol = max(float(np.max(c[in_rows], initial=0.0)), float(np.max(np.abs(c[eq_rows]), initial=0.0)))
         val = objective(ai)[0]
@@ -215,45 +385,257 @@ def best_response(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray |
     return best_val, best_x, note
 
 
-def certificate(game: CompiledGame, z: np.ndarray, x: np.ndarray | None = None,
-                best: dict[str, np.ndarray] | None = None, responses: NewtonResponses | None = None) -> dict:
-    """KKT residuals and every agent's best-response gap at z (``certificate`` in summary.json); ``best``, if
-    given, receives each agent's best response found. With ``responses``, the best responses are Newton solves of
-    the agents' own problems, and SLSQP's where none of those ends feasible; without, SLSQP's."""
+@dataclass
+class PlayerCheck:
+    """One agent's part of a certificate."""
+
+    gap: float | None  # J_i(a) - the best value found (None: nothing feasible was found, or the cost is not finite)
+    decision: np.ndarray | None  # the best response found
+    kind: str  # "global on the box" | "over N starts" | "not checked"
+    note: str
+    box: tuple[list[float], list[float]] | None = None  # the box of a global statement
+    bound: float | None = None  # a proven upper bound on the gap (global on the box)
+    ray: Ray | None = None  # a feasible ray along which the cost keeps decreasing (no best response)
+    finite: bool = True
+    kinks: list[str] = field(default_factory=list)
+
+
+def check_player(game: CompiledGame, agent: int, z: np.ndarray, x: np.ndarray | None = None,
+                 responses: NewtonResponses | None = None) -> PlayerCheck:
+    """Agent ``agent``'s best response to the others at z, as the module docstring describes."""
     n = game.n
     a = np.asarray(z[:n], dtype=float)
+    sl = game.agent_slices[agent]
+    ni = sl.stop - sl.start
+    y = a[sl]
+    rows = game.constraint_rows(agent)
+    prices = z[n + rows]
+    J0 = float(game.costs(a, x)[agent])
+    grad = game.cost_gradients(a, x)[agent, sl]
+    undefined = bool(game.outside_domain(a, x)[agent])
+    if not math.isfinite(J0) or not np.all(np.isfinite(grad)) or undefined:
+        what = (f"J = {J0}" if not math.isfinite(J0) else "its gradient is not finite" if not undefined else
+                "a log, sqrt, asin or acos in it is evaluated outside its domain")
+        return PlayerCheck(None, None, "not checked", f"the cost is not finite at the point ({what})", finite=False)
+    tol = GAP_TOL * max(1.0, abs(J0))
+    starts = response_starts(game, agent, a, x)
+    best_val, best_x = math.inf, None
+
+    def consider(points: list[np.ndarray], strict: bool) -> None:
+        nonlocal best_val, best_x
+        vals, ok = _values(game, agent, a, x, points, prices, strict)
+        for p, v, good in zip(points, vals, ok, strict=True):
+            if good and math.isfinite(v) and v < best_val:
+                best_val, best_x = float(v), np.asarray(p, dtype=float).copy()
+
+    consider(starts.compare, strict=False)
+    local = list(starts.local)
+    # the best design points and any point already better than the candidate start local solves too
+    vals, ok = _values(game, agent, a, x, starts.compare, prices)
+    order = [k for k in np.argsort(np.where(ok, vals, np.inf)) if ok[k] and math.isfinite(vals[k])]
+    if ni <= global_response.MAX_DIM:
+        local = _unique(local + [starts.compare[k] for k in order[: LOCAL_FROM_DESIGN + 1]])
+    elif order and vals[order[0]] < J0 - tol:  # a larger player: a start already better than the candidate
+        local = _unique(local + [starts.compare[order[0]]])
+
+    # the box search (small players): a global statement, or a witness
+    box_result, box = None, None
+    if 0 < ni <= global_response.MAX_DIM:
+        box_result, box = _box_search(game, agent, a, x, J0 - tol)
+        if box_result is not None and box_result.witness is not None:
+            consider([box_result.witness], strict=False)
+            local = _unique(local + [box_result.witness])
+
+    # local solves
+    kind_note = ""
+    ends: list[tuple[np.ndarray, bool]] = []
+    counted = 0
+    if responses is not None:
+        ends = responses.solve_from(agent, a, x, local, prices if rows.size else None)
+        vals, ok = _values(game, agent, a, x, [e for e, _ in ends], prices)
+        counted = sum(1 for (_, conv), good in zip(ends, ok, strict=True) if conv and good)
+        for (e, conv), v, good in zip(ends, vals, ok, strict=True):
+            if good and math.isfinite(v) and (conv or v < J0) and v < best_val:
+                best_val, best_x = float(v), e
+        kind_note = f"Newton, {counted} of {len(local)} starts"
+    if responses is None or counted == 0:
+        val, dec, note = best_response(game, agent, a, x, local, prices)
+        if val is not None and val < best_val:
+            best_val, best_x = val, dec
+        kind_note = "SLSQP" + (": no Newton start ended feasible" if responses is not None else "")
+        if val is None:
+            kind_note += f" ({note})"
+
+    # rays: a player whose cost keeps decreasing has no best response
+    runaway = [e - y for e, conv in ends if np.all(np.isfinite(e)) and
+               np.linalg.norm(e - y) > 1e3 * max(1.0, float(np.linalg.norm(y)))]
+    ray = None
+    extra = list(runaway)
+    if ni <= unbounded.COORDINATE_RAYS_UP_TO:  # flat and concave directions of the player's own cost
+        extra += unbounded.flat_directions(game.agent_hessian(agent, a, x))
+    if rows.size:  # the way out of its linearised rows along which the cost falls
+        _, dc = game.constraint_values(a, x)
+        d = unbounded.recession_direction(grad, dc[rows][:, sl], game.equality_mask[rows])
+        if d is not None:
+            extra.append(d)
+    directions = unbounded.free_directions(game.a_lower[sl], game.a_upper[sl], grad, _seed(agent, a), extra)
+    if directions:
+        scale = max(1.0, float(np.max(np.abs(y), initial=0.0)))
+        points, t = unbounded.ray_points(y, directions, scale)
+        along = np.repeat(np.asarray(directions), t.size, axis=0)
+        vals, ok, slopes = _values(game, agent, a, x, list(points), prices, directions=along)
+        ray = unbounded.descending_ray(directions, t, np.where(np.isfinite(vals), vals, np.nan), ok, J0, slopes)
+        consider(list(points), strict=False)
+
+    gap = None if best_x is None else J0 - best_val
+    if box_result is not None and box_result.complete and gap is not None and gap <= tol:
+        kind = "global on the box"
+        bound = tol
+    elif gap is not None and gap <= tol and _convex_player(game, agent, a, x):
+        kind = "global (convex problem)"  # the candidate is a KKT point of the player's own convex problem
+        bound = None
+    else:
+        kind = f"over {len(starts.compare) + len(local)} starts"
+        bound = None
+        if box_result is not None and math.isfinite(box_result.lower_bound) and box_result.witness is None:
+            bound = J0 - box_result.lower_bound
+    note = "ok (" + kind_note + ")" if gap is not None else "no start ended feasible (" + kind_note + ")"
+    if starts.kinks:
+        note += f"; at a kink of {', '.join(starts.kinks)}: the branches compared by probes around the point"
+    if ray is not None:
+        note += "; " + ray.describe(game.variable_names[agent] if game.kind == "static" else
+                                    [f"a[{k}]" for k in range(ni)])
+    return PlayerCheck(gap, best_x, kind, note, box, bound, ray, True, starts.kinks)
+
+
+def _convex_player(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | None) -> bool:
+    """The agent's problem is convex for certain: an LQ game (constant derivatives, affine rows) whose agent's own
+    Hessian block is positive semidefinite. Its KKT points are its minima."""
+    if not game.affine:
+        return False
+    w = np.linalg.eigvalsh(0.5 * (lambda H: H + H.T)(game.agent_hessian(agent, a, x)))
+    return bool(w.size == 0 or w[0] >= -1e-10 * max(1.0, float(np.max(np.abs(w)))))
+
+
+def _box_search(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | None, threshold: float):
+    sl = game.agent_slices[agent]
+    J, dJ, c = game.agent_functions(agent)
+    try:
+        tapes = [_agent_tape(game, agent, f) for f in (J, dJ, c)]
+    except UnsupportedTape:
+        return None, None
+    lo, hi = search_box(game, agent, a)
+    xv = game.x0 if x is None else np.asarray(x, dtype=float)
+    rows = game.constraint_rows(agent)
+    eq = game.equality_mask[rows]
+
+    def embed(blo: np.ndarray, bhi: np.ndarray):
+        B = blo.shape[1]
+        Al = np.repeat(a.reshape(-1, 1), B, axis=1)
+        Ah = Al.copy()
+        Al[sl], Ah[sl] = blo, bhi
+        return [Al, xv], [Ah, xv]
+
+    result = global_response.box_search(tapes[0], tapes[1], tapes[2] if rows.size else None, eq, lo, hi, embed,
+                                        threshold)
+    return result, (lo.tolist(), hi.tolist())
+
+
+def certificate(game: CompiledGame, z: np.ndarray, x: np.ndarray | None = None,
+                best: dict[str, np.ndarray] | None = None, responses: NewtonResponses | None = None,
+                check=None) -> dict:
+    """KKT residuals and every agent's best-response check at z (``certificate`` in summary.json); ``best``, if
+    given, receives each agent's best response found. With ``responses``, the local best responses are Newton
+    solves of the agents' own problems, and SLSQP's where none of those ends feasible; without, SLSQP's. ``check``
+    is called before each agent (a stop request may raise there)."""
     out: dict = kkt_residuals(game, z, x)
+    names = game.agent_names
     if not np.all(np.isfinite(z)):
-        out["best_response_gap"] = {name: None for name in game.agent_names}
-        out["best_response_note"] = {name: "the candidate is not finite" for name in game.agent_names}
+        out["best_response_gap"] = {name: None for name in names}
+        out["best_response_note"] = {name: "the candidate is not finite" for name in names}
+        out["best_response_kind"] = {name: "not checked" for name in names}
+        out["not_finite"] = list(names)
         return out
-    values = game.costs(a, x)
     gaps: dict[str, float | None] = {}
     notes: dict[str, str] = {}
-    for i, name in enumerate(game.agent_names):
-        prices = z[n + game.constraint_rows(i)]
-        value = None
-        if responses is not None:
-            starts = response_starts(game, i, a)
-            value, decision, counted = responses.best_response(i, a, x, starts, prices)
-            note = f"ok (Newton, {counted} of {len(starts)} starts)"
-        if value is None:
-            value, decision, note = best_response(game, i, a, x, prices=prices)
-            if responses is not None:
-                note = f"{note} (SLSQP: no Newton start ended feasible)"
-        gaps[name] = None if value is None else float(values[i] - value)
-        notes[name] = note
-        if best is not None and decision is not None:
-            best[name] = decision
+    kinds: dict[str, str] = {}
+    bounds: dict[str, float | None] = {}
+    boxes: dict[str, dict] = {}
+    rays: dict[str, dict] = {}
+    kinks: dict[str, list[str]] = {}
+    not_finite: list[str] = []
+    for i, name in enumerate(names):
+        if check is not None:
+            check()
+        pc = check_player(game, i, z, x, responses)
+        gaps[name] = pc.gap
+        notes[name] = pc.note
+        kinds[name] = pc.kind
+        bounds[name] = pc.bound
+        if pc.box is not None and pc.kind == "global on the box":
+            boxes[name] = {"lower": pc.box[0], "upper": pc.box[1]}
+        if pc.ray is not None:
+            rays[name] = {"direction": pc.ray.direction.tolist(), "steps": pc.ray.steps.tolist(),
+                          "costs": pc.ray.costs.tolist(), "cost_at_point": pc.ray.start_cost,
+                          "unbounded_below": pc.ray.unbounded_below}
+        if pc.kinks:
+            kinks[name] = pc.kinks
+        if not pc.finite:
+            not_finite.append(name)
+        if best is not None and pc.decision is not None:
+            best[name] = pc.decision
     out["best_response_gap"] = gaps
     out["best_response_note"] = notes
+    out["best_response_kind"] = kinds
+    out["best_response_gap_bound"] = bounds
+    if boxes:
+        out["best_response_box"] = boxes
+    if rays:
+        out["unbounded"] = rays
+    if kinks:
+        out["kinks"] = kinks
+    if not_finite:
+        out["not_finite"] = not_finite
     return out
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """What a certificate says about a KKT point (:func:`assess`)."""
+
+    improving: dict[str, float]  # agents that can improve alone, by their gaps
+    unbounded: dict[str, str]  # agents without a best response: the ray seen
+    not_finite: list[str]  # agents whose cost is not finite at the point
+    unchecked: dict[str, str]  # agents whose best response could not be checked: why
+
+    @property
+    def certified(self) -> bool:
+        return not (self.improving or self.unbounded or self.not_finite or self.unchecked)
+
+
+def assess(game: CompiledGame, cert: dict, a: np.ndarray, x: np.ndarray | None = None) -> Verdict:
+    """Read a certificate: which agents improve alone (gap above GAP_TOL max(1, |J_i(a)|)), have no best response,
+    have a cost that is not finite, or could not be checked."""
+    gaps = cert.get("best_response_gap") or {}
+    notes = cert.get("best_response_note") or {}
+    values = game.costs(np.asarray(a, dtype=float), x)
+    not_finite = list(cert.get("not_finite", []))
+    unbounded_agents = {}
+    for name, ray in (cert.get("unbounded") or {}).items():
+        unbounded_agents[name] = notes.get(name, "").split("; ")[-1]
+        del ray
+    improving, unchecked = {}, {}
+    for (name, gap), value in zip(gaps.items(), values, strict=True):
+        if name in not_finite or name in unbounded_agents:
+            continue
+        if gap is None or not math.isfinite(gap):
+            unchecked[name] = notes.get(name, "no best response could be computed")
+        elif gap > GAP_TOL * max(1.0, abs(float(value))):
+            improving[name] = gap
+    return Verdict(improving, unbounded_agents, not_finite, unchecked)
 
 
 def improving_agents(game: CompiledGame, cert: dict, a: np.ndarray, x: np.ndarray | None = None) -> dict[str, float]:
     """The agents whose best-response gap in ``cert`` exceeds GAP_TOL max(1, |J_i(a)|): at a KKT point of a game
     with nonconvex players, each of them can improve on its own, so the point is not an equilibrium."""
-    gaps = cert.get("best_response_gap") or {}
-    values = game.costs(np.asarray(a, dtype=float), x)
-    return {name: gap for (name, gap), value in zip(gaps.items(), values, strict=True)
-            if gap is not None and gap > GAP_TOL * max(1.0, abs(float(value)))}
+    return assess(game, cert, a, x).improving

@@ -62,6 +62,10 @@ class Status(StrEnum):
     INFEASIBLE_STAGE_CONSTRAINT = "infeasible_stage_constraint"  # a row no decision reaches is violated
     NOT_AN_EQUILIBRIUM = "not_an_equilibrium"  # a KKT point at which an agent can improve alone (certificate)
     STALLED = "stalled"  # the globalized method made no progress from any of its starting points
+    # what a solve's certificate concludes (gnerun.runs.solving.certified_solve), never a step's status
+    KKT_POINT = "kkt_point"  # a KKT point whose best responses were not (or could not be) checked: not certified
+    UNBOUNDED_PLAYER = "unbounded_player"  # a player has no best response: its cost keeps decreasing along a ray
+    INFEASIBLE = "infeasible"  # the game's constraints cannot all hold at once (phase 1)
 
 
 FAILURES = frozenset({Status.SINGULAR_JACOBIAN, Status.DIVERGED, Status.NAN, Status.SUBPROBLEM_FAILED,

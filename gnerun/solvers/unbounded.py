@@ -1,0 +1,182 @@
+"""Players without a best response: a cost that keeps decreasing along a feasible ray.
+
+A player whose cost is unbounded below on its feasible set (x^3/3 - x + ..., a concave or a linear cost of an
+unbounded decision, x^2 - 1e-6 x^4), or that decreases towards an infimum it never attains (exp(-x)), has no best
+response, and a game in which that happens at a point has no equilibrium there, whatever the KKT residual says: a
+KKT point may well be such a player's local minimum or maximum. From the point, rays y + t d are followed over
+``STEPS`` decades of t (t = s/100, s/10, ..., 1e8 s with s the size of the point); a ray shows the player unbounded
+when every point on it satisfies the player's constraints and the cost falls below the point's own over ``TAIL``
+descending steps to a lowest value that it never leaves again (at the end of the ray, or a floor it approaches).
+The directions: the coordinates the player's bounds leave free, the negative gradient there, a few seeded random
+directions in the same cone, and any given ones (where a best-response solve ran away). A cost whose minimum lies
+beyond 1e8 s along the ray is reported as unbounded as well; the values seen are in the report.
+
+Two more directions find what coordinates and random draws miss: the eigenvectors of the player's own Hessian whose
+eigenvalues are (nearly) zero or negative (a flat valley, along which a cost can decay forever while rising on both
+sides), and the steepest descent direction of the recession cone of the player's linearised rows (min grad J . d
+s.t. grad c_j . d <= 0 for every inequality row, = 0 for every equality, |d| <= 1: a linear program), which is the
+way out of a polyhedral set along which a linear cost falls.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import linprog
+
+STEPS = 11  # t = s * 10^k, k = -2..8
+TAIL = 3  # strict decreases at the end of the ray
+COORDINATE_RAYS_UP_TO = 8  # players with at most this many free coordinates get one ray per coordinate and sign
+RANDOM_RAYS = 6
+
+
+@dataclass(frozen=True)
+class Ray:
+    """A feasible ray along which the player's cost keeps decreasing."""
+
+    direction: np.ndarray  # unit vector in the player's decisions
+    steps: np.ndarray  # t of the points looked at
+    costs: np.ndarray  # the cost at each
+    start_cost: float  # the cost at the point the ray starts from
+    unbounded_below: bool  # the cost fell by more than UNBOUNDED_DROP x max(1, |start cost|); else: not attained
+
+    def describe(self, names: list[str]) -> str:
+        d = self.direction
+        big = np.flatnonzero(np.abs(d) >= 0.05 * np.max(np.abs(d)))[:4]
+        along = " ".join(f"{'+' if d[k] > 0 else '-'}{abs(d[k]):.2g} {names[k]}" for k in big)
+        pairs = list(zip(self.steps, self.costs, strict=True))
+        distinct = [p for k, p in enumerate(pairs) if k == 0 or p[1] != pairs[k - 1][1]]  # underflow repeats zeros
+        seen = ", ".join(f"{c:.3g} at t = {t:.0e}" for t, c in distinct[-3:])
+        what = ("decreases without bound" if self.unbounded_below else
+                "keeps decreasing towards a value it does not attain")
+        return f"its cost {what} along ({along}) from {self.start_cost:.6g}: {seen}"
+
+
+UNBOUNDED_DROP = 1e6
+NEAR = 6  # the first part of a ray: t up to 1e3 s
+FLOOR = 1e-9  # after its lowest point a ray's cost may wobble this much (relative) at the arithmetic's resolution
+
+
+def free_directions(lower: np.ndarray, upper: np.ndarray, gradient: np.ndarray | None, seed,
+                    extra: list[np.ndarray] = ()) -> list[np.ndarray]:
+    """The directions a ray can take from a point of the box [lower, upper] without leaving it for good: + along a
+    coordinate without an upper bound, - along one without a lower bound (and combinations of those)."""
+    up = ~np.isfinite(upper)
+    down = ~np.isfinite(lower)
+    free = up | down
+    dirs: list[np.ndarray] = []
+    n = lower.size
+    # the given directions, without the components that would leave the box for good
+    extra = [np.where(((d > 0) & ~up) | ((d < 0) & ~down), 0.0, d) for d in extra if np.all(np.isfinite(d))]
+    if not free.any():
+        return []
+    idx = np.flatnonzero(free)
+    if idx.size <= COORDINATE_RAYS_UP_TO:
+        for k in idx:
+            for sign in (1.0, -1.0):
+                if (sign > 0 and up[k]) or (sign < 0 and down[k]):
+                    e = np.zeros(n)
+                    e[k] = sign
+                    dirs.append(e)
+    if gradient is not None and np.all(np.isfinite(gradient)):
+        g = -np.where(free, gradient, 0.0)
+        g = np.where((g > 0) & ~up, 0.0, np.where((g < 0) & ~down, 0.0, g))
+        if np.any(g):
+            dirs.append(g)
+    rng = np.random.default_rng(seed)
+    for _ in range(RANDOM_RAYS if idx.size > 1 else 0):
+        r = np.zeros(n)
+        r[idx] = rng.standard_normal(idx.size)
+        r = np.where((r > 0) & ~up, -r, np.where((r < 0) & ~down, -r, r))
+        dirs.append(r)
+    dirs += [d for d in extra if _admissible(d, up, down)]
+    out = []
+    for d in dirs:
+        norm = float(np.linalg.norm(d))
+        if norm > 0 and math.isfinite(norm):
+            out.append(d / norm)
+    return out
+
+
+def flat_directions(hessian: np.ndarray) -> list[np.ndarray]:
+    """Both signs of every eigenvector of the symmetric part of ``hessian`` whose eigenvalue is at most 1e-6 of the
+    largest in size (flat or concave directions)."""
+    H = 0.5 * (hessian + hessian.T)
+    if not np.all(np.isfinite(H)) or not H.size:
+        return []
+    w, V = np.linalg.eigh(H)
+    cut = 1e-6 * max(1.0, float(np.max(np.abs(w))))
+    return [s * V[:, k] for k in np.flatnonzero(w <= cut) for s in (1.0, -1.0)]
+
+
+def recession_direction(gradient: np.ndarray, rows_jacobian: np.ndarray, equality: np.ndarray) -> np.ndarray | None:
+    """The steepest descent direction of the recession cone of the linearised rows (None when no direction of that
+    cone descends): min g . d s.t. C_j d <= 0 (inequalities), C_j d = 0 (equalities), -1 <= d <= 1."""
+    n = gradient.size
+    if not np.all(np.isfinite(gradient)) or not np.all(np.isfinite(rows_jacobian)):
+        return None
+    C = rows_jacobian.reshape(-1, n)
+    res = linprog(gradient, A_ub=C[~equality] if (~equality).any() else None,
+                  b_ub=np.zeros(int((~equality).sum())) if (~equality).any() else None,
+                  A_eq=C[equality] if equality.any() else None,
+                  b_eq=np.zeros(int(equality.sum())) if equality.any() else None,
+                  bounds=[(-1.0, 1.0)] * n, method="highs")
+    if res.status != 0 or not res.fun < -1e-12 * max(1.0, float(np.max(np.abs(gradient)))):
+        return None
+    return np.asarray(res.x, dtype=float)
+
+
+def _admissible(d: np.ndarray, up: np.ndarray, down: np.ndarray) -> bool:
+    return bool(np.all(np.isfinite(d)) and not np.any((d > 0) & ~up) and not np.any((d < 0) & ~down) and np.any(d))
+
+
+def ray_points(y: np.ndarray, directions: list[np.ndarray], scale: float) -> tuple[np.ndarray, np.ndarray]:
+    """The points y + t d of every ray, (len(directions) * STEPS, n), and the steps t."""
+    t = scale * 10.0 ** np.arange(-2, STEPS - 2)
+    D = np.asarray(directions).reshape(len(directions), 1, y.size)
+    return (y + t.reshape(1, -1, 1) * D).reshape(-1, y.size), t
+
+
+def _descends(seq: np.ndarray, slopes: np.ndarray, floor: float) -> bool:
+    """seq (the start's cost, then the ray's) reaches its lowest value below the start by TAIL descending steps and
+    does not rise from it by more than ``floor``."""
+    low = int(np.argmin(seq))
+    if not seq[low] < seq[0] or np.any(seq[low:] > seq[low] + floor):
+        return False
+    tail, k = 0, low
+    while k > 0 and tail < TAIL:
+        prev, cur = seq[k - 1], seq[k]
+        if not (cur < prev - 1e-12 * abs(prev) or (cur <= prev and slopes[k - 1] < 0)):
+            break
+        tail += 1
+        k -= 1
+    return tail >= TAIL
+
+
+def descending_ray(directions: list[np.ndarray], t: np.ndarray, costs: np.ndarray, feasible: np.ndarray,
+                   start_cost: float, slopes: np.ndarray | None = None) -> Ray | None:
+    """The first ray (costs, feasible, slopes: (len(directions) * STEPS,) in ray_points' order) that shows the cost
+    decreasing without end, or None.
+
+    Along the ray the cost must reach its lowest value below the start's by ``TAIL`` descending steps in a row (a
+    step descends where the cost falls, or where it stays level at rounding while its exact directional derivative
+    ``slopes`` there is negative: a cost of 1e-19 added to 1), and never rise again by more than ``FLOOR`` max(1,
+    |start cost|) (a floor it approaches: an infimum at infinity, at the resolution of the arithmetic)."""
+    costs = costs.reshape(len(directions), t.size)
+    feasible = feasible.reshape(len(directions), t.size)
+    slopes = np.full(costs.shape, np.nan) if slopes is None else slopes.reshape(len(directions), t.size)
+    floor = FLOOR * max(1.0, abs(start_cost))
+    best: Ray | None = None
+    for d, c, ok, dc in zip(directions, costs, feasible, slopes, strict=True):
+        if not ok.all() or np.any(np.isnan(c)):
+            continue
+        # the whole ray, or its first part (a valley followed along a direction known only to rounding leaves it
+        # far out, rising like (t x rounding)^2: the floor is seen before that)
+        if not any(_descends(np.concatenate([[start_cost], c[:end]]), dc[:end], floor) for end in (t.size, NEAR)):
+            continue
+        ray = Ray(d, t, c, start_cost, bool(c[-1] < start_cost - UNBOUNDED_DROP * max(1.0, abs(start_cost))))
+        if best is None or ray.costs[-1] < best.costs[-1]:
+            best = ray
+    return best
