@@ -381,3 +381,170 @@ def test_a_player_unbounded_below_is_no_equilibrium() -> None:
     res = solve(cfg, out=None)
     assert res.status != "converged"
     assert res.certificate["best_response_gap"]["p1"] > 1.0
+
+
+# --- games with nonconvex, unbounded, nonsmooth and non-finite players ---------------------------------------------
+# Each is checked against what the game is, computed here without gnerun: closed forms, or a dense grid of the
+# player's cost with the others fixed.
+
+
+def _static(agents: list[tuple[str, str, str, str]], extra: str = "") -> str:
+    """A static game: (name, variable, cost, bounds and start as YAML flow items) per agent."""
+    lines = ["game:", "  kind: static", "  agents:"]
+    for name, var, cost, spec in agents:
+        lines += [f"    - name: {name}", f"      variables: {{{var}: {{{spec}}}}}", f'      cost: "{cost}"']
+    return "\n".join(lines) + "\n" + extra
+
+
+def _grid_min(f, lo: float, hi: float, n: int = 2_000_001) -> tuple[float, float]:
+    g = np.linspace(lo, hi, n)
+    v = f(g)
+    k = int(np.argmin(v))
+    return float(v[k]), float(g[k])
+
+
+def test_a_player_unbounded_below_at_a_local_minimum_is_named() -> None:
+    """p1's cost x1^3 - 12 x1 + x1 x2 falls like x1^3 as x1 -> -inf for every x2: no equilibrium. At the KKT point
+    where p1 sits at its local minimum (x1 = sqrt((12 - x2)/3)) every local best response returns there."""
+    cfg = load_config(text=_static([("p1", "x1", "x1**3 - 12*x1 + x1*x2", "start: 2"),
+                                    ("p2", "x2", "(x2 - 0.5*x1)**2", "start: 1")]))
+    res = solve(cfg)
+    assert res.status == "unbounded_player"
+    ray = res.certificate["unbounded"]["p1"]
+    assert ray["direction"] == [-1.0] and ray["unbounded_below"] and ray["costs"][-1] < -1e20
+    assert "p1 has no best response" in res.message and "decreases without bound" in res.message
+    x1, x2 = res.solution["p1"]["x1"], res.solution["p2"]["x2"]
+    assert x1 == pytest.approx(np.sqrt((12 - x2) / 3), rel=1e-9)  # the KKT point: its local minimum
+
+
+def test_a_linear_player_without_a_best_response_is_named_not_diverged() -> None:
+    """p1's cost (x2 - 3) x1 is linear in x1 >= 0 with p2 at x2 = 1: it falls without bound as x1 grows. The solver
+    cannot end anywhere; the status says why."""
+    cfg = load_config(text=_static([("p1", "x1", "(x2 - 3)*x1", "lower: 0, start: 0"),
+                                    ("p2", "x2", "(x2 - 1)**2 + 0*x1", "start: 0")]))
+    res = solve(cfg)
+    assert res.status == "unbounded_player"
+    assert res.certificate["unbounded"]["p1"]["direction"] == [1.0]
+
+
+def test_a_better_basin_is_found_and_certified_on_the_box() -> None:
+    """p1 has a shallow well near x1 = -2 and a deep one near x1 = 4, coupled weakly to p2 (x2 = 0.3 x1). Started in
+    the shallow well, the solver reaches its KKT point; the certificate finds the deep well (a design point there is
+    already better as it is), the solve restarts from it and ends certified, each gap global on a box."""
+    j1 = "-1.5*exp(-(x1 + 2)**2) - 3*exp(-(x1 - 4)**2/2) + 0.02*(x1 - x2)**2"
+    cfg = load_config(text=_static([("p1", "x1", j1, "start: -2.1"), ("p2", "x2", "(x2 - 0.3*x1)**2", "start: -0.6")]))
+    res = solve(cfg)
+    assert res.status == "converged"
+    x1, x2 = res.solution["p1"]["x1"], res.solution["p2"]["x2"]
+    assert x2 == pytest.approx(0.3 * x1, abs=1e-9)
+
+    def j(g):
+        return -1.5 * np.exp(-(g + 2) ** 2) - 3 * np.exp(-(g - 4) ** 2 / 2) + 0.02 * (g - x2) ** 2
+
+    best, arg = _grid_min(j, -50, 50)
+    assert x1 == pytest.approx(arg, abs=1e-4) and x1 > 3  # the deep well: p1's global best response
+    assert res.certificate["best_response_kind"] == {"p1": "global on the box", "p2": "global on the box"}
+    assert res.certificate["best_response_gap"]["p1"] <= 1e-9
+    assert j(np.array([x1]))[0] - best <= 1e-9
+
+
+def test_the_starts_spread_with_the_size_of_the_decision() -> None:
+    """A one-dimensional, unbounded player with wells near x1 = -30 and +30, the left one lower by about 120: at the
+    KKT point in the right well, starts perturbed by N(0, 1) (not by the decision's size) stay in that well; the
+    certificate's starts (scaled to the size of the candidate, and a design over a box around it) reach the other."""
+    from scipy.optimize import brentq
+
+    j1 = "(x1**2 - 900)**2/1e4 + 2*x1 + 0.01*x1*x2"
+    cfg = load_config(text=_static([("p1", "x1", j1, "start: 30"), ("p2", "x2", "(x2 - 1)**2 + 0*x1", "start: 1")]))
+    game = compile_game(cfg)
+    x1 = brentq(lambda t: 4 * t * (t**2 - 900) / 1e4 + 2 + 0.01, 20, 40)  # p1's stationary point in the right well
+
+    def j(g):
+        return (g**2 - 900) ** 2 / 1e4 + 2 * g + 0.01 * g
+
+    best, arg = _grid_min(j, -100, 100)
+    cert = certificate(game, _z(game, [x1, 1.0]))
+    assert cert["best_response_gap"]["p1"] == pytest.approx(j(x1) - best, rel=1e-6) and arg < -25
+    assert cert["best_response_gap"]["p2"] <= 1e-12
+
+
+def test_a_cost_undefined_at_the_point_is_never_converged() -> None:
+    """NaN and infinite costs: x1/(x2 - x2) is x1/0 (infinite), and 0*log(-1 - x1**2) is undefined everywhere,
+    although CasADi simplifies it to 0; both end nan, with the player named."""
+    for cost in ("x1/(x2 - x2) + x1**2", "(x1 - 1)**2 + 0*log(-1 - x1**2)"):
+        cfg = load_config(text=_static([("p1", "x1", cost, "start: 0.5"), ("p2", "x2", "(x2 - x1)**2", "start: 0")]))
+        res = solve(cfg)
+        assert res.status == "nan", (cost, res.status, res.message)
+        assert res.certificate["not_finite"] == ["p1"] and res.certificate["best_response_gap"]["p1"] is None
+
+
+def test_a_kkt_point_at_a_kink_is_checked_branch_by_branch() -> None:
+    """p1 (four decisions in [-1, 1]) has the cost -|y1| + |y|^2 + 0.1 y2 x5: at y = 0 the derivative CasADi takes of
+    -|y1| is 0, so y = 0 is a KKT point, yet -|y1| + y1^2 is lowest at y1 = +-1/2 (by 1/4). The certificate sees the
+    kink, compares the branches and finds the gap; the solve leaves the point and ends at a true equilibrium."""
+    txt = """
+game:
+  kind: static
+  agents:
+    - name: p1
+      variables:
+        y1: {lower: -1, upper: 1, start: 0}
+        y2: {lower: -1, upper: 1, start: 0}
+        y3: {lower: -1, upper: 1, start: 0}
+        y4: {lower: -1, upper: 1, start: 0}
+      cost: "-abs(y1) + y1**2 + y2**2 + y3**2 + y4**2 + 0.1*y2*x5"
+    - name: p2
+      variables: {x5: {start: 0}}
+      cost: "(x5 - 0.1*y1)**2"
+"""
+    cfg = load_config(text=txt)
+    game = compile_game(cfg)
+    from gnerun.solvers.certificate import NewtonResponses
+
+    cert = certificate(game, np.zeros(game.size), None, None, NewtonResponses(cfg, game))
+    assert cert["kinks"] == {"p1": ["fabs"]}
+    assert cert["best_response_gap"]["p1"] == pytest.approx(0.25, abs=1e-9)
+    res = solve(cfg)
+    assert res.status == "converged"
+    y1, x5 = res.solution["p1"]["y1"], res.solution["p2"]["x5"]
+    assert abs(y1) == pytest.approx(0.5, abs=1e-9) and x5 == pytest.approx(0.1 * y1, abs=1e-9)
+
+
+def test_abs_min_max_games_are_not_solved_as_linear_quadratic() -> None:
+    """abs(x1 - 2) + 0.2 x1^2 against (x2 + x1)^2: the equilibrium is (2, -2), at the kink. Taken as affine, the game
+    was 'solved' from z = 0 with the derivative of abs at 0; now the solve either certifies the kink or does not
+    end converged."""
+    cfg = load_config(text=_static([("p1", "x1", "abs(x1 - 2) + 0.2*x1**2 + 0*x2", "start: 0"),
+                                    ("p2", "x2", "(x2 + x1)**2", "start: 0")]))
+    assert not compile_game(cfg).affine
+    res = solve(cfg)
+    if res.status == "converged":
+        assert res.solution["p1"]["x1"] == pytest.approx(2.0, abs=1e-6)
+    else:
+        assert "abs, min or max" in res.message  # the failure says what the game has
+
+
+def test_without_best_responses_a_kkt_point_is_not_called_converged(tmp_path) -> None:
+    """A concave player: its KKT point is its maximum. With run.certificate false the solve ends kkt_point, 'not
+    certified', in the summary and on the command line's status line."""
+    import json
+    import subprocess
+    import sys
+
+    text = _static([("p1", "x1", "-(x1 - 1)**2 + x1*x2", "lower: -5, upper: 5, start: 0"),
+                    ("p2", "x2", "(x2 - 0.5)**2", "start: 0")], "run: {certificate: false, reference: none}\n")
+    config = tmp_path / "concave.yaml"
+    config.write_text("name: concave\n" + text)
+    res = solve(load_config(config))
+    assert res.status == "kkt_point" and "not certified" in res.message
+    out = subprocess.run([sys.executable, "-m", "gnerun.cli", "solve", str(config), "--out", str(tmp_path / "run")],
+                         capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    status = next(line for line in out.stdout.splitlines() if line.startswith("status:"))
+    assert status.startswith("status: kkt_point") and "not certified" in status
+    assert json.loads((tmp_path / "run" / "summary.json").read_text())["status"] == "kkt_point"
+    # with the certificate the point is found to be p1's maximum: the solve leaves it for p1's best response, the
+    # bound -5 (-(x1 - 1)^2 + 0.5 x1 is -38.5 there, -13.5 at 5), and ends at the equilibrium (-5, 0.5)
+    assert res.solution["p1"]["x1"] == pytest.approx(1.25, abs=1e-9)  # the KKT point (p1's maximum)
+    full = solve(load_config(config, {"run.certificate": True}))
+    assert full.status == "converged" and full.solution["p1"]["x1"] == pytest.approx(-5.0, abs=1e-9)

@@ -121,7 +121,8 @@ def kink_function(f: ca.Function) -> tuple[ca.Function, list[str]] | None:
     """For the SX Function ``f``: a Function of f's inputs whose outputs are the relative distances of f's piecewise
     nodes whose arguments depend on input 0 from their kinks (what :meth:`Tape.kinks` computes, compiled once for
     evaluation at many points), and the nodes' names; None if there are none."""
-    ins, outs = f.sx_in(), f.sx_out()
+    ins = f.sx_in()
+    outs = f.call(ins)  # the outputs as expressions of fresh inputs (sx_out would give bare symbols)
     a = ins[0]
     stack = [o[k] for o in outs for k in range(o.numel())]
     seen: set[int] = set()

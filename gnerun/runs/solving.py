@@ -266,6 +266,11 @@ def conclude(game: CompiledGame, out: Certified, x: np.ndarray | None = None, ce
             status, message = Status.UNBOUNDED_PLAYER, (
                 f"at the last iterate, {', '.join(verdict.unbounded)} has no best response ({who}); the solver: "
                 f"{message}")
+        elif status not in (Status.INFEASIBLE, Status.INFEASIBLE_STAGE_CONSTRAINT) and game.piecewise:
+            message += ("; the game has abs, min or max of the decisions, whose derivatives jump at their kinks, so "
+                        "its KKT system is discontinuous there and Newton steps cannot converge to an equilibrium at "
+                        "a kink: write such a term smoothly (sqrt(u**2 + eps**2) for abs(u)), or as constraints with "
+                        "an extra decision (s >= u, s >= -u for s = abs(u))")
     out.status, out.message = str(status), message
     return out
 

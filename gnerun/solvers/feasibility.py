@@ -31,7 +31,7 @@ class PhaseOne:
     """The outcome of :func:`phase_one`."""
 
     violation: float  # the smallest largest-violation found: 0 when a point satisfies every row
-    rows: list[str]  # labels of the rows that realise it (binding at the phase-1 optimum)
+    rows: list[str]  # labels of the rows that realise it (linear: nonzero duals, weightiest first; else: binding)
     point: np.ndarray | None  # the point found
     proven: bool  # the rows are affine and the linear program's optimum is the smallest violation
     method: str
@@ -77,7 +77,14 @@ def _linear(game: CompiledGame, x: np.ndarray | None, rows: np.ndarray) -> Phase
         return PhaseOne(math.nan, [], None, False, f"linear programming: {res.message}")
     a = res.x[:n]
     t = float(res.x[-1])
-    return PhaseOne(t, _binding(game, rows, dc @ a + c0, eq, t), a, True, "linear programming (HiGHS)")
+    # the rows that realise the optimum: those with a nonzero dual (a Farkas combination of them proves that no point
+    # does better), the weightiest first
+    dual = -np.asarray(res.ineqlin.marginals, dtype=float)
+    weight = dual[: rows.size].copy()
+    weight[np.flatnonzero(eq)] += dual[rows.size:]
+    order = [k for k in np.argsort(-weight, kind="stable") if weight[k] > 1e-12] if t > TOL else []
+    labels = list(dict.fromkeys(game.constraints[int(rows[k])].label for k in order))  # a shared row's copies once
+    return PhaseOne(t, labels, a, True, "linear programming (HiGHS)")
 
 
 def _binding(game: CompiledGame, rows: np.ndarray, c: np.ndarray, eq: np.ndarray, t: float) -> list[str]:

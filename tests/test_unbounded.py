@@ -1,0 +1,71 @@
+"""Rays (gnerun/solvers/unbounded.py) on bare cost sequences and cones: what shows a cost without a minimum, and
+what does not."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from gnerun.solvers.unbounded import (
+    STEPS,
+    descending_ray,
+    flat_directions,
+    free_directions,
+    ray_points,
+    recession_direction,
+)
+
+
+def _ray(f, y0: np.ndarray, d: np.ndarray):
+    points, t = ray_points(y0, [d], max(1.0, float(np.max(np.abs(y0)))))
+    costs = np.array([f(q) for q in points])
+    return descending_ray([d], t, costs, np.ones(STEPS, dtype=bool), f(y0))
+
+
+def test_costs_unbounded_below_or_without_a_minimiser_are_shown() -> None:
+    e = np.array([1.0])
+    assert _ray(lambda q: q[0] ** 3 / 3 - q[0], np.array([1.0]), -e).unbounded_below  # a local minimum of a cubic
+    assert _ray(lambda q: q[0] ** 2 - 1e-6 * q[0] ** 4, np.array([0.0]), e) is not None  # rises first, falls far out
+    ray = _ray(lambda q: np.exp(-q[0]), np.array([20.0]), e)  # no minimiser: decays to 0, underflows
+    assert ray is not None and not ray.unbounded_below
+    ray = _ray(lambda q: -q[0] / (1 + abs(q[0])), np.array([3e3]), e)  # tends to -1, never reaches it
+    assert ray is not None
+
+
+def test_costs_with_a_minimum_are_not() -> None:
+    e = np.array([1.0])
+    assert _ray(lambda q: (q[0] - 1) ** 2, np.array([1.0]), e) is None  # the minimum itself
+    assert _ray(lambda q: (q[0] - 1) ** 2, np.array([-5.0]), e) is None  # descends, then rises again
+    assert _ray(lambda q: np.cos(q[0]), np.array([np.pi]), e) is None
+    assert _ray(lambda q: max(1 - q[0], 0.0) * 0 + 3.0, np.array([0.0]), e) is None  # flat: nothing is lower
+
+
+def test_an_infeasible_point_on_the_ray_ends_it() -> None:
+    d = np.array([1.0])
+    points, t = ray_points(np.array([0.0]), [d], 1.0)
+    costs = -points[:, 0]
+    ok = points[:, 0] <= 50  # a bound at 50
+    assert descending_ray([d], t, costs, ok, 0.0) is None
+    assert descending_ray([d], t, costs, np.ones_like(ok), 0.0) is not None
+
+
+def test_directions_respect_the_bounds() -> None:
+    lo = np.array([0.0, -np.inf, -1.0])
+    hi = np.array([np.inf, np.inf, 1.0])
+    dirs = free_directions(lo, hi, np.array([1.0, -2.0, 0.5]), 0, [np.array([-1.0, 1.0, 1.0])])
+    assert dirs
+    for d in dirs:
+        assert abs(np.linalg.norm(d) - 1) < 1e-12
+        assert d[2] == 0.0  # a coordinate bounded on both sides never moves along a ray
+    assert free_directions(np.zeros(2), np.ones(2), None, 0) == []
+
+
+def test_flat_and_recession_directions() -> None:
+    H = np.array([[2.0, 2.0], [2.0, 2.0]])  # flat along (1, -1)
+    flat = flat_directions(H)
+    assert any(abs(abs(d @ np.array([1, -1]) / np.sqrt(2)) - 1) < 1e-12 for d in flat)
+    assert flat_directions(np.eye(2)) == []
+    # rows y1 + 2 y2 <= 4, y2 - y1 <= 1 (gradients (1, 2) and (-1, 1)); cost gradient (-0.9, -1): the cone's descent
+    # direction is (2, -1) up to scale
+    d = recession_direction(np.array([-0.9, -1.0]), np.array([[1.0, 2.0], [-1.0, 1.0]]), np.zeros(2, dtype=bool))
+    assert d is not None and d @ np.array([-0.9, -1.0]) < 0 and d @ np.array([1.0, 2.0]) <= 1e-12
+    assert recession_direction(np.array([1.0, 1.0]), -np.eye(2), np.zeros(2, dtype=bool)) is None  # y >= 0, cost up
