@@ -135,10 +135,11 @@ def run(problem: Problem, method: str, compiled: _Compiled, certify: bool = True
     a = state.z[: game.n]
     max_gap = ref_err = None
     certified = False
-    note = "" if state.status == "converged" else state.message
+    status = outcome.status  # what gnerun solve would say: the certificate's conclusion
+    note = "" if status == "converged" else outcome.message
     if outcome.improving:
         note = f"a KKT point at which {', '.join(outcome.improving)} can improve alone"
-    if state.status == "converged" and not outcome.improving and certify:
+    if status == "converged" and certify:
         certified = True
         if problem.best_response_gaps is not None:
             gaps = problem.best_response_gaps(a)
@@ -152,7 +153,7 @@ def run(problem: Problem, method: str, compiled: _Compiled, certify: bool = True
             if not ref_err <= problem.reference_tol:
                 certified = False
                 note = f"{ref_err:.1e} from the literature's solution"
-    return Outcome(problem.family, problem.name, problem.start, method, str(state.status), state.k, elapsed,
+    return Outcome(problem.family, problem.name, problem.start, method, str(status), state.k, elapsed,
                    state.residual_norm, certified, max_gap, ref_err, (game.n, game.m), outcome.restarts, note)
 
 

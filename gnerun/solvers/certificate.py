@@ -12,7 +12,7 @@ statement it is (``best_response_kind``):
   (its bounds; where a decision is unbounded, a box of radius ``BOX_RADIUS`` times the point's size around the
   candidate) proves that no feasible point of the box has a cost below J_i(a) - tol, or finds one that has
   (:mod:`gnerun.solvers.global_response`);
-- **global (convex problem)**: in an LQ game, a player whose own Hessian block is positive semidefinite has a
+- **global (convex)**: in an LQ game, a player whose own Hessian block is positive semidefinite has a
   convex problem (its rows are affine), whose KKT points are its minima: the candidate, a KKT point, is its best
   response, and the local solves confirm the gap;
 - **over N starts**: otherwise, the best of local solves from the starts below, a statement about those starts.
@@ -492,7 +492,7 @@ def check_player(game: CompiledGame, agent: int, z: np.ndarray, x: np.ndarray | 
         kind = "global on the box"
         bound = tol
     elif gap is not None and gap <= tol and _convex_player(game, agent, a, x):
-        kind = "global (convex problem)"  # the candidate is a KKT point of the player's own convex problem
+        kind = "global (convex)"  # the candidate is a KKT point of the player's own convex problem
         bound = None
     else:
         kind = f"over {len(starts.compare) + len(local)} starts"
