@@ -741,7 +741,7 @@ class _Expressions:
 
 
 def _expressions(g: StaticGame | DynamicGame, lay: _Layout, a: ca.SX, x: ca.SX, agents: list[int],
-                 *, shared_as_own: bool = False, states: ca.SX | None = None) -> _Expressions:
+                 *, shared_as_own: bool = False, states: ca.SX | None = None, smoothing: float = 0.0) -> _Expressions:
     """Costs and constraints of ``agents`` only, as CasADi expressions in (a, x).
 
     Other agents' costs and constraints are not even parsed: what is built from here can reach only
@@ -755,8 +755,8 @@ def _expressions(g: StaticGame | DynamicGame, lay: _Layout, a: ca.SX, x: ca.SX, 
     """
     # where the log, sqrt, asin, acos of each agent's cost are defined is recorded (gnerun.language.expr)
     domain: dict[int, list] = {i: [] for i in agents}
-    cost_fns = {i: casadi_functions(domain[i]) for i in agents}
-    fns = fns_f = casadi_functions()
+    cost_fns = {i: casadi_functions(domain[i], smoothing) for i in agents}
+    fns = fns_f = casadi_functions(smoothing=smoothing)
     params = dict(g.parameters)
     slices, names = lay.agent_slices, lay.variable_names
     own_shared = g.equilibrium == "generalized" or shared_as_own
@@ -925,14 +925,15 @@ def _domain_function(a: ca.SX, x: ca.SX, domain: list) -> tuple[Evaluator, np.nd
     return Evaluator(ca.Function("domain", [a, x], [ca.densify(margins)])), strict, owner
 
 
-def compile_game(cfg: Config) -> CompiledGame:
-    """Parse, condense (dynamic games) and differentiate the game of ``cfg`` once."""
+def compile_game(cfg: Config, smoothing: float = 0.0) -> CompiledGame:
+    """Parse, condense (dynamic games) and differentiate the game of ``cfg`` once. With ``smoothing`` mu > 0, abs, min
+    and max are replaced by smooth functions within mu of them (gnerun.language.expr.casadi_functions)."""
     g = cfg.game
     lay = _layout(g)
     N = len(g.agents)
     a = ca.SX.sym("a", lay.n)
     x = ca.SX.sym("x", lay.nx)
-    ex = _expressions(g, lay, a, x, list(range(N)))
+    ex = _expressions(g, lay, a, x, list(range(N)), smoothing=smoothing)
     return _assemble(kind=g.kind, a=a, x=x, costs=[ex.costs[i] for i in range(N)],
                      own_rows=[ex.own_rows[i] for i in range(N)], shared_common=ex.shared_common,
                      agent_names=[ag.name for ag in g.agents], lay=lay, equilibrium=g.equilibrium,

@@ -419,14 +419,29 @@ def numpy_functions() -> dict[str, Callable]:
     return table
 
 
-def casadi_functions(domain: list | None = None) -> dict[str, Callable]:
+def casadi_functions(domain: list | None = None, smoothing: float = 0.0) -> dict[str, Callable]:
     """The function table for CasADi symbols (exact derivatives by automatic differentiation).
 
     With ``domain``, every call of a function with a restricted domain on a symbolic argument appends what must
     hold for the call to be defined: ("positive", v) for log, log2, log10 (v > 0), ("nonnegative", v) for sqrt
     (v >= 0) and for asin, acos (1 - v^2 >= 0). CasADi simplifies 0 * log(v) to 0, so a term that is undefined
-    everywhere can vanish from the compiled expression; the recorded conditions keep it checkable."""
+    everywhere can vanish from the compiled expression; the recorded conditions keep it checkable.
+
+    With ``smoothing`` mu > 0, abs, min and max are replaced by smooth functions within mu of them:
+    abs(u) ~ sqrt(u^2 + mu^2) - mu, and max, min(u, v) ~ (u + v +- sqrt((u - v)^2 + mu^2))/2 (what a smoothing
+    homotopy solves, gnerun.runs.solving)."""
     import casadi as ca
+
+    def smooth_abs(v: Any) -> Any:
+        return ca.sqrt(v * v + smoothing * smoothing) - smoothing
+
+    def smooth_max(u: Any, v: Any) -> Any:
+        return 0.5 * (u + v + ca.sqrt((u - v) * (u - v) + smoothing * smoothing))
+
+    def smooth_min(u: Any, v: Any) -> Any:
+        return 0.5 * (u + v - ca.sqrt((u - v) * (u - v) + smoothing * smoothing))
+
+    smooth = smoothing > 0
 
     def guarded(f: Callable, kind: str, margin: Callable = lambda v: v) -> Callable:
         if domain is None:
@@ -447,7 +462,7 @@ def casadi_functions(domain: list | None = None) -> dict[str, Callable]:
         "cos": ca.cos,
         "tan": ca.tan,
         "tanh": ca.tanh,
-        "abs": ca.fabs,
+        "abs": smooth_abs if smooth else ca.fabs,
         "log2": guarded(lambda v: ca.log(v) / math.log(2.0), "positive"),
         "log10": guarded(ca.log10, "positive"),
         "asin": guarded(ca.asin, "nonnegative", lambda v: 1 - v * v),
@@ -457,8 +472,8 @@ def casadi_functions(domain: list | None = None) -> dict[str, Callable]:
         "cosh": ca.cosh,
         "atan2": ca.atan2,
         "hypot": lambda u, v: ca.sqrt(u * u + v * v),
-        "min": _variadic(ca.fmin),
-        "max": _variadic(ca.fmax),
+        "min": _variadic(smooth_min if smooth else ca.fmin),
+        "max": _variadic(smooth_max if smooth else ca.fmax),
     }
 
 

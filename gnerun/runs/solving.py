@@ -275,6 +275,72 @@ def conclude(game: CompiledGame, out: Certified, x: np.ndarray | None = None, ce
     return out
 
 
+def _smoothable(cfg: Config, game: CompiledGame, outcome: Certified) -> bool:
+    """A failed solve of a game with abs, min or max of its decisions, by the default method, whose answer can be
+    certified: the smoothing homotopy (gnerun.runs.smoothing) is tried."""
+    from ..solvers.ssn import FAILURES
+
+    failed = Status(outcome.status) in FAILURES or outcome.status == Status.MAX_ITER
+    return (failed and outcome.status not in (Status.INFEASIBLE, Status.INFEASIBLE_STAGE_CONSTRAINT)
+            and game.piecewise and cfg.solver.kind == "ssn" and cfg.solver.method == "hybrid" and cfg.run.certificate)
+
+
+def _smoothed(cfg: Config, game: CompiledGame, solver, outcome: Certified, z0: np.ndarray, x: np.ndarray | None,
+              record, note, responses, interrupt: Interrupt, on_stage) -> Certified:
+    """The smoothing homotopy after ``outcome`` failed, and the certificate of where it ends on the original game:
+    ``converged`` only where every best response is certified there. Where a player improves alone, the homotopy
+    starts again from the best responses, up to ``CERTIFY_RESTARTS`` times; otherwise ``outcome`` stays, its
+    message saying what the homotopy reached."""
+    from ..solvers.certificate import assess, certificate
+    from .smoothing import LEVELS, RESTART_FROM, smoothing_homotopy
+
+    if on_stage is not None:
+        on_stage("the game has abs, min or max of its decisions: solving smoothed games as they approach it")
+    t = time.perf_counter()
+    start, k, restarts, total = z0, outcome.state.k + 1, 0, 0
+    while True:
+        sm = smoothing_homotopy(cfg, start, x, record, k, LEVELS[0] if not restarts else RESTART_FROM)
+        if sm is None:
+            outcome.message += (f"; smoothing abs, min and max (mu = {LEVELS[0]:g} down to {LEVELS[-1]:g} times the "
+                                "start's size) did not converge")
+            outcome.time_s += time.perf_counter() - t
+            return outcome
+        k += sm.iterations
+        total += sm.iterations
+        best: dict[str, np.ndarray] = {}
+        cert = certificate(game, sm.z, x, best, responses, interrupt.check)
+        verdict = assess(game, cert, sm.z[: game.n], x)
+        how = (f"abs, min and max smoothed within mu of themselves, mu lowered from {sm.levels[0][0]:g} to "
+               f"{sm.mu:g} ({total} iterations in smoothed games" +
+               (f", {restarts} restart(s) from best responses" if restarts else "") + ")")
+        if verdict.certified:
+            break
+        improving = verdict.improving
+        if (restarts >= CERTIFY_RESTARTS or not improving or verdict.unbounded or verdict.not_finite
+                or not all(name in best for name in improving)):
+            who = ", ".join([*verdict.improving, *verdict.unbounded, *verdict.not_finite, *verdict.unchecked])
+            outcome.message += f"; {how} ended at a point that is not certified ({who})"
+            outcome.time_s += time.perf_counter() - t
+            return outcome
+        restarts += 1
+        start = sm.z.copy()
+        for i, name in enumerate(game.agent_names):
+            if name in improving:
+                start[game.agent_slices[i]] = best[name]
+        start[game.n:] = 0.0
+        note(f"the smoothing homotopy ended where {', '.join(improving)} can improve alone: restart {restarts} from "
+             "their best responses")
+    elapsed = time.perf_counter() - t
+    state = replace(solver.init(sm.z, x), k=k)
+    note(f"certified at the end of the smoothing homotopy: {how}")
+    message = (f"converged by smoothing: an equilibrium where abs, min or max is at its kink, every player's best "
+               f"response certified on the original game; {how}; ||Phi|| = {state.residual_norm:.2e} is the "
+               f"nonsmooth system's, with one branch's derivative at the kink (the unsmoothed solve: "
+               f"{outcome.state.message})")
+    return Certified(state, cert, {}, outcome.restarts, outcome.time_s + elapsed, str(Status.CONVERGED), message,
+                     outcome.diagnosis)
+
+
 @dataclass
 class SolveResult:
     """The outcome of :func:`solve` (scipy-style: status, message, success, iterations, z)."""
@@ -420,6 +486,12 @@ def _solve(cfg: Config, game: CompiledGame, solver: SemismoothNewton, run: RunDi
     except Stopped:
         return _interrupted(cfg, game, run, history, z_star, ref, interrupt,
                             time.perf_counter() - started - sink_time, compile_time)
+    if _smoothable(cfg, game, outcome):
+        try:
+            outcome = _smoothed(cfg, game, solver, outcome, z0, x, record, note, responses, interrupt, on_stage)
+        except Stopped:
+            return _interrupted(cfg, game, run, history, z_star, ref, interrupt,
+                                time.perf_counter() - started - sink_time, compile_time)
     state, cert = outcome.state, outcome.certificate
     elapsed = outcome.time_s - sink_time  # the solver alone: the sink's I/O and the certificate are excluded
     if exact and outcome.restarts and state.status == Status.CONVERGED:  # the equilibrium reached, polished

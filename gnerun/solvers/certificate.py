@@ -441,7 +441,7 @@ def check_player(game: CompiledGame, agent: int, z: np.ndarray, x: np.ndarray | 
     # the box search (small players): a global statement, or a witness
     box_result, box = None, None
     if 0 < ni <= global_response.MAX_DIM:
-        box_result, box = _box_search(game, agent, a, x, J0 - tol)
+        box_result, box = _box_search(game, agent, a, x, J0 - tol, tol)
         if box_result is not None and box_result.witness is not None:
             consider([box_result.witness], strict=False)
             local = _unique(local + [box_result.witness])
@@ -488,17 +488,17 @@ def check_player(game: CompiledGame, agent: int, z: np.ndarray, x: np.ndarray | 
         consider(list(points), strict=False)
 
     gap = None if best_x is None else J0 - best_val
-    if box_result is not None and box_result.complete and gap is not None and gap <= tol:
-        kind = "global on the box"
-        bound = tol
+    if box_result is not None and box_result.complete and gap is not None:
+        kind = "global on the box"  # no feasible point of the box is cheaper than the best one found by more than tol
+        bound = gap + tol
     elif gap is not None and gap <= tol and _convex_player(game, agent, a, x):
         kind = "global (convex)"  # the candidate is a KKT point of the player's own convex problem
         bound = None
     else:
         kind = f"over {len(starts.compare) + len(local)} starts"
         bound = None
-        if box_result is not None and math.isfinite(box_result.lower_bound) and box_result.witness is None:
-            bound = J0 - box_result.lower_bound
+        if box_result is not None and math.isfinite(box_result.lower_bound):
+            bound = J0 - box_result.lower_bound  # the search's budget ran out: what it proved
     note = "ok (" + kind_note + ")" if gap is not None else "no start ended feasible (" + kind_note + ")"
     if starts.kinks:
         note += f"; at a kink of {', '.join(starts.kinks)}: the branches compared by probes around the point"
@@ -517,7 +517,8 @@ def _convex_player(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray 
     return bool(w.size == 0 or w[0] >= -1e-10 * max(1.0, float(np.max(np.abs(w)))))
 
 
-def _box_search(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | None, threshold: float):
+def _box_search(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | None, threshold: float,
+                tol: float):
     sl = game.agent_slices[agent]
     J, dJ, c = game.agent_functions(agent)
     try:
@@ -537,7 +538,7 @@ def _box_search(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | N
         return [Al, xv], [Ah, xv]
 
     result = global_response.box_search(tapes[0], tapes[1], tapes[2] if rows.size else None, eq, lo, hi, embed,
-                                        threshold)
+                                        threshold, tol=tol)
     return result, (lo.tolist(), hi.tolist())
 
 

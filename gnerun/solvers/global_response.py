@@ -36,7 +36,8 @@ MAX_ACTIVE = 8_192  # pieces kept at once; past this the search stops, its state
 class BoxSearch:
     """The outcome of :func:`box_search`."""
 
-    complete: bool  # every piece was discarded: no feasible point of the box is below the threshold
+    complete: bool  # every piece was discarded: no feasible point of the box is below the threshold (with tol: below
+    # the witness's value minus tol)
     witness: np.ndarray | None  # a point of the box, provably feasible, whose cost is provably below the threshold
     witness_value: float | None
     lower_bound: float  # the player's cost is >= this at every feasible point of the box (-inf: nothing known)
@@ -44,21 +45,24 @@ class BoxSearch:
 
 
 def box_search(cost: Tape, gradient: Tape | None, rows: Tape | None, equality: np.ndarray, lower: np.ndarray,
-               upper: np.ndarray, embed, threshold: float, *, max_pieces: int = MAX_PIECES) -> BoxSearch:
+               upper: np.ndarray, embed, threshold: float, *, tol: float | None = None,
+               max_pieces: int = MAX_PIECES) -> BoxSearch:
     """Search the box [lower, upper] of the player's own decisions for a feasible point below ``threshold``.
 
     ``cost``, ``gradient`` and ``rows`` are tapes of functions of (a, x) (J_i, grad_{a_i} J_i, the player's rows);
     ``embed(lo, hi)`` turns bounds of the player's decisions, shaped (d, B), into the inputs' bounds of those tapes
-    (lists for :meth:`Tape.bounds`: the others' decisions and the state as degenerate intervals)."""
+    (lists for :meth:`Tape.bounds`: the others' decisions and the state as degenerate intervals). With ``tol``, a
+    witness does not end the search: the threshold drops to the witness's value minus ``tol`` and the search goes on,
+    so that a complete search returns a witness within ``tol`` of the cheapest feasible point of the box (a best
+    response, not just a better point)."""
     d = lower.size
     lo = lower.reshape(d, 1).astype(float)
     hi = upper.reshape(d, 1).astype(float)
     width0 = np.maximum(upper - lower, 1e-300).reshape(d, 1)
     pieces = 0
-    floor = math.inf  # the smallest lower bound of a piece kept when the search stops
+    witness, witness_value = None, None
     while lo.shape[1]:
-        B = lo.shape[1]
-        pieces += B
+        pieces += lo.shape[1]
         mid = 0.5 * (lo + hi)
         # cost: natural enclosure, and the mean-value form around the centre
         (jl,), _ = cost.bounds(*embed(lo, hi))
@@ -73,8 +77,8 @@ def box_search(cost: Tape, gradient: Tape | None, rows: Tape | None, equality: n
                 mv = ml[0] + np.sum(terms, axis=0)
             mv = np.nextafter(np.nextafter(mv, -math.inf), -math.inf)
             bound = np.maximum(bound, np.where(np.isnan(mv), -math.inf, mv))
-        keep = ~(bound >= threshold)
-        centre_ok = mh[0] < threshold
+        keep = np.ones(lo.shape[1], dtype=bool)
+        centre_ok = np.ones(lo.shape[1], dtype=bool)
         if rows is not None and equality.size:
             (cl,), (ch,) = rows.bounds(*embed(lo, hi))
             ineq = ~equality
@@ -83,25 +87,28 @@ def box_search(cost: Tape, gradient: Tape | None, rows: Tape | None, equality: n
             (pl,), (ph,) = rows.bounds(*embed(mid, mid))
             # a centre counts only where every row provably holds there (equality rows cannot: they need a solve)
             centre_ok &= (ph[ineq] <= 0).all(axis=0) & ~equality.any()
-        hit = np.flatnonzero(keep & centre_ok)
+        # a centre provably feasible and provably below the threshold is a witness; with tol, the best one so far
+        hit = np.flatnonzero(keep & centre_ok & (mh[0] < threshold))
         if hit.size:
             j = hit[np.argmin(mh[0][hit])]
-            return BoxSearch(False, mid[:, j].copy(), float(mh[0][j]), -math.inf, pieces)
+            witness, witness_value = mid[:, j].copy(), float(mh[0][j])
+            if tol is None:
+                return BoxSearch(False, witness, witness_value, -math.inf, pieces)
+            threshold = witness_value - tol
+        keep &= ~(bound >= threshold)
         lo, hi, bound = lo[:, keep], hi[:, keep], bound[keep]
         if not lo.shape[1]:
             break
-        if pieces >= max_pieces or 2 * lo.shape[1] > MAX_ACTIVE:
-            floor = float(np.min(bound))
-            return BoxSearch(False, None, None, min(floor, threshold), pieces)
+        stop = pieces >= max_pieces or 2 * lo.shape[1] > MAX_ACTIVE
         # split each piece in halves along its widest side (relative to the box)
         side = np.argmax((hi - lo) / width0, axis=0)
         cols = np.arange(lo.shape[1])
         cut = 0.5 * (lo[side, cols] + hi[side, cols])
+        stop = stop or not np.all((cut > lo[side, cols]) & (cut < hi[side, cols]))  # down to rounding
+        if stop:
+            return BoxSearch(False, witness, witness_value, min(float(np.min(bound)), threshold), pieces)
         lo2, hi2 = lo.copy(), hi.copy()
         hi[side, cols] = cut
         lo2[side, cols] = cut
-        if not np.all((hi - lo)[side, cols] > 0) or not np.all((hi2 - lo2)[side, cols] > 0):  # down to rounding
-            floor = float(np.min(bound))
-            return BoxSearch(False, None, None, min(floor, threshold), pieces)
         lo, hi = np.hstack([lo, lo2]), np.hstack([hi, hi2])
-    return BoxSearch(True, None, None, threshold, pieces)
+    return BoxSearch(True, witness, witness_value, threshold, pieces)
