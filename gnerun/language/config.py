@@ -134,8 +134,15 @@ class SharedConstraint(Strict):
     agents: list[str] | None = Field(default=None, min_length=1)
 
 
-StageConstraint = Expr | StagedConstraint
-SharedSpec = Expr | SharedConstraint
+def _constraint_tag(v: Any) -> str:
+    # a constraint is its text, or a mapping with options: pydantic reports the problems of the one it is
+    return "options" if isinstance(v, dict | BaseModel) else "text"
+
+
+StageConstraint = Annotated[Annotated[Expr, Tag("text")] | Annotated[StagedConstraint, Tag("options")],
+                            Discriminator(_constraint_tag)]
+SharedSpec = Annotated[Annotated[Expr, Tag("text")] | Annotated[SharedConstraint, Tag("options")],
+                       Discriminator(_constraint_tag)]
 
 
 def constraint_text(c: StageConstraint | SharedSpec) -> str:
@@ -248,12 +255,25 @@ class SolverConfig(Strict):
         return "none" if self.kind == "jn" else "hybrid"
 
 
+def _scale(v: Any) -> float | list[float]:
+    """A plant disturbance's scale: one number, or a list of numbers (one per state)."""
+    if isinstance(v, list):
+        return [_number(x, f"entry {i + 1} is not a number") for i, x in enumerate(v)]
+    return _number(v, "must be a number or a list of numbers (one per state)")
+
+
+def _number(x: Any, problem: str) -> float:
+    if isinstance(x, bool) or not isinstance(x, int | float):
+        raise PydanticCustomError("float_type", problem)
+    return float(x)
+
+
 class PlantDisturbance(Strict):
     """w(t) in x(t+1) = f(x(t), u(t)) + w(t): gaussian (standard deviation ``scale``), uniform on
     [-scale, scale], or the constant ``scale``; ``scale`` is one number or one per state."""
 
     kind: Literal["none", "gaussian", "uniform", "constant"] = "none"
-    scale: float | list[float] = 0.0
+    scale: Annotated[float | list[float], PlainValidator(_scale)] = 0.0
     seed: Seed = 0
 
 
@@ -503,10 +523,10 @@ def load_config(
     try:
         cfg = Config.model_validate(data)
     except ValidationError as e:
-        raise ConfigError(_validation_problems(e, data, smap)) from None
+        raise ConfigError(one_per_template(_validation_problems(e, data, smap))) from None
     problems = check_semantics(cfg, smap)
     if problems:
-        raise ConfigError(problems)
+        raise ConfigError(one_per_template(problems))
     from .size import estimate  # the size of the game, before anything is built from it
 
     size = estimate(cfg)
@@ -547,6 +567,31 @@ RENAMED = {
 }
 
 
+_COPY = re.compile(r"^(?P<where>.*?:\d+:\d+) \(for [^)]*\): (?P<path>[^ ]*): (?P<message>.*)$")
+
+
+def one_per_template(problems: list[str]) -> list[str]:
+    """One message per template: the same problem in several copies of a family (at the template's file:line:column,
+    the same field and message) is reported once, for its first copy, with the number of the others."""
+    first: dict[tuple[str, str, str], int] = {}
+    more: dict[int, int] = {}
+    kept: list[str] = []
+    for p in problems:
+        m = _COPY.match(p)
+        if m is None:
+            kept.append(p)
+            continue
+        key = (m["where"], re.sub(r"\.\d+(?=\.|$)", ".*", m["path"]), m["message"])
+        if key in first:
+            more[first[key]] += 1
+            continue
+        first[key] = len(kept)
+        more[len(kept)] = 0
+        kept.append(p)
+    return [p + (f" (and in {more[i]} more cop{'ies' if more[i] > 1 else 'y'} of the family)" if more.get(i) else "")
+            for i, p in enumerate(kept)]
+
+
 def _validation_problems(err: ValidationError, data: Any, smap: SourceMap) -> list[str]:
     problems = []
     for e in err.errors(include_url=False):
@@ -568,6 +613,9 @@ def _validation_problems(err: ValidationError, data: Any, smap: SourceMap) -> li
                 msg = msg.replace("Input tag", "kind")
             elif kind == "value_error":
                 msg = msg.removeprefix("Value error, ")
+            elif kind == "too_short":
+                n = (e.get("ctx") or {}).get("min_length", 1)
+                msg = f"needs at least {n} entr{'y' if n == 1 else 'ies'} (it has {len(e['input'])})"
         problems.append(f"{where}: {dotted}: {msg}")
     return problems
 
