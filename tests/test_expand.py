@@ -210,7 +210,7 @@ game:
 
 @pytest.mark.parametrize(("agents", "expected"), [
     ('    - for: {i: 1..1000000000}\n      name: "p{i}"\n      variables: {"x{i}": {}}\n      cost: "x{i}**2"\n',
-     rf":6:\d+: the game expands to more than {MAX_ITEMS}"),
+     rf":6:\d+: the game expands to more than {MAX_ITEMS:,}"),
     ('    - for: {i: 1..N}\n      name: "p{i}"\n      variables: {"x{i}": {}}\n      cost: "x{i}**2 + c[i+1]"\n',
      r":9:\d+ \(for i = 3\): index 4 of 'c' is outside 1..3"),
     ('    - for: {i: 1..N}\n      name: "p{i}"\n      variables: {"x{i}": {}}\n      cost: "x{i}**2 + x{i+1}"\n',
@@ -224,7 +224,7 @@ game:
     ('    - for: {N: 1..2}\n      name: "p{N}"\n      variables: {"x{N}": {}}\n      cost: "x{N}**2"\n',
      r":6:\d+: index 'N' is already in use"),
     ('    - name: p\n      variables: {x: {}}\n      cost: "sum(x for k in 1..2000000000)"\n',
-     rf":\d+:\d+: the game expands to more than {MAX_ITEMS}"),
+     rf":\d+:\d+: the game expands to more than {MAX_ITEMS:,}"),
     ('    - name: p\n      variables: {x: {}}\n      cost: "x**2 + d[1]"\n',
      r":\d+:\d+: 'd' is indexed but is not a vector or matrix parameter"),
     ('    - name: p\n      variables: {x: {}}\n      cost: "x{{1}}"\n', r":\d+:\d+: unbalanced or nested braces"),
@@ -260,7 +260,7 @@ def test_the_cli_refuses_a_huge_family_with_exit_code_2(tmp_path) -> None:
                          text=True, timeout=60)
     assert out.returncode == 2, out.stderr
     assert "Traceback" not in out.stderr
-    assert "huge.yaml:6:" in out.stderr and str(MAX_ITEMS) in out.stderr
+    assert "huge.yaml:6:" in out.stderr and f"{MAX_ITEMS:,}" in out.stderr
 
 
 def test_validate_expand_prints_the_game_written_out(tmp_path) -> None:

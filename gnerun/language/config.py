@@ -37,6 +37,7 @@ from .expr import (
     FUNCTIONS,
     ExpressionError,
     check_names,
+    parse_cache,
     parse_constraint,
     parse_expression,
 )
@@ -524,12 +525,13 @@ def load_config(
         cfg = Config.model_validate(data)
     except ValidationError as e:
         raise ConfigError(one_per_template(_validation_problems(e, data, smap))) from None
-    problems = check_semantics(cfg, smap)
-    if problems:
-        raise ConfigError(one_per_template(problems))
     from .size import estimate  # the size of the game, before anything is built from it
 
-    size = estimate(cfg)
+    with parse_cache():  # every expression parsed once, for the checks and the estimate
+        problems = check_semantics(cfg, smap)
+        if problems:
+            raise ConfigError(one_per_template(problems))
+        size = estimate(cfg)
     too_large, _ = size.problems()
     if too_large:
         where = ("game", "horizon") if cfg.game.kind == "dynamic" else ("game", "agents")
@@ -690,15 +692,20 @@ def _field_model(model: Any, part: Any, node: Any) -> Any:
 
 def sparse_obstacles(cfg: Config) -> list[str]:
     """Why the sparse formulation cannot solve this config (empty: it can)."""
+    return obstacles(isinstance(cfg.game, StaticGame), cfg.solver, cfg.disturbance)
+
+
+def obstacles(static: bool, solver: SolverConfig, disturbance: DisturbanceConfig) -> list[str]:
+    """:func:`sparse_obstacles` of a game, static or not, solved with these options."""
     why = []
-    if isinstance(cfg.game, StaticGame):
+    if static:
         why.append("a static game has no states to keep")
-    if cfg.solver.kind != "ssn":
-        why.append(f"solver.kind is {cfg.solver.kind!r} (the sparse formulation is for 'ssn')")
-    if cfg.solver.complementarity != "min":
+    if solver.kind != "ssn":
+        why.append(f"solver.kind is {solver.kind!r} (the sparse formulation is for 'ssn')")
+    if solver.complementarity != "min":
         why.append("it takes min-map steps (solver.complementarity: min)")
-    if cfg.disturbance.kind in ("jacobian_noise", "residual") and cfg.disturbance.scale > 0:
-        why.append(f"disturbance {cfg.disturbance.kind!r} perturbs the whole condensed JPhi or its right-hand side")
+    if disturbance.kind in ("jacobian_noise", "residual") and disturbance.scale > 0:
+        why.append(f"disturbance {disturbance.kind!r} perturbs the whole condensed JPhi or its right-hand side")
     return why
 
 

@@ -47,11 +47,11 @@ from .expr import (
     parse_expression,
     unparse,
 )
+from .extent import MAX_ITEMS
 from .templates import AGGREGATES, Aggregate, Entry, Hole, Template, Word, parse_template
 from .yaml_source import PathKey, SourceMap
 
-MAX_ITEMS = 100_000  # family copies and aggregate terms one config may expand to
-EXPANSION_SECONDS = 20.0  # the expansion's wall-clock budget, behind the estimate
+EXPANSION_SECONDS = 60.0  # the expansion's wall-clock budget behind the estimate (a game at the limits: ~10 s)
 _NAME = re.compile(r"(?<![\w.])([A-Za-z_]\w*)")
 _AGGREGATE = re.compile(r"(?<![\w.])(sum|prod|max|min)\s*\(")
 _TEMPLATE = re.compile(r"\{([^{}]*)\}")
@@ -122,6 +122,7 @@ class Expander:
         self.vectors: dict[str, list] = {}
         self.scalars: dict[str, float] = {}  # numeric parameters (for numbers written as expressions)
         self.definitions: dict[str, Node] = {}  # expanded trees (shared wherever they are used)
+        self.definition_names: dict[int, set[str]] = {}  # the names in each definition's tree, by the tree's id
         self.templates: dict[str, Template] = {}  # parsed once per text
         self.integers: dict[str, Any] = {}  # integer expressions, parsed once per text
         self.changed = False  # whether the expression being expanded had anything written in
@@ -144,6 +145,7 @@ class Expander:
         return out, self.out
 
     def _document(self, data: dict) -> dict:
+        self.document = data
         out = {}
         for key, value in data.items():
             self._copy_position((key,), (key,))
@@ -169,6 +171,7 @@ class Expander:
         horizon = game.get("horizon")
         if isinstance(horizon, int) and not isinstance(horizon, bool):
             base["T"] = horizon
+        self._measure(game, base)
         scope = _Scope(base)
         definitions = game.get("definitions", {})
         if definitions is not None and not isinstance(definitions, dict):
@@ -186,9 +189,11 @@ class Expander:
             lhs, relation, _, _ = self._expanded(str(text), path, scope)
             if relation is not None:
                 raise _Problem(path, f"definition {name!r} is an expression, not a constraint ({relation!r})")
-            if name in _dag_names(lhs):
+            names = _dag_names(lhs, self.definition_names)
+            if name in names:
                 raise _Problem(path, f"definition {name!r} refers to itself")
             self.definitions[name] = lhs
+            self.definition_names[id(lhs)] = names
         out: dict[str, Any] = {}
         for key, value in game.items():
             if key == "definitions":
@@ -209,6 +214,31 @@ class Expander:
                                "a definition may not shadow a variable, state, input, parameter or constant", key=True)
         return out
 
+    def _measure(self, game: dict, base: dict[str, int]) -> None:
+        """Count what the game expands to before expanding it (:mod:`gnerun.language.extent`), and estimate the size
+        of the game from the counts (:mod:`gnerun.language.size`): past a limit, the config is refused here, with
+        the estimate, before anything is written out."""
+        from .extent import game_section
+        from .size import from_extent
+
+        self.extent = extent = game_section(self, game, base)
+        size = from_extent(extent, game, self.document)
+        too_large = size.problems()[0] if size is not None else []
+        if too_large:
+            where = ("game", "horizon") if game.get("kind") == "dynamic" and "horizon" in game else ("game", "agents")
+            raise _Problem(where, too_large[0] + " (estimated before expanding the config)")
+
+    def template(self, text: str, path: PathKey) -> Template:
+        """``text`` parsed as a template (a located problem if it does not parse)."""
+        return self._parsed(text, path, _Scope({}))
+
+    def integer_tree(self, text: str) -> Node:
+        """An integer expression's tree, parsed once per text (ExpressionError if it does not parse)."""
+        parsed = self.integers.get(text)
+        if parsed is None:
+            parsed = self.integers[text] = parse_expression(text).tree
+        return parsed
+
     # families ------------------------------------------------------------------------------------------
     def _family(self, spec: Any, path: PathKey, scope: _Scope) -> list[_Scope]:
         """The scopes of a ``for`` mapping's copies, in order (nested in the order written), counted before
@@ -225,6 +255,7 @@ class Expander:
             if name in self.definitions:
                 raise _Problem(path, f"index {name!r} is the name of a definition", scope.indices)
         scopes: list[_Scope] = []
+        described = "the family for: {" + ", ".join(f"{k}: {v}" for k, v in spec.items()) + "}"
 
         def nest(level: int, current: _Scope) -> None:
             if level == len(names):
@@ -236,7 +267,7 @@ class Expander:
             if level == len(names) - 1 and self.items + max(0, hi - lo + 1) > MAX_ITEMS:
                 self._count(max(0, hi - lo + 1), path, current)  # refused before the copies are built
             for v in range(lo, hi + 1):
-                self._tick(path, current)
+                self._tick(path, current, described)
                 nest(level + 1, current.bind(name, v))
 
         nest(0, scope)
@@ -269,14 +300,10 @@ class Expander:
         return a, b
 
     def _parsed_integer(self, text: str, path: PathKey, scope: _Scope) -> Node:
-        parsed = self.integers.get(text)
-        if parsed is None:
-            try:
-                parsed = self.integers[text] = parse_expression(text).tree
-            except ExpressionError as e:
-                raise _Problem(path, f"in the integer expression {text.strip()!r}: {e.message}",
-                               scope.indices) from None
-        return parsed
+        try:
+            return self.integer_tree(text)
+        except ExpressionError as e:
+            raise _Problem(path, f"in the integer expression {text.strip()!r}: {e.message}", scope.indices) from None
 
     def _integer(self, text: str, path: PathKey, scope: _Scope) -> int:
         return self._value(self._parsed_integer(text, path, scope), text, path, scope)
@@ -356,7 +383,7 @@ class Expander:
         if relation is not None:
             raise _Problem(path, f"{value!r} is a comparison, not a number", scope.indices)
         env = dict(self.scalars)
-        unknown = sorted(_dag_names(tree) - set(env) - set(CONSTANTS))
+        unknown = sorted(_dag_names(tree, self.definition_names) - set(env) - set(CONSTANTS))
         if unknown:
             raise _Problem(path, f"{unknown[0]!r} in {value!r} is not an index or a numeric parameter", scope.indices)
         with _quiet():
@@ -522,11 +549,11 @@ class Expander:
                     values.append(Call(n.function, tuple(children), n.column))
         return values[0]
 
-    def _tick(self, path: PathKey, scope: _Scope) -> None:
+    def _tick(self, path: PathKey, scope: _Scope, what: str = "this expression") -> None:
         """The wall-clock budget of the expansion, the last guard behind the estimate (checked every 4,096 nodes)."""
         self.ticks += 1
         if self.ticks & 4095 == 0 and time.perf_counter() > self.deadline:
-            raise _Problem(path, f"expanding this took more than {EXPANSION_SECONDS:g} s (the expansion's time "
+            raise _Problem(path, f"expanding {what} took more than {EXPANSION_SECONDS:g} s (the expansion's time "
                                  "limit); write the game with fewer or smaller families, sums or definitions",
                            scope.indices)
 
@@ -618,8 +645,9 @@ def _aggregate(node: Aggregate, terms: list[Node]) -> Node:
     return Call(node.function, tuple(terms), node.column) if len(terms) > 1 else terms[0]
 
 
-def _dag_names(node: Node) -> set[str]:
-    """The names in a tree whose subtrees may be shared (definitions): each shared subtree is visited once."""
+def _dag_names(node: Node, known: dict[int, set[str]]) -> set[str]:
+    """The names in a tree whose subtrees may be shared (definitions): each shared subtree is visited once, and a
+    subtree whose names are ``known`` (a definition's, by its id) not at all."""
     names: set[str] = set()
     seen: set[int] = set()
     stack = [node]
@@ -628,7 +656,9 @@ def _dag_names(node: Node) -> set[str]:
         if id(n) in seen:
             continue
         seen.add(id(n))
-        if isinstance(n, Name):
+        if id(n) in known:
+            names |= known[id(n)]
+        elif isinstance(n, Name):
             names.add(n.id)
         elif isinstance(n, Unary):
             stack.append(n.operand)

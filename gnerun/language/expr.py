@@ -22,11 +22,13 @@ before they can exhaust the interpreter's stack.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import re
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
+from contextvars import ContextVar
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 MAX_LENGTH = 20_000
 MAX_DEPTH = 100
@@ -173,8 +175,7 @@ _TOKEN = re.compile(
 )
 
 
-@dataclass(frozen=True)
-class _Token:
+class _Token(NamedTuple):
     kind: str  # number | name | op | end
     text: str
     column: int  # 1-based
@@ -183,24 +184,25 @@ class _Token:
 def _tokenize(text: str) -> list[_Token]:
     tokens: list[_Token] = []
     pos = 0
-    while pos < len(text):
-        m = _TOKEN.match(text, pos)
-        if m is None:
-            ch = text[pos]
-            hint = ""
-            if ch == ".":
-                hint = " (attribute access is not part of the language)"
-            elif ch in "'\"":
-                hint = " (strings are not part of the language)"
-            elif ch in "<>=!":
-                hint = " (comparisons are <=, >= and ==, and only in constraints)"
-            elif ch == "[" or ch == "]":
-                hint = " (indexing is not part of the language)"
-            raise ExpressionError(f"unexpected character {ch!r}{hint}", text, pos + 1)
+    for m in _TOKEN.finditer(text):  # one scan; a character no token matches is where two matches do not meet
+        if m.start() != pos:
+            break
         kind = m.lastgroup or ""
         if kind != "ws":
             tokens.append(_Token(kind, m.group(), pos + 1))
         pos = m.end()
+    if pos < len(text):
+        ch = text[pos]
+        hint = ""
+        if ch == ".":
+            hint = " (attribute access is not part of the language)"
+        elif ch in "'\"":
+            hint = " (strings are not part of the language)"
+        elif ch in "<>=!":
+            hint = " (comparisons are <=, >= and ==, and only in constraints)"
+        elif ch == "[" or ch == "]":
+            hint = " (indexing is not part of the language)"
+        raise ExpressionError(f"unexpected character {ch!r}{hint}", text, pos + 1)
     tokens.append(_Token("end", "", len(text) + 1))
     return tokens
 
@@ -348,17 +350,40 @@ def _check_text(text: object) -> str:
     return text
 
 
+_parsed: ContextVar[dict | None] = ContextVar("gnerun_parsed", default=None)
+
+
+@contextlib.contextmanager
+def parse_cache() -> Iterator[None]:
+    """Within the block, an expression or constraint text is parsed once: its tree is kept and given again (loading
+    a config checks every expression, then counts its nodes)."""
+    token = _parsed.set({})
+    try:
+        yield
+    finally:
+        _parsed.reset(token)
+
+
 def parse_expression(text: str) -> Expression:
     """Parse an arithmetic expression (no comparison)."""
+    cache = _parsed.get()
+    if cache is not None and (hit := cache.get(("expression", text))) is not None:
+        return hit
     text = _check_text(text)
     p = _Parser(text)
     tree = p.expr()
     p.finish()
-    return Expression(text, tree)
+    parsed = Expression(text, tree)
+    if cache is not None:
+        cache[("expression", text)] = parsed
+    return parsed
 
 
 def parse_constraint(text: str) -> Constraint:
     """Parse ``lhs <= rhs``, ``lhs >= rhs`` or ``lhs == rhs`` (exactly one relation)."""
+    cache = _parsed.get()
+    if cache is not None and (hit := cache.get(("constraint", text))) is not None:
+        return hit
     text = _check_text(text)
     p = _Parser(text)
     lhs = p.expr()
@@ -373,7 +398,10 @@ def parse_constraint(text: str) -> Constraint:
     if nxt.kind == "op" and nxt.text in RELATIONS:
         raise p.error("chained comparisons are not allowed: write one constraint per relation")
     p.finish()
-    return Constraint(text, lhs, tok.text, rhs)
+    parsed = Constraint(text, lhs, tok.text, rhs)
+    if cache is not None:
+        cache[("constraint", text)] = parsed
+    return parsed
 
 
 # ---------------------------------------------------------------------------------------------

@@ -164,3 +164,42 @@ def estimate(cfg: Config) -> Size:
     if auto_condensed and (kkt < SPARSE_FROM if isinstance(dynamics, LinearDynamics) else kkt * stages < SPARSE_WORK):
         dense = True
     return Size(decisions, multipliers, len(g.states) * stages, nodes, dense, loop_steps)
+
+
+def from_extent(extent, game: dict, document: dict) -> Size | None:
+    """A lower bound of the size of a game from the counts of its unexpanded config (:mod:`gnerun.language.extent`),
+    so that a game too large to build is refused before it is written out; None where the config is not readable
+    enough to tell (its validation says why)."""
+    from pydantic import ValidationError
+
+    from .config import DisturbanceConfig, SolverConfig, obstacles
+
+    kind = game.get("kind")
+    if kind not in ("static", "dynamic"):
+        return None
+    try:
+        solver = SolverConfig.model_validate(document.get("solver") or {})
+        disturbance = DisturbanceConfig.model_validate(document.get("disturbance") or {})
+    except (ValidationError, AttributeError, TypeError):
+        return None
+    static = kind == "static"
+    stages = 1 if static else extent.stages
+    field = "variables" if static else "inputs"
+    decisions = extent.copies[("agents", "*", field, "*")] * stages
+    multipliers = (extent.keys[("agents", "*", field, "*", "lower")]
+                   + extent.keys[("agents", "*", field, "*", "upper")]) * stages
+    for rows in (("agents", "*", "constraints", "*"), ("shared_constraints", "*")):
+        staged = extent.staged[rows]
+        multipliers += (extent.copies[rows] - staged) * stages + staged
+    nodes = 0
+    for path, n in extent.expression_nodes.items():
+        once = path[-1] in ("staged", "cost", "terminal_cost")
+        nodes += n * (1 if once else stages)
+    states = 0 if static else extent.copies[("states", "*")] * stages
+    dense = bool(obstacles(static, solver, disturbance)) or solver.formulation == "condensed"
+    dynamics = game.get("dynamics")
+    linear = isinstance(dynamics, dict) and "A" in dynamics
+    kkt = decisions + multipliers
+    if solver.formulation == "auto" and (kkt < SPARSE_FROM if linear else kkt * stages < SPARSE_WORK):
+        dense = True
+    return Size(decisions, multipliers, states, nodes, dense, 0)
