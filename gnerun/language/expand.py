@@ -293,10 +293,12 @@ class Expander:
         shorter: a negative count is a mistake, not an empty family."""
         a = self._value(lo, text.split("..")[0], path, scope)
         b = self._value(hi, text.split("..")[-1], path, scope)
-        if b < a - 1 and not (names_in(lo) | names_in(hi)) & set(scope.indices):
-            raise _Problem(path, f"the range {text!r} is {a}..{b}, a negative count ({b - a + 1}): a range has "
-                                 f"at least no values ({a}..{a - 1}); is a count such as a parameter too small?",
-                           scope.indices)
+        used = names_in(lo) | names_in(hi)
+        if b < a - 1 and not used & set(scope.indices):
+            given = ", ".join(f"{k} = {scope.base[k]}" for k in sorted(used) if k in scope.base)
+            raise _Problem(path, f"the range {text!r} is {a}..{b}, a negative count ({b - a + 1} values"
+                                 + (f", with {given}" if given else "") + f"): a range may be empty ({a}..{a - 1}) "
+                                 "but not shorter", scope.indices)
         return a, b
 
     def _parsed_integer(self, text: str, path: PathKey, scope: _Scope) -> Node:
