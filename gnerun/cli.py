@@ -9,6 +9,7 @@ the commands, so that ``gnerun --help`` stays fast.
 from __future__ import annotations
 
 import contextlib
+import os
 import sys
 import traceback
 from collections.abc import Iterator
@@ -212,9 +213,9 @@ def validate(config: ConfigArg, set_: SetOpt = None, quiet: QuietOpt = False, ex
             for p in e.problems:
                 typer.echo(f"error: {p}", err=True)
             raise typer.Exit(2) from None
-        large = cfg.size_warnings("simulate" if cfg.game.kind == "dynamic" else "solve")
+        large = cfg.size_warnings("validate")
         _warn(config, large, quiet)
-        if not large or not cfg.size.problems()[1]:  # a game of a size that builds in seconds is built
+        if not cfg.size.problems()[1]:  # a game of a size that builds in seconds is built
             from .game.compile import compile_game
             from .runs.solving import make_solver
 
@@ -331,6 +332,9 @@ def simulate(config: ConfigArg, out: OutOpt = None, set_: SetOpt = None, quiet: 
         v = r.constraint_violation
         t = max(range(r.done), key=lambda i: v[i] if v[i] == v[i] else -1.0)
         typer.echo(f"K={K}: largest violation {_fmt(r.max_constraint_violation)} at t = {t}: {r.worst_constraint[t]}")
+    for r in sim.values():
+        if r.message:  # a loop that ended early: why
+            typer.echo(one_line(r.message))
     typer.echo(f"run directory: {sim.run_dir}")
 
 
@@ -625,11 +629,21 @@ def main() -> None:
     from .runs.interrupt import terminate_like_ctrl_c
 
     terminate_like_ctrl_c()
+    code: int | str | None = 0
     try:
         app(standalone_mode=True)
     except KeyboardInterrupt:
         typer.echo("interrupted", err=True)
-        sys.exit(130)
+        code = 130
+    except SystemExit as e:
+        code = e.code
+    from .game.building import abandoned
+
+    if abandoned():  # a stopped build still runs in its helper thread: end now, everything is written
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code if isinstance(code, int) else 1)
+    sys.exit(code)
 
 
 if __name__ == "__main__":

@@ -42,6 +42,7 @@ from ..language.config import (
     constraint_text,
 )
 from ..language.expr import casadi_functions, evaluate, parse_constraint, parse_expression
+from .building import stoppable
 
 
 class Evaluator:
@@ -132,6 +133,7 @@ class CompiledGame:
     # The dense derivatives are built on first use: the sparse formulation of a long horizon never needs
     # the condensed Jacobian, whose construction grows with T^2.
     @functools.cached_property
+    @stoppable
     def _derivatives(self) -> dict:
         sym = self._symbolic
         a, lam, x, L, c = sym.a, sym.lam, sym.x, sym.L, sym.c
@@ -161,6 +163,7 @@ class CompiledGame:
         return self._derivatives["kkt"]
 
     @functools.cached_property
+    @stoppable
     def _residual(self) -> Evaluator:
         """L and c without derivatives: what a line search evaluates at its trial points."""
         sym = self._symbolic
@@ -168,6 +171,7 @@ class CompiledGame:
                                      ["a", "lam", "x"], ["L", "c"]))
 
     @functools.cached_property
+    @stoppable
     def _constraints(self) -> Evaluator:
         sym = self._symbolic
         dc = ca.jacobian(sym.c, sym.a) if self.m else ca.SX(0, self.n)
@@ -180,6 +184,7 @@ class CompiledGame:
         return c.reshape(-1), dc.reshape(self.m, self.n)
 
     @functools.cached_property
+    @stoppable
     def _constraint_only(self) -> Evaluator:
         sym = self._symbolic
         return Evaluator(ca.Function("c", [sym.a, sym.x], [ca.densify(sym.c)], ["a", "x"], ["c"]))
@@ -189,6 +194,7 @@ class CompiledGame:
         return self._constraint_only(a, self._x(x))[0].reshape(-1)
 
     @functools.cached_property
+    @stoppable
     def zero_gradient_rows(self) -> np.ndarray:
         """Rows of c that depend on no decision variable (structurally): at a stage where the decisions cannot
         reach a constraint (a position one step after an input that drives its second derivative), the row is a
@@ -231,6 +237,7 @@ class CompiledGame:
         return {"dL": dL, "dc": dc, "W": W, "x": None}
 
     @functools.cached_property
+    @stoppable
     def linear_dynamics(self) -> bool:
         """The one-step dynamics affine in (x, u) (a static game: True); tested on one stage, without the
         condensed derivatives."""
@@ -242,11 +249,13 @@ class CompiledGame:
         return not ca.depends_on(ca.vec(d), ca.vertcat(x, u))
 
     @functools.cached_property
+    @stoppable
     def linear_rows(self) -> np.ndarray:
         """Rows of c that are affine in a (polyhedral constraints)."""
         return _affine_rows(self._symbolic.c, self._symbolic.a, self.m)
 
     @functools.cached_property
+    @stoppable
     def _pseudo(self) -> Evaluator:
         sym = self._symbolic
         H = ca.jacobian(sym.F, sym.a)
@@ -254,6 +263,7 @@ class CompiledGame:
                                      ["a", "x"], ["F", "H"]))
 
     @functools.cached_property
+    @stoppable
     def _cost_grads(self) -> Evaluator:
         sym = self._symbolic
         return Evaluator(ca.Function("cost_gradients", [sym.a, sym.x], [ca.densify(ca.jacobian(sym.J, sym.a))],
@@ -789,6 +799,7 @@ def _assemble(*, kind: str, a: ca.SX, x: ca.SX, costs: list[ca.SX], own_rows: li
     )
 
 
+@stoppable
 def compile_game(cfg: Config) -> CompiledGame:
     """Parse, condense (dynamic games) and differentiate the game of ``cfg`` once."""
     g = cfg.game
@@ -831,6 +842,7 @@ class StageConstraints:
         return (float(v[j]), self.labels[j]) if v[j] > 0 else (0.0, None)
 
 
+@stoppable
 def compile_stage_constraints(cfg: Config) -> StageConstraints:
     """Every agent's and every shared constraint row at tau = 0, in terms of (x_next, u): the stage's rows of the
     game, written with the state as a variable instead of f(x, u), so that they can be checked on the state the
@@ -855,6 +867,7 @@ def compile_stage_constraints(cfg: Config) -> StageConstraints:
                             [r.info.label for r in rows])
 
 
+@stoppable
 def compile_agent_problem(cfg: Config, agent: int, tau: float) -> CompiledGame:
     """Agent ``agent``'s proximal response problem [eq:proximal_response, eq:Semi_proximal]:
 

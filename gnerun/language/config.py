@@ -264,7 +264,14 @@ def _scale(v: Any) -> float | list[float]:
 
 
 def _number(x: Any, problem: str) -> float:
-    if isinstance(x, bool) or not isinstance(x, int | float):
+    if isinstance(x, str):  # YAML reads 1e-3 as a string: a number written so is a number, as in every float field
+        try:
+            return float(x)
+        except ValueError:
+            pass
+    if isinstance(x, bool) or not isinstance(x, int | float | str):
+        raise PydanticCustomError("float_type", problem)
+    if isinstance(x, str):
         raise PydanticCustomError("float_type", problem)
     return float(x)
 
@@ -321,6 +328,8 @@ class RunConfig(Strict):
                                 "(log_time = t x sampling_time); default: dynamics.dt of an ode, else 1")
 
 
+MIN_SAMPLING_TIME = 1e-9  # the run log's resolution: log_time is in nanoseconds
+MAX_LOG_SECONDS = (2**63 - 1) / 1e9  # the last time a run log can stamp (signed 64-bit nanoseconds, as readers take it)
 MAX_NAME_BYTES = 100  # runs/<name>-<UTC timestamp>/ stays well inside a file name's 255 bytes
 
 
@@ -385,10 +394,13 @@ class Config(Strict):
         return self._size
 
     def size_warnings(self, command: str) -> list[str]:
-        """Warnings about the size of what ``command`` (solve, simulate, validate) would build and run."""
+        """Warnings about the size of what ``command`` (solve, simulate, validate: both) would build and run."""
         warnings = list(self.size.problems()[1])
-        loop = self.size.loop_warning() if command == "simulate" and self.game.kind == "dynamic" else None
-        return warnings + ([loop] if loop else [])
+        if command in ("simulate", "validate") and self.game.kind == "dynamic":
+            warnings.append(self.size.loop_warning())
+        if command in ("solve", "validate") and self.run.certificate:
+            warnings.append(self.size.certificate_warning())
+        return [w for w in warnings if w]
 
     def resolved_yaml(self) -> str:
         """The config with every default filled in, as YAML (what runs write to config.yaml)."""
@@ -866,6 +878,17 @@ def check_semantics(cfg: Config, smap: SourceMap) -> list[str]:
         report(("disturbance", "kind"), f"{cfg.disturbance.kind!r} perturbs semismooth Newton; with solver.kind "
                "'jn' use 'pseudogradient' (noise on F and H)")
     dynamics = getattr(g, "dynamics", None)
+    if not static:  # a closed loop's log time is t x sampling_time in nanoseconds, an unsigned 64-bit integer
+        given = ("run", "sampling_time") if smap.has(("run", "sampling_time")) or not isinstance(
+            dynamics, ContinuousDynamics) else ("game", "dynamics", "dt")
+        ts, end = cfg.run.sampling_time, cfg.run.steps * cfg.run.sampling_time
+        if ts < MIN_SAMPLING_TIME:
+            report(given, f"is {ts:g} s, below the log's resolution of one nanosecond (every sampling time would be "
+                          "logged at the same time)")
+        elif end > MAX_LOG_SECONDS:
+            report(given, f"is {ts:g} s: run.steps = {cfg.run.steps:,} sampling times of it span {end:.3g} s, "
+                          f"beyond the {MAX_LOG_SECONDS:.3g} s (about {MAX_LOG_SECONDS / 3.156e7:,.0f} years) a run "
+                          "log's time in nanoseconds can count")
     if isinstance(dynamics, ContinuousDynamics) and cfg.run.sampling_time != dynamics.dt:
         report(("run", "sampling_time"), f"is {cfg.run.sampling_time:g} s, but the ode is integrated over one "
                f"sampling time of dynamics.dt = {dynamics.dt:g} s (leave it out, or make the two equal)")

@@ -271,7 +271,8 @@ def run_point(task: dict[str, Any]) -> list[dict[str, Any]]:
         except (InputError, OSError) as e:
             message = str(e) if isinstance(e, InputError) else f"{out}: cannot write the point: {e.strerror or e}"
             return [_row(task, K=None, status="error", message=message, wall=time.perf_counter() - t0)]
-        return _run_point(task, out, t0)
+        with lock.lent():  # the run inside writes the point's directory under this lock
+            return _run_point(task, out, t0)
     except (_Stopped, KeyboardInterrupt):  # stopped: the point ended (interrupted) or was cut short
         _abandon(143)
     finally:
