@@ -64,7 +64,8 @@ def test_validate_stays_fast_on_huge_configs(tmp_path) -> None:
     # horizon 10,000 for ssn: the sparse formulation, linear in T: a warning, and validate does not build it
     proc = _validate(study2, "--set", "game.horizon=10000")
     assert proc.returncode == 0, proc.stderr
-    [warning] = proc.stderr.strip().splitlines()
+    warning, certificate = proc.stderr.strip().splitlines()  # the game, and the certificate a solve would build
+    assert "a large certificate" in certificate and "the largest with 30,003 unknowns" in certificate, certificate
     assert warning.startswith(f"warning: {study2}: a large game: estimated 130,013 unknowns in the sparse "
                               "formulation (30,003 decisions, 40,004 multipliers") and f"{SPARSE_WARN:,}" in warning
     assert "not built, as it is large" in proc.stdout
@@ -102,7 +103,8 @@ def test_validate_does_not_build_a_game_of_many_expression_nodes() -> None:
     merge = str(CONFIGS / "algames_merge_n.yaml")
     proc = _validate(merge, "--set", "game.parameters.N=30")
     assert proc.returncode == 0, proc.stderr
-    [warning] = proc.stderr.strip().splitlines()
+    warning, certificate = proc.stderr.strip().splitlines()  # the game, and the certificate a solve would build
+    assert "a large certificate" in certificate and "the largest with 8,780 unknowns" in certificate, certificate
     assert warning.startswith(f"warning: {merge}: a large game: estimated 15,900 unknowns in the sparse formulation") \
         and "147,330 expression nodes" in warning and "(more than 100,000 expression nodes)" in warning, warning
     assert "not built, as it is large" in proc.stdout
