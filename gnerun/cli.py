@@ -9,6 +9,7 @@ the commands, so that ``gnerun --help`` stays fast.
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 import sys
 import traceback
@@ -20,7 +21,7 @@ import typer
 from typer.core import TyperCommand
 
 from . import __version__
-from .errors import InputError, Unavailable, one_line
+from .errors import MAX_MESSAGE, InputError, Unavailable, one_line, shorten
 from .threads import single_threaded_blas
 
 EXAMPLES = """Examples:
@@ -100,13 +101,17 @@ def _main(
 def _fail(exc: BaseException) -> NoReturn:
     if _options["debug"]:
         traceback.print_exception(exc)
+    if isinstance(exc, OSError) and exc.errno == errno.ENAMETOOLONG:  # a path given on the command line
+        exc = InputError(f"{shorten(str(exc.filename), 100)}: {exc.strerror} (a path component is at most 255 bytes, "
+                         "a path at most 4,096)")
     if isinstance(exc, InputError):  # one line already (InputError escapes what it quotes)
         typer.echo(f"error: {exc.cli}", err=True)
         raise typer.Exit(2)
     if isinstance(exc, Unavailable):
-        typer.echo(f"error: {one_line(str(exc))}", err=True)
+        typer.echo(f"error: {one_line(shorten(str(exc), MAX_MESSAGE))}", err=True)
         raise typer.Exit(1)
-    typer.echo(f"error: {type(exc).__name__}: {one_line(str(exc))} (run with --debug for the traceback)", err=True)
+    typer.echo(f"error: {type(exc).__name__}: {one_line(shorten(str(exc), MAX_MESSAGE))} (run with --debug for the "
+               "traceback)", err=True)
     raise typer.Exit(1)
 
 

@@ -13,7 +13,7 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 
 from .. import __version__
-from ..errors import InputError, WriteError
+from ..errors import InputError, WriteError, shorten
 from ..files import replace_text, write_text
 from ..language.config import Config
 from ..log.mcap_log import RunLog, json_ready
@@ -74,12 +74,13 @@ class RunDirectory:
     @classmethod
     def create(cls, out: str | Path, cfg: Config, *, command: str, force: bool = False) -> RunDirectory:
         path = Path(out)
-        if path.exists() and not path.is_dir():
-            raise InputError(f"{path}: exists and is not a directory")
+        shown = shorten(str(path), 100)
         try:
+            if path.exists() and not path.is_dir():
+                raise InputError(f"{shown}: exists and is not a directory")
             path.mkdir(parents=True, exist_ok=True)
-        except OSError as e:
-            raise InputError(f"{path}: cannot write the run directory: {e.strerror or e}") from None
+        except OSError as e:  # a name too long, a path through a file, no permission
+            raise InputError(f"{shown}: cannot write the run directory: {e.strerror or e}") from None
         lock = DirectoryLock.acquire(path)
         made: list[Path] = []  # what a directory that could not be made complete loses again: none is left half-made
         try:

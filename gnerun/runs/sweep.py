@@ -723,9 +723,9 @@ def read_index(sweep_dir: str | Path) -> list[dict[str, Any]]:
     if not path.exists():
         raise InputError(f"{sweep_dir}: no sweep index here (expected {INDEX_CSV})")
     data = read_regular(path, MAX_JSON_BYTES, INDEX_CSV)
-    try:
-        return [{k: _parse_cell(v) for k, v in r.items()}
-                for r in csv.DictReader(io.StringIO(data.decode(), newline=""))]
+    try:  # a row cut short has its missing cells empty; the cells of a row too long are left out
+        return [{k: _parse_cell(v) for k, v in r.items() if k is not None}
+                for r in csv.DictReader(io.StringIO(data.decode(), newline=""), restval="")]
     except (UnicodeDecodeError, csv.Error) as e:
         raise InputError(f"{path}: damaged {INDEX_CSV}: {str(e).splitlines()[0][:80]}") from None
 
