@@ -543,13 +543,17 @@ def replay(
         if spawn:
             rp.spawn(runs)
         if serve:
-            with tempfile.TemporaryDirectory(prefix="gnerun-replay-") as tmp:
+            with tempfile.TemporaryDirectory(prefix="gnerun-replay-", ignore_cleanup_errors=True) as tmp:
                 rrd = save if save is not None else Path(tmp) / "replay.rrd"
                 if save is None:
                     rp.save(runs, rrd)
+                import shutil
+
+                # a temporary recording goes once the viewer has read it: a killed replay leaves nothing behind
                 rp.serve(rrd, web_port, grpc_port,
                          ready=lambda: (typer.echo(f"web viewer: {rp.web_url(web_port, grpc_port)} (Ctrl-C stops it)"),
-                                        sys.stdout.flush()))
+                                        sys.stdout.flush()),
+                         loaded=None if save is not None else lambda: shutil.rmtree(tmp, ignore_errors=True))
 
 
 @app.command(cls=_Command, short_help="Write a finished, indexed copy of a killed run's log.")
