@@ -138,3 +138,18 @@ def test_ten_million_steps_stream_instead_of_allocating(tmp_path) -> None:
     summary = json.loads((out / "summary.json").read_text())
     assert summary["status"] == "interrupted" and summary["steps"] == 10_000_000
     assert 0 < summary["by_K"]["1"]["completed_steps"] == len(summary["by_K"]["1"]["u"]) < 10_000_000
+
+
+def test_the_certificates_agent_problems_are_estimated_before_a_solve() -> None:
+    """paper_study1 at horizon 2,000: the certificate built each agent's own problem (4,002 to 6,003 unknowns,
+    condensed and dense) in 377 s and 6.3 GB with no word; now solve and validate warn with that estimate, and
+    simulate, which builds no certificate, does not."""
+    cfg = load_config(CONFIGS / "paper_study1.yaml", {"game.horizon": 2000})
+    assert cfg.size.responses == (4002, 4002, 6003)
+    [warning] = [w for w in cfg.size_warnings("solve") if "certificate" in w]
+    assert "the largest with 6,003 unknowns: about 374 s and 6.3 GB for the 3 agents" in warning
+    assert any("certificate" in w for w in cfg.size_warnings("validate"))
+    assert not any("certificate" in w for w in cfg.size_warnings("simulate"))
+    off = load_config(CONFIGS / "paper_study1.yaml", {"game.horizon": 2000, "run.certificate": False})
+    assert not any("certificate" in w for w in off.size_warnings("solve"))
+    assert not any("certificate" in w for w in load_config(CONFIGS / "paper_study1.yaml").size_warnings("solve"))

@@ -348,3 +348,81 @@ def test_parse_template_reads_constraints_and_keeps_plain_text() -> None:
 
 
 ROOT = __import__("pathlib").Path(__file__).resolve().parent.parent
+
+
+# the reported language cases on the command line: exit code 0 or 2, one line ------------------------------
+
+HARKER = (ROOT / "configs" / "harker.yaml").read_text()
+FAMILY = """\
+name: negative-family
+game:
+  kind: static
+  agents:
+    - for: {i: -2..2}
+      name: "p{i + 3}"
+      variables: {"x{i + 3}": {start: 0}}
+      cost: "(x{i + 3} - i**2)**2"
+"""
+SHARED = """\
+game:
+  kind: static
+  agents:
+    - {name: car1, variables: {x1: {}}, cost: "x1**2"}
+    - {name: car2, variables: {x2: {}}, cost: "x2**2"}
+  shared_constraints:
+    - {expr: "x1 + x2 <= 1", agents: AGENTS}
+"""
+LANGUAGE_CASES = [
+    ("a definition named like a variable", HARKER.replace("game:\n", 'game:\n  definitions: {x2: "0"}\n'),
+     "definition 'x2' has the name of a variable of 'p2'"),
+    ("a definition named pi", HARKER.replace("game:\n", 'game:\n  definitions: {pi: "3"}\n'),
+     "definition 'pi' has the name of a constant"),
+    ("a definition named tau", (ROOT / "configs" / "paper_study1.yaml").read_text().replace(
+        "game:\n", 'game:\n  definitions: {tau: "3"}\n'), "definition 'tau' has the name of the stage index"),
+    ("a definition named T", (ROOT / "configs" / "paper_study1.yaml").read_text().replace(
+        "game:\n", 'game:\n  definitions: {T: "3"}\n'), "definition 'T' has the name of the horizon"),
+    ("a space before an index", HARKER.replace("game:\n", "game:\n  parameters: {c: [1, 2]}\n").replace(
+        '"x1**2 +', '"c [1]*x1**2 +'), "a space before '['"),
+    ("a negative index in a name", FAMILY.replace('"x{i + 3}": {start: 0}', '"x{i}": {start: 0}').replace(
+        "(x{i + 3} - i**2)**2", "(x{i} - i**2)**2"), "which is not a name"),
+    ("shared agents []", SHARED.replace("AGENTS", "[]"), "agents: needs at least 1 entry (it has 0)"),
+    ('shared agents "car1"', SHARED.replace("AGENTS", '"car1"'), "agents: Input should be a valid list"),
+    ("an item with nothing but for", HARKER.replace("  shared_constraints:", "    - for: {i: 1..3}\n"
+                                                    "  shared_constraints:"), "this item has nothing but for:"),
+    ("a name a template repeats", FAMILY.replace('name: "p{i + 3}"', "name: p"),
+     "agent 'p' is declared twice (and in 3 more copies of the family)"),
+    ("max() nested 1,200 deep", HARKER.replace('"x1**2 +', '"' + "max(" * 1200 + "x1" + ", 1)" * 1200 + " +"),
+     "nested deeper than 100 levels"),
+]
+
+
+@pytest.mark.parametrize(("name", "text", "phrase"), LANGUAGE_CASES, ids=[c[0] for c in LANGUAGE_CASES])
+def test_each_reported_language_case_is_one_line_with_exit_2(name: str, text: str, phrase: str, tmp_path) -> None:
+    from .conftest import run_cli
+
+    config = tmp_path / "case.yaml"
+    config.write_text(text)
+    proc = run_cli("validate", str(config))
+    assert proc.returncode == 2, (name, proc.stdout, proc.stderr)
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"error: {config}:") and phrase in lines[0], lines
+    assert "Traceback" not in proc.stderr and "function-" not in proc.stderr
+
+
+def test_the_negative_family_solves_the_game_it_says(tmp_path) -> None:
+    """A family i = -2..2 with cost (x - i**2)**2: the agents' solution is i**2 = 4, 1, 0, 1, 4 (the old splicing
+    made it -4, -1, 0, 1, 4); and sum(k**2 for k in -3..3) is 28 as validate --expand writes it."""
+    import json
+
+    from .conftest import run_cli
+
+    config = tmp_path / "family.yaml"
+    config.write_text(FAMILY)
+    proc = run_cli("solve", str(config), "--out", str(tmp_path / "run"), "-q")
+    assert proc.returncode == 0, proc.stderr
+    solution = json.loads((tmp_path / "run" / "summary.json").read_text())["solution"]
+    assert [round(v[f"x{i + 3}"], 9) for v, i in zip(solution.values(), range(-2, 3), strict=True)] == [4, 1, 0, 1, 4]
+    config.write_text(FAMILY.replace("i**2)**2", "i**2 - sum(k**2 for k in -3..3) + 28)**2"))
+    proc = run_cli("validate", "--expand", str(config))
+    assert proc.returncode == 0, proc.stderr
+    assert "(-3)**2 + (-2)**2 + (-1)**2 + 0**2 + 1**2 + 2**2 + 3**2" in proc.stdout
