@@ -578,7 +578,7 @@ def _finished(sweep_dir: Path, point: Point) -> tuple[dict[str, Any], dict[str, 
     except InputError:
         return None
     if (meta.get("config_hash") == point.config_hash and meta.get("status") != "error"
-            and summary.get("status") != "interrupted"):
+            and summary.get("status") not in ("interrupted", "error")):
         return meta, summary
     return None
 
