@@ -9,6 +9,8 @@ the commands, so that ``gnerun --help`` stays fast.
 from __future__ import annotations
 
 import contextlib
+import errno
+import os
 import sys
 import traceback
 from collections.abc import Iterator
@@ -19,7 +21,7 @@ import typer
 from typer.core import TyperCommand
 
 from . import __version__
-from .errors import InputError, Unavailable, one_line
+from .errors import MAX_MESSAGE, InputError, Unavailable, one_line, shorten
 from .threads import single_threaded_blas
 
 EXAMPLES = """Examples:
@@ -99,13 +101,17 @@ def _main(
 def _fail(exc: BaseException) -> NoReturn:
     if _options["debug"]:
         traceback.print_exception(exc)
+    if isinstance(exc, OSError) and exc.errno == errno.ENAMETOOLONG:  # a path given on the command line
+        exc = InputError(f"{shorten(str(exc.filename), 100)}: {exc.strerror} (a path component is at most 255 bytes, "
+                         "a path at most 4,096)")
     if isinstance(exc, InputError):  # one line already (InputError escapes what it quotes)
         typer.echo(f"error: {exc.cli}", err=True)
         raise typer.Exit(2)
     if isinstance(exc, Unavailable):
-        typer.echo(f"error: {one_line(str(exc))}", err=True)
+        typer.echo(f"error: {one_line(shorten(str(exc), MAX_MESSAGE))}", err=True)
         raise typer.Exit(1)
-    typer.echo(f"error: {type(exc).__name__}: {one_line(str(exc))} (run with --debug for the traceback)", err=True)
+    typer.echo(f"error: {type(exc).__name__}: {one_line(shorten(str(exc), MAX_MESSAGE))} (run with --debug for the "
+               "traceback)", err=True)
     raise typer.Exit(1)
 
 
@@ -212,9 +218,9 @@ def validate(config: ConfigArg, set_: SetOpt = None, quiet: QuietOpt = False, ex
             for p in e.problems:
                 typer.echo(f"error: {p}", err=True)
             raise typer.Exit(2) from None
-        large = cfg.size_warnings("simulate" if cfg.game.kind == "dynamic" else "solve")
+        large = cfg.size_warnings("validate")
         _warn(config, large, quiet)
-        if not large or not cfg.size.problems()[1]:  # a game of a size that builds in seconds is built
+        if not cfg.size.problems()[1]:  # a game of a size that builds in seconds is built
             from .game.compile import compile_game
             from .runs.solving import make_solver
 
@@ -333,6 +339,9 @@ def simulate(config: ConfigArg, out: OutOpt = None, set_: SetOpt = None, quiet: 
         v = r.constraint_violation
         t = max(range(r.done), key=lambda i: v[i] if v[i] == v[i] else -1.0)
         typer.echo(f"K={K}: largest violation {_fmt(r.max_constraint_violation)} at t = {t}: {r.worst_constraint[t]}")
+    for r in sim.values():
+        if r.message:  # a loop that ended early: why
+            typer.echo(one_line(r.message))
     typer.echo(f"run directory: {sim.run_dir}")
 
 
@@ -536,13 +545,17 @@ def replay(
         if spawn:
             rp.spawn(runs)
         if serve:
-            with tempfile.TemporaryDirectory(prefix="gnerun-replay-") as tmp:
+            with tempfile.TemporaryDirectory(prefix="gnerun-replay-", ignore_cleanup_errors=True) as tmp:
                 rrd = save if save is not None else Path(tmp) / "replay.rrd"
                 if save is None:
                     rp.save(runs, rrd)
+                import shutil
+
+                # a temporary recording goes once the viewer has read it: a killed replay leaves nothing behind
                 rp.serve(rrd, web_port, grpc_port,
                          ready=lambda: (typer.echo(f"web viewer: {rp.web_url(web_port, grpc_port)} (Ctrl-C stops it)"),
-                                        sys.stdout.flush()))
+                                        sys.stdout.flush()),
+                         loaded=None if save is not None else lambda: shutil.rmtree(tmp, ignore_errors=True))
 
 
 @app.command(cls=_Command, short_help="Write a finished, indexed copy of a killed run's log.")
@@ -627,11 +640,21 @@ def main() -> None:
     from .runs.interrupt import terminate_like_ctrl_c
 
     terminate_like_ctrl_c()
+    code: int | str | None = 0
     try:
         app(standalone_mode=True)
     except KeyboardInterrupt:
         typer.echo("interrupted", err=True)
-        sys.exit(130)
+        code = 130
+    except SystemExit as e:
+        code = e.code
+    from .game.building import abandoned
+
+    if abandoned():  # a stopped build still runs in its helper thread: end now, everything is written
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code if isinstance(code, int) else 1)
+    sys.exit(code)
 
 
 if __name__ == "__main__":

@@ -204,6 +204,10 @@ def test_an_edited_sweep_index_is_drawn_in_part_or_refused_in_one_line(tmp_path)
         (out / "index.csv").write_text("\n".join([header, f"2,points/c,[3],{k},completed,1,0.1", *good]) + "\n")
         result = CliRunner().invoke(app, figures)
         assert result.exit_code == 0 and result.exception is None, (k, result.output)
+    for bad in ("2,points/c,[3]", "2", "2,points/c,[3],3,completed,1,0.1,extra,cells"):  # rows cut short, too long
+        (out / "index.csv").write_text("\n".join([header, bad, *good]) + "\n")
+        result = CliRunner().invoke(app, figures)
+        assert result.exit_code == 0 and result.exception is None, (bad, result.output)
     solves = ['0,points/a,[1],,converged,2.5,0.1', '1,points/b,[2],,converged,1.5,0.1']  # a solve has no K
     for content in (b"\xff\xfe\x00", b"point,max_e\n0,1\n", b"garbage", "\n".join([header, *solves]).encode()):
         (out / "index.csv").write_bytes(content)
@@ -241,3 +245,20 @@ def test_numerical_overflow_is_a_line_in_the_log_not_a_warning_on_stderr(tmp_pat
     assert summary["status"] != "converged"
     warnings = [e["message"] for e in read_run(out).messages["/log"] if level_name(e) == "warning"]
     assert any(w.startswith("floating-point trouble: overflow encountered") for w in warnings), warnings
+
+
+@pytest.mark.parametrize("command", ["solve", "simulate", "sweep", "figures"])
+def test_an_out_path_too_long_is_one_short_line_with_exit_2(command: str, tmp_path) -> None:
+    """A 300-character path component (ENAMETOOLONG) and a 5,000-character path: exit code 2, the path shortened."""
+    for out in (tmp_path / ("a" * 300), Path(str(tmp_path / "/".join(["b" * 250] * 20))) / ("c" * 300)):
+        source = {"solve": CONFIGS / "harker.yaml", "simulate": STUDY2, "sweep": CONFIGS / "k_sweep.yaml",
+                  "figures": CONFIGS}[command]
+        args = [command, str(source), "--out", str(out)] + (["--workers", "1"] if command == "sweep" else [])
+        if command == "figures":
+            run = tmp_path / "run"
+            if not run.exists():
+                assert run_cli("solve", str(CONFIGS / "harker.yaml"), "--out", str(run), "-q").returncode == 0
+            args = ["figures", str(run), "--out", str(out / "figs")]
+        line = _one_line_exit_2(run_cli(*args))
+        assert "File name too long" in line and len(line) < 400, line
+        assert not os.path.exists(out)

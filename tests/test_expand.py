@@ -210,7 +210,7 @@ game:
 
 @pytest.mark.parametrize(("agents", "expected"), [
     ('    - for: {i: 1..1000000000}\n      name: "p{i}"\n      variables: {"x{i}": {}}\n      cost: "x{i}**2"\n',
-     rf":6:\d+: the game expands to more than {MAX_ITEMS}"),
+     rf":6:\d+: the game expands to more than {MAX_ITEMS:,}"),
     ('    - for: {i: 1..N}\n      name: "p{i}"\n      variables: {"x{i}": {}}\n      cost: "x{i}**2 + c[i+1]"\n',
      r":9:\d+ \(for i = 3\): index 4 of 'c' is outside 1..3"),
     ('    - for: {i: 1..N}\n      name: "p{i}"\n      variables: {"x{i}": {}}\n      cost: "x{i}**2 + x{i+1}"\n',
@@ -224,7 +224,7 @@ game:
     ('    - for: {N: 1..2}\n      name: "p{N}"\n      variables: {"x{N}": {}}\n      cost: "x{N}**2"\n',
      r":6:\d+: index 'N' is already in use"),
     ('    - name: p\n      variables: {x: {}}\n      cost: "sum(x for k in 1..2000000000)"\n',
-     rf":\d+:\d+: the game expands to more than {MAX_ITEMS}"),
+     rf":\d+:\d+: the game expands to more than {MAX_ITEMS:,}"),
     ('    - name: p\n      variables: {x: {}}\n      cost: "x**2 + d[1]"\n',
      r":\d+:\d+: 'd' is indexed but is not a vector or matrix parameter"),
     ('    - name: p\n      variables: {x: {}}\n      cost: "x{{1}}"\n', r":\d+:\d+: unbalanced or nested braces"),
@@ -260,7 +260,7 @@ def test_the_cli_refuses_a_huge_family_with_exit_code_2(tmp_path) -> None:
                          text=True, timeout=60)
     assert out.returncode == 2, out.stderr
     assert "Traceback" not in out.stderr
-    assert "huge.yaml:6:" in out.stderr and str(MAX_ITEMS) in out.stderr
+    assert "huge.yaml:6:" in out.stderr and f"{MAX_ITEMS:,}" in out.stderr
 
 
 def test_validate_expand_prints_the_game_written_out(tmp_path) -> None:
@@ -506,3 +506,64 @@ def test_the_intersection_config_is_the_written_intersection() -> None:
     config = compile_game(load_config(CONFIGS / "algames_intersection.yaml"))
     _same_functions(config, written, np.random.default_rng(7), points=2, tol=1e-10, x=written.x0)
     np.testing.assert_allclose(config.x0, trajectory.INTERSECTION.x0, atol=1e-15)
+
+
+# refusals in the config's words, one per template --------------------------------------------------------
+
+TWO_CARS = """\
+game:
+  kind: static
+  agents:
+    - {name: car1, variables: {x1: {}}, cost: "x1**2"}
+    - {name: car2, variables: {x2: {}}, cost: "x2**2"}
+  shared_constraints:
+    - {expr: "x1 + x2 <= 1", agents: AGENTS}
+"""
+
+
+@pytest.mark.parametrize(("agents", "expected"), [
+    ("[]", r"<string>:7:\d+: game\.shared_constraints\.0\.agents: needs at least 1 entry \(it has 0\)$"),
+    ('"car1"', r"<string>:7:\d+: game\.shared_constraints\.0\.agents: Input should be a valid list$"),
+    ("[car1, car3]", r"'car3' is not an agent"),
+])
+def test_a_shared_constraints_agents_are_reported_in_the_configs_words(agents: str, expected: str) -> None:
+    import re
+
+    with pytest.raises(ConfigError) as err:
+        load_config(text=TWO_CARS.replace("AGENTS", agents))
+    assert len(err.value.problems) == 1, err.value.problems
+    assert re.search(expected, err.value.problems[0]), err.value.problems[0]
+    assert "function-" not in err.value.problems[0] and "[" not in err.value.problems[0].split(": ")[1]
+
+
+@pytest.mark.parametrize(("item", "expected"), [
+    ('    - for: {i: 1..5}\n', r"<string>:6:7: this item has nothing but for:"),
+    ('    - for: {i: 1..5}\n      name: p\n      variables: {"x{i}": {}}\n      cost: "x{i}**2"\n',
+     r"<string>:7:13 \(for i = 1\): game\.agents\.2\.name: agent 'p' is declared twice "
+     r"\(and in 4 more copies of the family\)"),
+    ('    - for: {i: 1..5}\n      name: "q{i}"\n      variables: {"x{i}": {}}\n      cost: "y**2"\n',
+     r"<string>:9:\d+ \(for i = 1\): .*unknown name 'y'.* \(and in 4 more copies of the family\)"),
+])
+def test_a_mistake_in_a_template_is_one_message_not_one_per_copy(item: str, expected: str) -> None:
+    import re
+
+    text = ("game:\n  kind: static\n  agents:\n    - {name: p, variables: {x0: {}}, cost: \"x0**2\"}\n"
+            "    - {name: r, variables: {z: {}}, cost: \"z**2\"}\n" + item)
+    with pytest.raises(ConfigError) as err:
+        load_config(text=text)
+    assert len(err.value.problems) == 1, err.value.problems
+    assert re.search(expected, err.value.problems[0]), err.value.problems[0]
+
+
+@pytest.mark.parametrize(("n", "line"), [(-5, 10), (0, 15)])
+def test_a_negative_count_is_refused_and_an_empty_family_allowed(n: int, line: int) -> None:
+    """fk_a01's family p2..pN: N = -5 makes the definition's sum over 1..N a negative count, N = 0 the family's
+    2..N (exit code 2, at the first range that is); N = 1 leaves the family empty (a one-player game)."""
+    from .conftest import run_cli
+
+    proc = run_cli("validate", str(CONFIGS / "fk_a01.yaml"), "--set", f"game.parameters.N={n}")
+    assert proc.returncode == 2, proc.stderr
+    assert len(proc.stderr.splitlines()) == 1 and "Traceback" not in proc.stderr
+    assert f"fk_a01.yaml:{line}:" in proc.stderr and "negative count" in proc.stderr and f"N = {n}" in proc.stderr
+    one = load_config(CONFIGS / "fk_a01.yaml", {"game.parameters.N": 1})
+    assert [a.name for a in one.game.agents] == ["p1"]

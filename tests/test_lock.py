@@ -48,8 +48,15 @@ def test_a_second_process_is_refused_with_the_holders_pid_and_the_lock_dies_with
         proc.wait()
     with locked(tmp_path) as lock:  # the kernel released it; the stale file is reused
         assert (tmp_path / LOCK_FILE).read_text().strip() == str(os.getpid())
-        with locked(tmp_path) as again:  # re-entrant within a process
-            assert again is lock
+        with pytest.raises(DirectoryBusy, match="in use by another writer in this process"):
+            DirectoryLock.acquire(tmp_path)  # the lock is the open directory's, not the process's
+        with lock.lent():  # handed over explicitly, once, to the next writer in this thread
+            with locked(tmp_path) as borrowed:
+                assert borrowed.lock is lock
+                with pytest.raises(DirectoryBusy):
+                    DirectoryLock.acquire(tmp_path)
+            with locked(tmp_path):  # given back: lent again
+                pass
         assert (tmp_path / LOCK_FILE).exists()
     assert not (tmp_path / LOCK_FILE).exists()  # removed by its holder when done
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import select
@@ -174,6 +175,55 @@ def test_serve_binds_to_localhost_only(runs, tmp_path: Path) -> None:
     time.sleep(0.5)
     with pytest.raises(OSError), socket.create_connection(("127.0.0.1", web), timeout=1):
         pass  # the viewer went down with gnerun
+
+
+def _viewers_on(port: int) -> list[int]:
+    """The processes whose command line serves the web viewer on ``port``."""
+    found = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            with contextlib.suppress(OSError):
+                if f"--web-viewer-port\0{port}\0".encode() in (entry / "cmdline").read_bytes():
+                    found.append(int(entry.name))
+    return found
+
+
+def test_a_killed_serve_takes_its_viewer_and_its_temporary_recording_with_it(runs, tmp_path: Path) -> None:
+    """replay --serve killed by SIGKILL (no clean-up at all): the viewer it started (in a session of its own) gets
+    SIGTERM from the kernel, and the temporary recording was removed as soon as the viewer had read it."""
+    web, grpc = _free_port(), _free_port()
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    proc = subprocess.Popen([*gnerun_command(), "replay", str(runs["loop"]), "--serve", "--web-port", str(web),
+                             "--grpc-port", str(grpc)], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
+                            stdin=subprocess.DEVNULL, text=True, env=dict(os.environ, TMPDIR=str(tmp)))
+    try:
+        ready, _, _ = select.select([proc.stdout], [], [], 60)
+        assert ready and "web viewer:" in proc.stdout.readline(), "the web viewer did not start"
+        deadline = time.monotonic() + 30
+        while list(tmp.iterdir()) and time.monotonic() < deadline:  # removed once the viewer has read it
+            time.sleep(0.1)
+        assert not list(tmp.iterdir())
+        proc.kill()
+        proc.wait(30)
+        deadline = time.monotonic() + 30
+        while time.monotonic() < deadline:
+            try:
+                with socket.create_connection(("127.0.0.1", web), timeout=1):
+                    pass
+            except OSError:
+                break  # the viewer went down with gnerun, killed
+            time.sleep(0.2)
+        else:
+            pytest.fail("the viewer outlived the gnerun that started it")
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        for pid in _viewers_on(web):  # a viewer left over by a failure: this test's own, by its pid
+            with contextlib.suppress(OSError):
+                os.kill(pid, signal.SIGKILL)
+    assert not list(tmp.iterdir())
 
 
 def _blueprint_text(rrd: Path) -> str:

@@ -64,7 +64,8 @@ def test_validate_stays_fast_on_huge_configs(tmp_path) -> None:
     # horizon 10,000 for ssn: the sparse formulation, linear in T: a warning, and validate does not build it
     proc = _validate(study2, "--set", "game.horizon=10000")
     assert proc.returncode == 0, proc.stderr
-    [warning] = proc.stderr.strip().splitlines()
+    warning, certificate = proc.stderr.strip().splitlines()  # the game, and the certificate a solve would build
+    assert "a large certificate" in certificate and "the largest with 30,003 unknowns" in certificate, certificate
     assert warning.startswith(f"warning: {study2}: a large game: estimated 130,013 unknowns in the sparse "
                               "formulation (30,003 decisions, 40,004 multipliers") and f"{SPARSE_WARN:,}" in warning
     assert "not built, as it is large" in proc.stdout
@@ -102,7 +103,8 @@ def test_validate_does_not_build_a_game_of_many_expression_nodes() -> None:
     merge = str(CONFIGS / "algames_merge_n.yaml")
     proc = _validate(merge, "--set", "game.parameters.N=30")
     assert proc.returncode == 0, proc.stderr
-    [warning] = proc.stderr.strip().splitlines()
+    warning, certificate = proc.stderr.strip().splitlines()  # the game, and the certificate a solve would build
+    assert "a large certificate" in certificate and "the largest with 8,780 unknowns" in certificate, certificate
     assert warning.startswith(f"warning: {merge}: a large game: estimated 15,900 unknowns in the sparse formulation") \
         and "147,330 expression nodes" in warning and "(more than 100,000 expression nodes)" in warning, warning
     assert "not built, as it is large" in proc.stdout
@@ -136,3 +138,18 @@ def test_ten_million_steps_stream_instead_of_allocating(tmp_path) -> None:
     summary = json.loads((out / "summary.json").read_text())
     assert summary["status"] == "interrupted" and summary["steps"] == 10_000_000
     assert 0 < summary["by_K"]["1"]["completed_steps"] == len(summary["by_K"]["1"]["u"]) < 10_000_000
+
+
+def test_the_certificates_agent_problems_are_estimated_before_a_solve() -> None:
+    """paper_study1 at horizon 2,000: the certificate built each agent's own problem (4,002 to 6,003 unknowns,
+    condensed and dense) in 377 s and 6.3 GB with no word; now solve and validate warn with that estimate, and
+    simulate, which builds no certificate, does not."""
+    cfg = load_config(CONFIGS / "paper_study1.yaml", {"game.horizon": 2000})
+    assert cfg.size.responses == (4002, 4002, 6003)
+    [warning] = [w for w in cfg.size_warnings("solve") if "certificate" in w]
+    assert "the largest with 6,003 unknowns: about 374 s and 6.3 GB for the 3 agents" in warning
+    assert any("certificate" in w for w in cfg.size_warnings("validate"))
+    assert not any("certificate" in w for w in cfg.size_warnings("simulate"))
+    off = load_config(CONFIGS / "paper_study1.yaml", {"game.horizon": 2000, "run.certificate": False})
+    assert not any("certificate" in w for w in off.size_warnings("solve"))
+    assert not any("certificate" in w for w in load_config(CONFIGS / "paper_study1.yaml").size_warnings("solve"))

@@ -42,6 +42,7 @@ from ..language.config import (
     constraint_text,
 )
 from ..language.expr import casadi_functions, evaluate, parse_constraint, parse_expression
+from .building import stoppable
 from .tape import kink_function, piecewise_outputs
 
 _BATCHES = (8, 64, 512)  # block sizes of CompiledGame.evaluate_many's mapped functions
@@ -136,6 +137,7 @@ class CompiledGame:
     # The dense derivatives are built on first use: the sparse formulation of a long horizon never needs
     # the condensed Jacobian, whose construction grows with T^2.
     @functools.cached_property
+    @stoppable
     def _derivatives(self) -> dict:
         sym = self._symbolic
         a, lam, x, L, c = sym.a, sym.lam, sym.x, sym.L, sym.c
@@ -167,6 +169,7 @@ class CompiledGame:
         return self._derivatives["kkt"]
 
     @functools.cached_property
+    @stoppable
     def _residual(self) -> Evaluator:
         """L and c without derivatives: what a line search evaluates at its trial points."""
         sym = self._symbolic
@@ -174,6 +177,7 @@ class CompiledGame:
                                      ["a", "lam", "x"], ["L", "c"]))
 
     @functools.cached_property
+    @stoppable
     def _constraints(self) -> Evaluator:
         sym = self._symbolic
         dc = ca.jacobian(sym.c, sym.a) if self.m else ca.SX(0, self.n)
@@ -186,6 +190,7 @@ class CompiledGame:
         return c.reshape(-1), dc.reshape(self.m, self.n)
 
     @functools.cached_property
+    @stoppable
     def _constraint_only(self) -> Evaluator:
         sym = self._symbolic
         return Evaluator(ca.Function("c", [sym.a, sym.x], [ca.densify(sym.c)], ["a", "x"], ["c"]))
@@ -195,6 +200,7 @@ class CompiledGame:
         return self._constraint_only(a, self._x(x))[0].reshape(-1)
 
     @functools.cached_property
+    @stoppable
     def zero_gradient_rows(self) -> np.ndarray:
         """Rows of c that depend on no decision variable (structurally): at a stage where the decisions cannot
         reach a constraint (a position one step after an input that drives its second derivative), the row is a
@@ -256,6 +262,7 @@ class CompiledGame:
         return {"dL": dL, "dc": dc, "W": W, "x": None}
 
     @functools.cached_property
+    @stoppable
     def linear_dynamics(self) -> bool:
         """The one-step dynamics affine in (x, u) (a static game: True); tested on one stage, without the
         condensed derivatives."""
@@ -267,11 +274,13 @@ class CompiledGame:
         return not ca.depends_on(ca.vec(d), ca.vertcat(x, u))
 
     @functools.cached_property
+    @stoppable
     def linear_rows(self) -> np.ndarray:
         """Rows of c that are affine in a (polyhedral constraints): no second derivative, and no kink."""
         return _affine_rows(self._symbolic.c, self._symbolic.a, self.m) & ~self.piecewise_parts[1]
 
     @functools.cached_property
+    @stoppable
     def _pseudo(self) -> Evaluator:
         sym = self._symbolic
         H = ca.jacobian(sym.F, sym.a)
@@ -279,6 +288,7 @@ class CompiledGame:
                                      ["a", "x"], ["F", "H"]))
 
     @functools.cached_property
+    @stoppable
     def _cost_grads(self) -> Evaluator:
         sym = self._symbolic
         return Evaluator(ca.Function("cost_gradients", [sym.a, sym.x], [ca.densify(ca.jacobian(sym.J, sym.a))],
@@ -925,6 +935,7 @@ def _domain_function(a: ca.SX, x: ca.SX, domain: list) -> tuple[Evaluator, np.nd
     return Evaluator(ca.Function("domain", [a, x], [ca.densify(margins)])), strict, owner
 
 
+@stoppable
 def compile_game(cfg: Config, smoothing: float = 0.0) -> CompiledGame:
     """Parse, condense (dynamic games) and differentiate the game of ``cfg`` once. With ``smoothing`` mu > 0, abs, min
     and max are replaced by smooth functions within mu of them (gnerun.language.expr.casadi_functions)."""
@@ -969,6 +980,7 @@ class StageConstraints:
         return (float(v[j]), self.labels[j]) if v[j] > 0 else (0.0, None)
 
 
+@stoppable
 def compile_stage_constraints(cfg: Config) -> StageConstraints:
     """Every agent's and every shared constraint row at tau = 0, in terms of (x_next, u): the stage's rows of the
     game, written with the state as a variable instead of f(x, u), so that they can be checked on the state the
@@ -993,6 +1005,7 @@ def compile_stage_constraints(cfg: Config) -> StageConstraints:
                             [r.info.label for r in rows])
 
 
+@stoppable
 def compile_agent_problem(cfg: Config, agent: int, tau: float) -> CompiledGame:
     """Agent ``agent``'s proximal response problem [eq:proximal_response, eq:Semi_proximal]:
 

@@ -34,6 +34,7 @@ import scipy.sparse as sp
 from scipy.sparse import linalg as spla
 
 from ..language.config import Config, DynamicGame
+from .building import stoppable
 from .compile import CompiledGame, Evaluator, _expressions, _layout, shared_rows_carried
 
 
@@ -111,6 +112,7 @@ class SparseKKT:
         return z_new
 
 
+@stoppable
 def compile_sparse(cfg: Config, game: CompiledGame) -> SparseKKT:
     """The full-space system of the dynamic game of ``cfg`` (``game`` is its condensed compilation, whose
     constraint order and multiplier blocks it shares)."""

@@ -37,6 +37,7 @@ from .expr import (
     FUNCTIONS,
     ExpressionError,
     check_names,
+    parse_cache,
     parse_constraint,
     parse_expression,
 )
@@ -134,8 +135,15 @@ class SharedConstraint(Strict):
     agents: list[str] | None = Field(default=None, min_length=1)
 
 
-StageConstraint = Expr | StagedConstraint
-SharedSpec = Expr | SharedConstraint
+def _constraint_tag(v: Any) -> str:
+    # a constraint is its text, or a mapping with options: pydantic reports the problems of the one it is
+    return "options" if isinstance(v, dict | BaseModel) else "text"
+
+
+StageConstraint = Annotated[Annotated[Expr, Tag("text")] | Annotated[StagedConstraint, Tag("options")],
+                            Discriminator(_constraint_tag)]
+SharedSpec = Annotated[Annotated[Expr, Tag("text")] | Annotated[SharedConstraint, Tag("options")],
+                       Discriminator(_constraint_tag)]
 
 
 def constraint_text(c: StageConstraint | SharedSpec) -> str:
@@ -248,12 +256,32 @@ class SolverConfig(Strict):
         return "none" if self.kind == "jn" else "hybrid"
 
 
+def _scale(v: Any) -> float | list[float]:
+    """A plant disturbance's scale: one number, or a list of numbers (one per state)."""
+    if isinstance(v, list):
+        return [_number(x, f"entry {i + 1} is not a number") for i, x in enumerate(v)]
+    return _number(v, "must be a number or a list of numbers (one per state)")
+
+
+def _number(x: Any, problem: str) -> float:
+    if isinstance(x, str):  # YAML reads 1e-3 as a string: a number written so is a number, as in every float field
+        try:
+            return float(x)
+        except ValueError:
+            pass
+    if isinstance(x, bool) or not isinstance(x, int | float | str):
+        raise PydanticCustomError("float_type", problem)
+    if isinstance(x, str):
+        raise PydanticCustomError("float_type", problem)
+    return float(x)
+
+
 class PlantDisturbance(Strict):
     """w(t) in x(t+1) = f(x(t), u(t)) + w(t): gaussian (standard deviation ``scale``), uniform on
     [-scale, scale], or the constant ``scale``; ``scale`` is one number or one per state."""
 
     kind: Literal["none", "gaussian", "uniform", "constant"] = "none"
-    scale: float | list[float] = 0.0
+    scale: Annotated[float | list[float], PlainValidator(_scale)] = 0.0
     seed: Seed = 0
 
 
@@ -300,6 +328,8 @@ class RunConfig(Strict):
                                 "(log_time = t x sampling_time); default: dynamics.dt of an ode, else 1")
 
 
+MIN_SAMPLING_TIME = 1e-9  # the run log's resolution: log_time is in nanoseconds
+MAX_LOG_SECONDS = (2**63 - 1) / 1e9  # the last time a run log can stamp (signed 64-bit nanoseconds, as readers take it)
 MAX_NAME_BYTES = 100  # runs/<name>-<UTC timestamp>/ stays well inside a file name's 255 bytes
 
 
@@ -364,10 +394,13 @@ class Config(Strict):
         return self._size
 
     def size_warnings(self, command: str) -> list[str]:
-        """Warnings about the size of what ``command`` (solve, simulate, validate) would build and run."""
+        """Warnings about the size of what ``command`` (solve, simulate, validate: both) would build and run."""
         warnings = list(self.size.problems()[1])
-        loop = self.size.loop_warning() if command == "simulate" and self.game.kind == "dynamic" else None
-        return warnings + ([loop] if loop else [])
+        if command in ("simulate", "validate") and self.game.kind == "dynamic":
+            warnings.append(self.size.loop_warning())
+        if command in ("solve", "validate") and self.run.certificate:
+            warnings.append(self.size.certificate_warning())
+        return [w for w in warnings if w]
 
     def resolved_yaml(self) -> str:
         """The config with every default filled in, as YAML (what runs write to config.yaml)."""
@@ -503,13 +536,14 @@ def load_config(
     try:
         cfg = Config.model_validate(data)
     except ValidationError as e:
-        raise ConfigError(_validation_problems(e, data, smap)) from None
-    problems = check_semantics(cfg, smap)
-    if problems:
-        raise ConfigError(problems)
+        raise ConfigError(one_per_template(_validation_problems(e, data, smap))) from None
     from .size import estimate  # the size of the game, before anything is built from it
 
-    size = estimate(cfg)
+    with parse_cache():  # every expression parsed once, for the checks and the estimate
+        problems = check_semantics(cfg, smap)
+        if problems:
+            raise ConfigError(one_per_template(problems))
+        size = estimate(cfg)
     too_large, _ = size.problems()
     if too_large:
         where = ("game", "horizon") if cfg.game.kind == "dynamic" else ("game", "agents")
@@ -547,6 +581,31 @@ RENAMED = {
 }
 
 
+_COPY = re.compile(r"^(?P<where>.*?:\d+:\d+) \(for [^)]*\): (?P<path>[^ ]*): (?P<message>.*)$")
+
+
+def one_per_template(problems: list[str]) -> list[str]:
+    """One message per template: the same problem in several copies of a family (at the template's file:line:column,
+    the same field and message) is reported once, for its first copy, with the number of the others."""
+    first: dict[tuple[str, str, str], int] = {}
+    more: dict[int, int] = {}
+    kept: list[str] = []
+    for p in problems:
+        m = _COPY.match(p)
+        if m is None:
+            kept.append(p)
+            continue
+        key = (m["where"], re.sub(r"\.\d+(?=\.|$)", ".*", m["path"]), m["message"])
+        if key in first:
+            more[first[key]] += 1
+            continue
+        first[key] = len(kept)
+        more[len(kept)] = 0
+        kept.append(p)
+    return [p + (f" (and in {more[i]} more cop{'ies' if more[i] > 1 else 'y'} of the family)" if more.get(i) else "")
+            for i, p in enumerate(kept)]
+
+
 def _validation_problems(err: ValidationError, data: Any, smap: SourceMap) -> list[str]:
     problems = []
     for e in err.errors(include_url=False):
@@ -568,6 +627,9 @@ def _validation_problems(err: ValidationError, data: Any, smap: SourceMap) -> li
                 msg = msg.replace("Input tag", "kind")
             elif kind == "value_error":
                 msg = msg.removeprefix("Value error, ")
+            elif kind == "too_short":
+                n = (e.get("ctx") or {}).get("min_length", 1)
+                msg = f"needs at least {n} entr{'y' if n == 1 else 'ies'} (it has {len(e['input'])})"
         problems.append(f"{where}: {dotted}: {msg}")
     return problems
 
@@ -642,15 +704,20 @@ def _field_model(model: Any, part: Any, node: Any) -> Any:
 
 def sparse_obstacles(cfg: Config) -> list[str]:
     """Why the sparse formulation cannot solve this config (empty: it can)."""
+    return obstacles(isinstance(cfg.game, StaticGame), cfg.solver, cfg.disturbance)
+
+
+def obstacles(static: bool, solver: SolverConfig, disturbance: DisturbanceConfig) -> list[str]:
+    """:func:`sparse_obstacles` of a game, static or not, solved with these options."""
     why = []
-    if isinstance(cfg.game, StaticGame):
+    if static:
         why.append("a static game has no states to keep")
-    if cfg.solver.kind != "ssn":
-        why.append(f"solver.kind is {cfg.solver.kind!r} (the sparse formulation is for 'ssn')")
-    if cfg.solver.complementarity != "min":
+    if solver.kind != "ssn":
+        why.append(f"solver.kind is {solver.kind!r} (the sparse formulation is for 'ssn')")
+    if solver.complementarity != "min":
         why.append("it takes min-map steps (solver.complementarity: min)")
-    if cfg.disturbance.kind in ("jacobian_noise", "residual") and cfg.disturbance.scale > 0:
-        why.append(f"disturbance {cfg.disturbance.kind!r} perturbs the whole condensed JPhi or its right-hand side")
+    if disturbance.kind in ("jacobian_noise", "residual") and disturbance.scale > 0:
+        why.append(f"disturbance {disturbance.kind!r} perturbs the whole condensed JPhi or its right-hand side")
     return why
 
 
@@ -811,6 +878,17 @@ def check_semantics(cfg: Config, smap: SourceMap) -> list[str]:
         report(("disturbance", "kind"), f"{cfg.disturbance.kind!r} perturbs semismooth Newton; with solver.kind "
                "'jn' use 'pseudogradient' (noise on F and H)")
     dynamics = getattr(g, "dynamics", None)
+    if not static:  # a closed loop's log time is t x sampling_time in nanoseconds, an unsigned 64-bit integer
+        given = ("run", "sampling_time") if smap.has(("run", "sampling_time")) or not isinstance(
+            dynamics, ContinuousDynamics) else ("game", "dynamics", "dt")
+        ts, end = cfg.run.sampling_time, cfg.run.steps * cfg.run.sampling_time
+        if ts < MIN_SAMPLING_TIME:
+            report(given, f"is {ts:g} s, below the log's resolution of one nanosecond (every sampling time would be "
+                          "logged at the same time)")
+        elif end > MAX_LOG_SECONDS:
+            report(given, f"is {ts:g} s: run.steps = {cfg.run.steps:,} sampling times of it span {end:.3g} s, "
+                          f"beyond the {MAX_LOG_SECONDS:.3g} s (about {MAX_LOG_SECONDS / 3.156e7:,.0f} years) a run "
+                          "log's time in nanoseconds can count")
     if isinstance(dynamics, ContinuousDynamics) and cfg.run.sampling_time != dynamics.dt:
         report(("run", "sampling_time"), f"is {cfg.run.sampling_time:g} s, but the ode is integrated over one "
                f"sampling time of dynamics.dt = {dynamics.dt:g} s (leave it out, or make the two equal)")

@@ -9,30 +9,51 @@ recorded in a run directory's ``config.yaml`` is the expanded one. What is expan
   dynamics): one copy of the item per index value, indices nested in the order written, a range may use earlier
   indices; in an expression, an index in scope is also a number;
 - ``sum(E for k in a..b)`` (and ``prod``, ``max``, ``min``) in an expression: the terms written out;
-- ``name[i]`` and ``name[i][j]`` of vector and matrix parameters (1-based): the number spliced in;
-- ``definitions``: named subexpressions, spliced in (parenthesised) wherever their name is used.
+- ``name[i]`` and ``name[i][j]`` of vector and matrix parameters (1-based): the entry;
+- ``definitions``: named subexpressions, written in wherever their name is used.
+
+Expressions are expanded as syntax trees (:mod:`gnerun.language.templates`): an index value, an entry or a definition
+becomes a node of the tree, and the tree is written back with the parentheses its structure needs, so that every
+number and definition keeps its meaning wherever it lands (``(-3)**2``, ``(x1**2)**0.5``).
 
 The expansion is bounded: every family's size and every aggregate's length is counted before anything is built,
-and a config that would expand beyond :data:`MAX_ITEMS` items is refused. Errors carry the template's
-``file:line:column`` and the index values that produced the failing copy.
+and a config that would expand beyond :data:`MAX_ITEMS` items is refused; a wall-clock budget of
+:data:`EXPANSION_SECONDS` is the last guard. Errors carry the template's ``file:line:column`` and the index values
+that produced the failing copy.
 """
 
 from __future__ import annotations
 
 import math
 import re
+import time
 from dataclasses import dataclass, field, replace
 from typing import Any
 
 from ..errors import ConfigError
-from .expr import ExpressionError, evaluate, numpy_functions, parse_expression
+from .expr import (
+    CONSTANTS,
+    FUNCTIONS,
+    Binary,
+    Call,
+    ExpressionError,
+    Name,
+    Node,
+    Num,
+    Unary,
+    evaluate,
+    names_in,
+    numpy_functions,
+    parse_expression,
+    unparse,
+)
+from .extent import MAX_ITEMS
+from .templates import AGGREGATES, Aggregate, Entry, Hole, Template, Word, parse_template
 from .yaml_source import PathKey, SourceMap
 
-MAX_ITEMS = 100_000  # family copies and aggregate terms one config may expand to
-AGGREGATES = ("sum", "prod", "max", "min")
+EXPANSION_SECONDS = 60.0  # the expansion's wall-clock budget behind the estimate (a game at the limits: ~10 s)
 _NAME = re.compile(r"(?<![\w.])([A-Za-z_]\w*)")
 _AGGREGATE = re.compile(r"(?<![\w.])(sum|prod|max|min)\s*\(")
-_INDEXED = re.compile(r"(?<![\w.])([A-Za-z_]\w*)\s*\[")
 _TEMPLATE = re.compile(r"\{([^{}]*)\}")
 # where a string is an expression (indices are numbers there, sums and parameter indexing are written out);
 # "*" stands for any list index or mapping key
@@ -45,11 +66,14 @@ _EXPRESSIONS = (
 
 
 class _Problem(Exception):
-    def __init__(self, path: PathKey, message: str, bindings: dict[str, int] | None = None):
+    def __init__(self, path: PathKey, message: str, bindings: dict[str, int] | None = None, *, key: bool = False,
+                 column: int | None = None):
         super().__init__(message)
         self.path = path
         self.message = message
         self.bindings = dict(bindings or {})
+        self.key = key  # located at the mapping key of ``path``
+        self.column = column  # located at this character of the string at ``path``
 
 
 @dataclass(frozen=True)
@@ -97,20 +121,31 @@ class Expander:
         self.items = 0
         self.vectors: dict[str, list] = {}
         self.scalars: dict[str, float] = {}  # numeric parameters (for numbers written as expressions)
-        self.definitions: dict[str, str] = {}
+        self.definitions: dict[str, Node] = {}  # expanded trees (shared wherever they are used)
+        self.definition_names: dict[int, set[str]] = {}  # the names in each definition's tree, by the tree's id
+        self.templates: dict[str, Template] = {}  # parsed once per text
+        self.integers: dict[str, Any] = {}  # integer expressions, parsed once per text
+        self.changed = False  # whether the expression being expanded had anything written in
+        self.ticks = 0
+        self.deadline = math.inf
 
     # entry point ---------------------------------------------------------------------------------------
     def expand(self, data: dict) -> tuple[dict, SourceMap]:
+        self.deadline = time.perf_counter() + EXPANSION_SECONDS
         try:
             out = self._document(data)
         except _Problem as p:
-            where = self.src.locate(p.path)
+            if p.column is not None:
+                where = self.src.locate_in_text(p.path, p.column)
+            else:
+                where = self.src.locate(p.path, key=p.key)
             if p.bindings:
                 where += " (for " + ", ".join(f"{k} = {v}" for k, v in p.bindings.items()) + ")"
             raise ConfigError([f"{where}: {p.message}"]) from None
         return out, self.out
 
     def _document(self, data: dict) -> dict:
+        self.document = data
         out = {}
         for key, value in data.items():
             self._copy_position((key,), (key,))
@@ -136,6 +171,7 @@ class Expander:
         horizon = game.get("horizon")
         if isinstance(horizon, int) and not isinstance(horizon, bool):
             base["T"] = horizon
+        self._measure(game, base)
         scope = _Scope(base)
         definitions = game.get("definitions", {})
         if definitions is not None and not isinstance(definitions, dict):
@@ -144,14 +180,20 @@ class Expander:
             path = ("game", "definitions", name)
             if not isinstance(name, str) or _NAME.fullmatch(name) is None:
                 raise _Problem(path, f"a definition's name must be a name, not {name!r}")
-            if name in kept or name in self.vectors or name in AGGREGATES:
-                raise _Problem(path, f"definition {name!r} has the name of a parameter or a function")
+            shadowed = _reserved(name, kept, self.vectors)
+            if shadowed:
+                raise _Problem(path, f"definition {name!r} has the name of {shadowed}; a definition may not shadow a "
+                                     "variable, state, input, parameter or constant", key=True)
             if not isinstance(text, str | int | float) or isinstance(text, bool):
                 raise _Problem(path, f"definition {name!r} must be an expression string")
-            expanded = self._expression(str(text), path, scope)
-            if name in _names(expanded):
+            lhs, relation, _, _ = self._expanded(str(text), path, scope)
+            if relation is not None:
+                raise _Problem(path, f"definition {name!r} is an expression, not a constraint ({relation!r})")
+            names = _dag_names(lhs, self.definition_names)
+            if name in names:
                 raise _Problem(path, f"definition {name!r} refers to itself")
-            self.definitions[name] = expanded
+            self.definitions[name] = lhs
+            self.definition_names[id(lhs)] = names
         out: dict[str, Any] = {}
         for key, value in game.items():
             if key == "definitions":
@@ -165,7 +207,37 @@ class Expander:
                 out[key] = self._merged(value, src, src, scope, ("dynamics",), "dynamics")
             else:
                 out[key] = self._walk(value, src, src, scope, (key,))
+        declared = _declared(out)
+        for name in self.definitions:
+            if name in declared:
+                raise _Problem(("game", "definitions", name), f"definition {name!r} has the name of {declared[name]}; "
+                               "a definition may not shadow a variable, state, input, parameter or constant", key=True)
         return out
+
+    def _measure(self, game: dict, base: dict[str, int]) -> None:
+        """Count what the game expands to before expanding it (:mod:`gnerun.language.extent`), and estimate the size
+        of the game from the counts (:mod:`gnerun.language.size`): past a limit, the config is refused here, with
+        the estimate, before anything is written out."""
+        from .extent import game_section
+        from .size import from_extent
+
+        self.extent = extent = game_section(self, game, base)
+        size = from_extent(extent, game, self.document)
+        too_large = size.problems()[0] if size is not None else []
+        if too_large:
+            where = ("game", "horizon") if game.get("kind") == "dynamic" and "horizon" in game else ("game", "agents")
+            raise _Problem(where, too_large[0] + " (estimated before expanding the config)")
+
+    def template(self, text: str, path: PathKey) -> Template:
+        """``text`` parsed as a template (a located problem if it does not parse)."""
+        return self._parsed(text, path, _Scope({}))
+
+    def integer_tree(self, text: str) -> Node:
+        """An integer expression's tree, parsed once per text (ExpressionError if it does not parse)."""
+        parsed = self.integers.get(text)
+        if parsed is None:
+            parsed = self.integers[text] = parse_expression(text).tree
+        return parsed
 
     # families ------------------------------------------------------------------------------------------
     def _family(self, spec: Any, path: PathKey, scope: _Scope) -> list[_Scope]:
@@ -180,7 +252,10 @@ class Expander:
             if name in scope.base or name in scope.indices:
                 raise _Problem(path, f"index {name!r} is already in use here (a parameter, T or an outer index)",
                                scope.indices)
+            if name in self.definitions:
+                raise _Problem(path, f"index {name!r} is the name of a definition", scope.indices)
         scopes: list[_Scope] = []
+        described = "the family for: {" + ", ".join(f"{k}: {v}" for k, v in spec.items()) + "}"
 
         def nest(level: int, current: _Scope) -> None:
             if level == len(names):
@@ -192,6 +267,7 @@ class Expander:
             if level == len(names) - 1 and self.items + max(0, hi - lo + 1) > MAX_ITEMS:
                 self._count(max(0, hi - lo + 1), path, current)  # refused before the copies are built
             for v in range(lo, hi + 1):
+                self._tick(path, current, described)
                 nest(level + 1, current.bind(name, v))
 
         nest(0, scope)
@@ -209,21 +285,41 @@ class Expander:
         if not isinstance(text, str) or text.count("..") != 1:
             raise _Problem(path, f"a range is written a..b (both ends included), not {text!r}", scope.indices)
         a, b = text.split("..")
-        return self._integer(a, path, scope), self._integer(b, path, scope)
+        return self._bounds(self._parsed_integer(a, path, scope), self._parsed_integer(b, path, scope), text.strip(),
+                            path, scope)
 
-    def _integer(self, text: str, path: PathKey, scope: _Scope) -> int:
-        env = scope.env()
+    def _bounds(self, lo: Node, hi: Node, text: str, path: PathKey, scope: _Scope) -> tuple[int, int]:
+        """The ends of a range. One that uses no index (a count given by parameters) may be empty (b = a - 1) but not
+        shorter: a negative count is a mistake, not an empty family."""
+        a = self._value(lo, text.split("..")[0], path, scope)
+        b = self._value(hi, text.split("..")[-1], path, scope)
+        used = names_in(lo) | names_in(hi)
+        if b < a - 1 and not used & set(scope.indices):
+            given = ", ".join(f"{k} = {scope.base[k]}" for k in sorted(used) if k in scope.base)
+            raise _Problem(path, f"the range {text!r} is {a}..{b}, a negative count ({b - a + 1} values"
+                                 + (f", with {given}" if given else "") + f"): a range may be empty ({a}..{a - 1}) "
+                                 "but not shorter", scope.indices)
+        return a, b
+
+    def _parsed_integer(self, text: str, path: PathKey, scope: _Scope) -> Node:
         try:
-            parsed = parse_expression(text)
+            return self.integer_tree(text)
         except ExpressionError as e:
             raise _Problem(path, f"in the integer expression {text.strip()!r}: {e.message}", scope.indices) from None
-        for name in _names(text):
+
+    def _integer(self, text: str, path: PathKey, scope: _Scope) -> int:
+        return self._value(self._parsed_integer(text, path, scope), text, path, scope)
+
+    def _value(self, tree: Node, text: str, path: PathKey, scope: _Scope) -> int:
+        """An integer expression of the indices in scope, the integer parameters and T."""
+        env = scope.env()
+        for name in names_in(tree):
             if name not in env:
                 known = ", ".join(sorted(env)) or "none"
                 raise _Problem(path, f"{name!r} in {text.strip()!r} is not an index, an integer parameter or T "
                                      f"(known here: {known})", scope.indices)
         with _quiet():
-            value = evaluate(parsed, env, numpy_functions())
+            value = evaluate(tree, env, numpy_functions())
         if not (isinstance(value, int | float) and math.isfinite(value) and float(value).is_integer()):
             raise _Problem(path, f"{text.strip()!r} is {value!r}, not an integer", scope.indices)
         if abs(value) > 10**12:
@@ -263,6 +359,10 @@ class Expander:
             for idx, item in enumerate(value):
                 if isinstance(item, dict) and "for" in item:
                     body = {k: v for k, v in item.items() if k != "for"}
+                    if not body:
+                        raise _Problem(src + (idx,), "this item has nothing but for: (a family item is an item with "
+                                                     "for: {i: a..b} added, e.g. an agent's name, variables and cost)",
+                                       scope.indices)
                     for inner in self._family(item["for"], src + (idx, "for"), scope):
                         self._emit(body, src + (idx,), dst, items, inner, logical)
                 else:
@@ -281,17 +381,15 @@ class Expander:
         ``pi/12``), evaluated when the config is loaded; a number as it is."""
         if not isinstance(value, str):
             return value
-        text = self._expression(value, path, scope)
-        env = {k: v for k, v in self.scalars.items()}
-        try:
-            parsed = parse_expression(text)
-        except ExpressionError as e:
-            raise _Problem(path, f"in the number {value!r}: {e.message}", scope.indices) from None
-        unknown = sorted(_names(text) - set(env) - {"pi"} - set(numpy_functions()))
+        tree, relation, _, _ = self._expanded(value, path, scope)
+        if relation is not None:
+            raise _Problem(path, f"{value!r} is a comparison, not a number", scope.indices)
+        env = dict(self.scalars)
+        unknown = sorted(_dag_names(tree, self.definition_names) - set(env) - set(CONSTANTS))
         if unknown:
             raise _Problem(path, f"{unknown[0]!r} in {value!r} is not an index or a numeric parameter", scope.indices)
         with _quiet():
-            number = float(evaluate(parsed, env, numpy_functions()))
+            number = float(evaluate(tree, env, numpy_functions()))
         if not math.isfinite(number):
             raise _Problem(path, f"{value!r} is {number}, not a finite number", scope.indices)
         return number
@@ -358,6 +456,7 @@ class Expander:
 
     # strings -------------------------------------------------------------------------------------------
     def _template(self, text: str, path: PathKey, scope: _Scope) -> str:
+        """``{...}`` in a string that is not an expression (a name, a key): the integers written in."""
         if "{" not in text and "}" not in text:
             return text
         out = _TEMPLATE.sub(lambda m: str(self._integer(m.group(1), path, scope)), text)
@@ -366,96 +465,138 @@ class Expander:
                            scope.indices)
         return out
 
+    def _parsed(self, text: str, path: PathKey, scope: _Scope) -> Template:
+        template = self.templates.get(text)
+        if template is None:
+            try:
+                template = parse_template(text)
+            except ExpressionError as e:
+                raise _Problem(path, e.describe(), scope.indices, column=e.column) from None
+            self.templates[text] = template
+        return template
+
     def _expression(self, text: str, path: PathKey, scope: _Scope) -> str:
-        text = self._aggregates(text, path, scope)
-        text = self._template(text, path, scope)
-        text = self._indexing(text, path, scope)
-        indices, definitions = scope.indices, self.definitions
+        """An expression (or a constraint) with its indices, entries, definitions and aggregates written in: the tree
+        expanded and written back with the parentheses it needs (:func:`~gnerun.language.expr.unparse`); a text
+        without any of them is kept as it was written."""
+        return self._written(*self._expanded(text, path, scope), text)
 
-        def name(m: re.Match) -> str:
-            word = m.group(1)
-            if word in indices:
-                return str(indices[word])
-            if word in definitions:
-                return _operand(definitions[word], "+-*/")
-            return word
+    def _expanded(self, text: str, path: PathKey, scope: _Scope) -> tuple[Node, str | None, Node | None, bool]:
+        template = self._parsed(text, path, scope)
+        self.changed = False
+        lhs = self._substitute(template.lhs, path, scope)
+        rhs = None if template.relation is None else self._substitute(template.rhs, path, scope)
+        return lhs, template.relation, rhs, self.changed
 
-        return _NAME.sub(name, text) if (indices or definitions) else text
-
-    def _aggregates(self, text: str, path: PathKey, scope: _Scope) -> str:
-        """``sum(E for k in a..b)`` (prod, max, min) written out, innermost templates per term."""
-        out, pos = [], 0
-        while True:
-            m = _AGGREGATE.search(text, pos)
-            if m is None:
-                out.append(text[pos:])
-                return "".join(out)
-            close = _matching(text, m.end() - 1)
-            if close is None:
-                out.append(text[pos:])  # the parser reports the unbalanced parenthesis
-                return "".join(out)
-            inner = text[m.end():close]
-            head = _top_level_for(inner)
-            if head is None:  # an ordinary call: only its arguments may hold aggregates
-                out.append(text[pos:m.end()] + self._aggregates(inner, path, scope) + ")")
-                pos = close + 1
-                continue
-            body, index, rng = head
-            if index in scope.base or index in scope.indices:
-                raise _Problem(path, f"index {index!r} of {m.group(1)}() is already in use here", scope.indices)
-            lo, hi = self._range(rng.strip(), path, scope)
-            self._count(max(0, hi - lo + 1), path, scope)
-            terms = [self._expression(body.strip(), path, scope.bind(index, v)) for v in range(lo, hi + 1)]
-            fn = m.group(1)
-            if not terms:
-                if fn in ("max", "min"):
-                    raise _Problem(path, f"{fn}() over the empty range {rng.strip()!r}", scope.indices)
-                written = "0" if fn == "sum" else "1"
-            elif fn == "sum":
-                written = "(" + " + ".join(_operand(t, "+-") for t in terms) + ")"
-            elif fn == "prod":
-                written = "(" + "*".join(_operand(t, "+-*/") for t in terms) + ")"
-            else:
-                written = f"{fn}({', '.join(terms)})" if len(terms) > 1 else _operand(terms[0], "+-*/")
-            out.append(text[pos:m.start()] + written)
-            pos = close + 1
-
-    def _indexing(self, text: str, path: PathKey, scope: _Scope) -> str:
-        """``name[i]``, ``name[i][j]`` of vector and matrix parameters: the entry (1-based)."""
-        if "[" not in text:
+    @staticmethod
+    def _written(lhs: Node, relation: str | None, rhs: Node | None, changed: bool, text: str) -> str:
+        if not changed:
             return text
-        out, pos = [], 0
-        while True:
-            m = _INDEXED.search(text, pos)
-            if m is None:
-                rest = text[pos:]
-                if "[" in rest or "]" in rest:
-                    raise _Problem(path, f"'[' or ']' in {text!r} outside name[index] of a vector parameter",
-                                   scope.indices)
-                out.append(rest)
-                return "".join(out)
-            name = m.group(1)
-            if name not in self.vectors:
-                known = ", ".join(sorted(self.vectors)) or "none"
-                raise _Problem(path, f"{name!r} is indexed but is not a vector or matrix parameter "
-                                     f"(those here: {known})", scope.indices)
-            value: Any = self.vectors[name]
-            end = m.end() - 1
-            while end < len(text) and text[end] == "[":
-                close = text.find("]", end)
-                if close < 0:
-                    raise _Problem(path, f"unclosed '[' after {name!r}", scope.indices)
-                k = self._integer(text[end + 1:close], path, scope)
-                if not isinstance(value, list):
-                    raise _Problem(path, f"{name!r} has fewer dimensions than indices", scope.indices)
-                if not 1 <= k <= len(value):
-                    raise _Problem(path, f"index {k} of {name!r} is outside 1..{len(value)}", scope.indices)
-                value = value[k - 1]
-                end = close + 1
-            if isinstance(value, list):
-                raise _Problem(path, f"{name!r} needs more indices (it is a matrix)", scope.indices)
-            out.append(text[pos:m.start()] + (f"({value!r})" if value < 0 else repr(value)))
-            pos = end
+        return unparse(lhs) if relation is None else f"{unparse(lhs)} {relation} {unparse(rhs)}"
+
+    def _substitute(self, node: Any, path: PathKey, scope: _Scope) -> Node:
+        """The plain tree of a template tree (an explicit stack: no recursion, whatever the length of a sum)."""
+        values: list[Node] = []
+        stack: list[tuple[Any, _Scope, int]] = [(node, scope, -1)]  # -1: not visited; otherwise children to combine
+        while stack:
+            n, sc, state = stack.pop()
+            if isinstance(n, Num):
+                values.append(n)
+            elif isinstance(n, Name):
+                values.append(self._name(n.id, n.column, sc))
+            elif isinstance(n, Word):
+                self.changed = True
+                values.append(self._name(self._word(n, path, sc), n.column, sc))
+            elif isinstance(n, Hole):
+                self.changed = True
+                values.append(Num(self._value(n.expr.tree, n.expr.text, path, sc), n.column))
+            elif isinstance(n, Entry):
+                self.changed = True
+                values.append(Num(self._entry(n, path, sc), n.column))
+            elif state < 0:
+                self._tick(path, sc)
+                if isinstance(n, Aggregate):
+                    self.changed = True
+                    if n.index in sc.base or n.index in sc.indices:
+                        raise _Problem(path, f"index {n.index!r} of {n.function}() is already in use here",
+                                       sc.indices, column=n.column)
+                    if n.index in self.definitions:
+                        raise _Problem(path, f"index {n.index!r} of {n.function}() is the name of a definition",
+                                       sc.indices, column=n.column)
+                    lo, hi = self._bounds(n.lo, n.hi, n.range_text, path, sc)
+                    count = max(0, hi - lo + 1)
+                    self._count(count, path, sc)
+                    if not count and n.function in ("max", "min"):
+                        raise _Problem(path, f"{n.function}() over the empty range {n.range_text!r}", sc.indices,
+                                       column=n.column)
+                    stack.append((n, sc, count))
+                    stack.extend((n.body, sc.bind(n.index, v), -1) for v in range(hi, lo - 1, -1))
+                elif isinstance(n, Unary):
+                    stack.extend(((n, sc, 1), (n.operand, sc, -1)))
+                elif isinstance(n, Binary):
+                    stack.extend(((n, sc, 2), (n.right, sc, -1), (n.left, sc, -1)))
+                else:  # Call
+                    stack.append((n, sc, len(n.args)))
+                    stack.extend((a, sc, -1) for a in reversed(n.args))
+            else:
+                children = values[len(values) - state:] if state else []
+                del values[len(values) - state:]
+                if isinstance(n, Aggregate):
+                    values.append(_aggregate(n, children))
+                elif isinstance(n, Unary):
+                    values.append(Unary(n.op, children[0], n.column))
+                elif isinstance(n, Binary):
+                    values.append(Binary(n.op, children[0], children[1], n.column))
+                else:
+                    values.append(Call(n.function, tuple(children), n.column))
+        return values[0]
+
+    def _tick(self, path: PathKey, scope: _Scope, what: str = "this expression") -> None:
+        """The wall-clock budget of the expansion, the last guard behind the estimate (checked every 4,096 nodes)."""
+        self.ticks += 1
+        if self.ticks & 4095 == 0 and time.perf_counter() > self.deadline:
+            raise _Problem(path, f"expanding {what} took more than {EXPANSION_SECONDS:g} s (the expansion's time "
+                                 "limit); write the game with fewer or smaller families, sums or definitions",
+                           scope.indices)
+
+    def _name(self, word: str, column: int, scope: _Scope) -> Node:
+        if word in scope.indices:
+            self.changed = True
+            return Num(scope.indices[word], column)
+        tree = self.definitions.get(word)
+        if tree is not None:
+            self.changed = True
+            return tree
+        return Name(word, column)
+
+    def _word(self, word: Word, path: PathKey, scope: _Scope) -> str:
+        """A templated name (``x{i}``) with its integers written in; what it makes must be a name."""
+        text = "".join(p if isinstance(p, str) else str(self._value(p.tree, p.text, path, scope)) for p in word.pieces)
+        if _NAME.fullmatch(text) is None:
+            raise _Problem(path, f"{word.text!r} makes {text!r}, which is not a name (a template inside a name must "
+                                 "give a non-negative integer)", scope.indices, column=word.column)
+        return text
+
+    def _entry(self, entry: Entry, path: PathKey, scope: _Scope) -> float:
+        """``name[i]``, ``name[i][j]`` of a vector or matrix parameter: the entry (1-based)."""
+        if entry.name not in self.vectors:
+            known = ", ".join(sorted(self.vectors)) or "none"
+            raise _Problem(path, f"{entry.name!r} is indexed but is not a vector or matrix parameter (those here: "
+                                 f"{known})", scope.indices, column=entry.column)
+        value: Any = self.vectors[entry.name]
+        for index in entry.indices:
+            k = self._value(index, unparse(index), path, scope)
+            if not isinstance(value, list):
+                raise _Problem(path, f"{entry.name!r} has fewer dimensions than indices", scope.indices,
+                               column=entry.column)
+            if not 1 <= k <= len(value):
+                raise _Problem(path, f"index {k} of {entry.name!r} is outside 1..{len(value)}", scope.indices,
+                               column=entry.column)
+            value = value[k - 1]
+        if isinstance(value, list):
+            raise _Problem(path, f"{entry.name!r} needs more indices (it is a matrix)", scope.indices,
+                           column=entry.column)
+        return value
 
     def _vector(self, value: list, path: PathKey) -> list:
         def check(v: Any, depth: int) -> None:
@@ -492,57 +633,80 @@ class Expander:
                     table_dst[dst + p[len(src):]] = pos
 
 
-def _operand(text: str, ops: str) -> str:
-    """``text`` as one operand where it is spliced in: parenthesised when its outermost operation is one of
-    ``ops`` or a unary sign (so that sums and products keep their order of evaluation) and it is not already."""
-    from .expr import Binary, Unary
-
-    if text.startswith("(") and _matching(text, 0) == len(text) - 1:
-        return text
-    try:
-        root = parse_expression(text).tree
-    except ExpressionError:
-        return f"({text})"  # the parser reports the mistake where the expanded expression is read
-    if (isinstance(root, Binary) and root.op in ops) or isinstance(root, Unary):
-        return f"({text})"
-    return text
+def _aggregate(node: Aggregate, terms: list[Node]) -> Node:
+    """The terms of an aggregate as one tree: a sum and a product left to right (as written out), max and min as a
+    call (one term: the term itself)."""
+    if not terms:
+        return Num(0 if node.function == "sum" else 1, node.column)
+    if node.function in ("sum", "prod"):
+        op = "+" if node.function == "sum" else "*"
+        out = terms[0]
+        for t in terms[1:]:
+            out = Binary(op, out, t, node.column)
+        return out
+    return Call(node.function, tuple(terms), node.column) if len(terms) > 1 else terms[0]
 
 
-def _names(text: str) -> set[str]:
-    return set(_NAME.findall(text))
+def _dag_names(node: Node, known: dict[int, set[str]]) -> set[str]:
+    """The names in a tree whose subtrees may be shared (definitions): each shared subtree is visited once, and a
+    subtree whose names are ``known`` (a definition's, by its id) not at all."""
+    names: set[str] = set()
+    seen: set[int] = set()
+    stack = [node]
+    while stack:
+        n = stack.pop()
+        if id(n) in seen:
+            continue
+        seen.add(id(n))
+        if id(n) in known:
+            names |= known[id(n)]
+        elif isinstance(n, Name):
+            names.add(n.id)
+        elif isinstance(n, Unary):
+            stack.append(n.operand)
+        elif isinstance(n, Binary):
+            stack.extend((n.left, n.right))
+        elif isinstance(n, Call):
+            stack.extend(n.args)
+    return names
+
+
+def _reserved(name: str, parameters: dict, vectors: dict) -> str | None:
+    """What a definition named ``name`` would shadow among the names known before the game is expanded."""
+    if name in FUNCTIONS or name in AGGREGATES:
+        return "a function"
+    if name in CONSTANTS:
+        return "a constant"
+    if name == "tau":
+        return "the stage index tau"
+    if name == "T":
+        return "the horizon T"
+    if name in parameters or name in vectors:
+        return "a parameter"
+    return None
+
+
+def _declared(game: dict) -> dict[str, str]:
+    """The names an expanded game declares (states, the agents' variables or inputs, parameters), and what each is."""
+    out: dict[str, str] = {}
+    states = game.get("states")
+    if isinstance(states, list):
+        out.update((s, "a state") for s in states if isinstance(s, str))
+    agents = game.get("agents")
+    for agent in agents if isinstance(agents, list) else []:
+        if not isinstance(agent, dict):
+            continue
+        for field_, what in (("variables", "a variable"), ("inputs", "an input")):
+            variables = agent.get(field_)
+            names = variables if isinstance(variables, list) else list(variables) if isinstance(variables, dict) else []
+            who = f" of {agent['name']!r}" if isinstance(agent.get("name"), str) else ""
+            out.update((v, what + who) for v in names if isinstance(v, str))
+    return out
 
 
 def _matches(logical: tuple) -> bool:
     return any(len(p) == len(logical) and all(a == "*" or a == b for a, b in zip(p, logical, strict=True))
                for p in _EXPRESSIONS)
-
-
-def _matching(text: str, open_at: int) -> int | None:
-    depth = 0
-    for i in range(open_at, len(text)):
-        if text[i] == "(":
-            depth += 1
-        elif text[i] == ")":
-            depth -= 1
-            if depth == 0:
-                return i
-    return None
-
-
-def _top_level_for(inner: str) -> tuple[str, str, str] | None:
-    """``E for k in a..b`` split at its top-level ``for`` (not inside parentheses), or None."""
-    depth = 0
-    for i, ch in enumerate(inner):
-        if ch in "([":
-            depth += 1
-        elif ch in ")]":
-            depth -= 1
-        elif depth == 0 and inner.startswith("for", i) and (i == 0 or not (inner[i - 1].isalnum()
-                                                                             or inner[i - 1] == "_")):
-            m = re.match(r"for\s+([A-Za-z_]\w*)\s+in\s+(.+)$", inner[i:], re.S)
-            if m is not None:
-                return inner[:i], m.group(1), m.group(2)
-    return None
 
 
 class _quiet:

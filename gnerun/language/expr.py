@@ -22,11 +22,13 @@ before they can exhaust the interpreter's stack.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import re
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
+from contextvars import ContextVar
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 MAX_LENGTH = 20_000
 MAX_DEPTH = 100
@@ -173,8 +175,7 @@ _TOKEN = re.compile(
 )
 
 
-@dataclass(frozen=True)
-class _Token:
+class _Token(NamedTuple):
     kind: str  # number | name | op | end
     text: str
     column: int  # 1-based
@@ -183,24 +184,25 @@ class _Token:
 def _tokenize(text: str) -> list[_Token]:
     tokens: list[_Token] = []
     pos = 0
-    while pos < len(text):
-        m = _TOKEN.match(text, pos)
-        if m is None:
-            ch = text[pos]
-            hint = ""
-            if ch == ".":
-                hint = " (attribute access is not part of the language)"
-            elif ch in "'\"":
-                hint = " (strings are not part of the language)"
-            elif ch in "<>=!":
-                hint = " (comparisons are <=, >= and ==, and only in constraints)"
-            elif ch == "[" or ch == "]":
-                hint = " (indexing is not part of the language)"
-            raise ExpressionError(f"unexpected character {ch!r}{hint}", text, pos + 1)
+    for m in _TOKEN.finditer(text):  # one scan; a character no token matches is where two matches do not meet
+        if m.start() != pos:
+            break
         kind = m.lastgroup or ""
         if kind != "ws":
             tokens.append(_Token(kind, m.group(), pos + 1))
         pos = m.end()
+    if pos < len(text):
+        ch = text[pos]
+        hint = ""
+        if ch == ".":
+            hint = " (attribute access is not part of the language)"
+        elif ch in "'\"":
+            hint = " (strings are not part of the language)"
+        elif ch in "<>=!":
+            hint = " (comparisons are <=, >= and ==, and only in constraints)"
+        elif ch == "[" or ch == "]":
+            hint = " (indexing is not part of the language)"
+        raise ExpressionError(f"unexpected character {ch!r}{hint}", text, pos + 1)
     tokens.append(_Token("end", "", len(text) + 1))
     return tokens
 
@@ -348,17 +350,40 @@ def _check_text(text: object) -> str:
     return text
 
 
+_parsed: ContextVar[dict | None] = ContextVar("gnerun_parsed", default=None)
+
+
+@contextlib.contextmanager
+def parse_cache() -> Iterator[None]:
+    """Within the block, an expression or constraint text is parsed once: its tree is kept and given again (loading
+    a config checks every expression, then counts its nodes)."""
+    token = _parsed.set({})
+    try:
+        yield
+    finally:
+        _parsed.reset(token)
+
+
 def parse_expression(text: str) -> Expression:
     """Parse an arithmetic expression (no comparison)."""
+    cache = _parsed.get()
+    if cache is not None and (hit := cache.get(("expression", text))) is not None:
+        return hit
     text = _check_text(text)
     p = _Parser(text)
     tree = p.expr()
     p.finish()
-    return Expression(text, tree)
+    parsed = Expression(text, tree)
+    if cache is not None:
+        cache[("expression", text)] = parsed
+    return parsed
 
 
 def parse_constraint(text: str) -> Constraint:
     """Parse ``lhs <= rhs``, ``lhs >= rhs`` or ``lhs == rhs`` (exactly one relation)."""
+    cache = _parsed.get()
+    if cache is not None and (hit := cache.get(("constraint", text))) is not None:
+        return hit
     text = _check_text(text)
     p = _Parser(text)
     lhs = p.expr()
@@ -373,7 +398,10 @@ def parse_constraint(text: str) -> Constraint:
     if nxt.kind == "op" and nxt.text in RELATIONS:
         raise p.error("chained comparisons are not allowed: write one constraint per relation")
     p.finish()
-    return Constraint(text, lhs, tok.text, rhs)
+    parsed = Constraint(text, lhs, tok.text, rhs)
+    if cache is not None:
+        cache[("constraint", text)] = parsed
+    return parsed
 
 
 # ---------------------------------------------------------------------------------------------
@@ -530,7 +558,7 @@ def _ieee(op: Callable[[Any, Any], Any]) -> Callable[[Any, Any], Any]:
     complex powers."""
 
     def f(a: Any, b: Any) -> Any:
-        if isinstance(a, float | int) and isinstance(b, float | int):
+        if _scalar(a) and _scalar(b):
             import numpy as np
 
             with np.errstate(all="ignore"):
@@ -538,6 +566,11 @@ def _ieee(op: Callable[[Any, Any], Any]) -> Callable[[Any, Any], Any]:
         return op(a, b)
 
     return f
+
+
+def _scalar(v: Any) -> bool:
+    """A plain number: a Python int or float, or a numpy scalar (np.abs of an int is a np.int64)."""
+    return isinstance(v, float | int) or (type(v).__module__ == "numpy" and getattr(v, "shape", None) == ())
 
 
 _BINARY: dict[str, Callable[[Any, Any], Any]] = {
@@ -562,3 +595,87 @@ def check_names(parsed: Expression | Constraint, allowed: Iterable[str], what: s
         column, name = min(unknown)
         known = ", ".join(sorted(set(allowed) | set(CONSTANTS))) or "none"
         raise ExpressionError(f"unknown {what} {name!r} (known here: {known})", parsed.text, column)
+
+
+# ---------------------------------------------------------------------------------------------
+# Writing a tree back as text
+# ---------------------------------------------------------------------------------------------
+
+_SUM, _PRODUCT, _UNARY, _POWER, _ATOM = 1, 2, 3, 4, 5
+_PRECEDENCE = {"+": _SUM, "-": _SUM, "*": _PRODUCT, "/": _PRODUCT, "**": _POWER}
+
+
+def _negative(value: float) -> bool:
+    return value < 0 or (value == 0 and math.copysign(1.0, value) < 0)
+
+
+def number_text(value: float) -> str:
+    """A number as the language writes it: integers without a fraction, other values by Python's shortest repr
+    (which reads back to the same double)."""
+    if isinstance(value, int) and not isinstance(value, bool):
+        return str(value)
+    value = float(value)
+    if value.is_integer() and abs(value) < 1e15:
+        return str(int(value))
+    return repr(value)
+
+
+def _precedence(node: Node) -> int:
+    if isinstance(node, Num):
+        return _UNARY if _negative(node.value) else _ATOM
+    if isinstance(node, Name | Call):
+        return _ATOM
+    if isinstance(node, Unary):
+        return _UNARY
+    return _PRECEDENCE[node.op]
+
+
+def unparse(node: Node) -> str:
+    """The text of an expression tree with the parentheses its structure needs, so that parsing the text gives the
+    same tree (a negative number comes back as a unary minus of its magnitude, the same value): a sum or a product on
+    the right of ``-`` or ``/``, any operand of ``**`` that is not a single atom, a negative number or a unary minus
+    wherever it is an operand (``(-3)**2``, ``2**(-1)``, ``x - (-3)``). Shared subtrees (definitions) are written
+    wherever they occur. The tree is walked with an explicit stack, and the text is built once: the cost is linear in
+    its length, whatever the tree's depth."""
+    parts: list[str] = []
+    stack: list[Node | str] = [node]
+
+    def operand(child: Node, wrap: bool) -> None:
+        if wrap:
+            stack.extend((")", child, "("))
+        else:
+            stack.append(child)
+
+    while stack:
+        n = stack.pop()
+        if isinstance(n, str):
+            parts.append(n)
+        elif isinstance(n, Num):
+            parts.append("-" + number_text(-n.value) if _negative(n.value) else number_text(n.value))
+        elif isinstance(n, Name):
+            parts.append(n.id)
+        elif isinstance(n, Call):
+            stack.append(")")
+            for k in range(len(n.args) - 1, -1, -1):
+                stack.append(n.args[k])
+                if k:
+                    stack.append(", ")
+            stack.append(n.function + "(")
+        elif isinstance(n, Unary):
+            operand(n.operand, _precedence(n.operand) < _POWER)
+            stack.append(n.op)
+        else:
+            left, right = _precedence(n.left), _precedence(n.right)
+            if n.op == "**":
+                operand(n.right, right < _POWER)
+                stack.append("**")
+                operand(n.left, left < _ATOM)
+            elif n.op in "*/":
+                operand(n.right, right < _POWER)
+                stack.append(n.op)
+                operand(n.left, left < _PRODUCT or (isinstance(n.left, Num) and left == _UNARY))
+            else:
+                operand(n.right, right <= _SUM or right == _UNARY)
+                stack.append(f" {n.op} ")
+                operand(n.left, False)
+    return "".join(parts)

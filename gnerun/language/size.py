@@ -41,6 +41,13 @@ NODES_LIMIT = 10_000_000
 SPARSE_FROM = 800
 SPARSE_WORK = 20_000
 LOOP_STEPS_WARN = 10_000_000  # from this many solver steps of a simulate on (sum over K of run.steps * K)
+# The certificate of a solve builds every agent's own problem, condensed and dense (gnerun.game.compile_agent_problem):
+# its decisions and constraint rows, the others' decisions as parameters. Measured (2 cores, loaded): paper_study1's
+# agents at horizon 100, 200, 400: 0.36, 0.89, 3.39 s each for 202, 402, 802 unknowns, about 5.5e-6 s per unknown
+# squared; at horizon 2,000 (4,002 unknowns each) 377 s and 6.3 GB for the three.
+RESPONSE_WARN = DENSE_WARN  # unknowns of the largest agent problem from which a solve warns
+RESPONSE_S = 5.5e-6  # seconds per squared unknown of an agent problem
+RESPONSE_BYTES = 93  # bytes per squared unknown, kept once built (the agents are built in turn and kept)
 
 
 @dataclass(frozen=True)
@@ -53,6 +60,7 @@ class Size:
     nodes: int  # expression nodes, every stage counted
     dense: bool  # the Jacobian is a dense matrix
     loop_steps: int  # solver steps a simulate may take: sum over the distinct K of run.steps * K
+    responses: tuple[int, ...] = ()  # unknowns of each agent's own problem, which a solve's certificate builds, dense
 
     @property
     def unknowns(self) -> int:
@@ -85,6 +93,16 @@ class Size:
             warn.append(f"a large game: {self.describe()}; building it takes a while (more than {NODES_WARN:,} "
                         "expression nodes)")
         return refuse, warn
+
+    def certificate_warning(self) -> str | None:
+        """A warning for a solve whose certificate builds large agent problems (it runs, and can be stopped)."""
+        if not self.responses or max(self.responses) <= RESPONSE_WARN:
+            return None
+        work = sum(u * u for u in self.responses)
+        return (f"a large certificate: run.certificate builds each agent's own problem, condensed and dense, the "
+                f"largest with {max(self.responses):,} unknowns: about {RESPONSE_S * work:,.0f} s and "
+                f"{RESPONSE_BYTES * work / 1e9:.1f} GB for the {len(self.responses)} agents (more than "
+                f"{RESPONSE_WARN:,} unknowns); run.certificate: false checks the KKT residual alone")
 
     def loop_warning(self) -> str | None:
         """A warning for a simulate whose loops take very many solver steps (they run, stream and can be stopped)."""
@@ -136,7 +154,10 @@ def estimate(cfg: Config) -> Size:
             carriers = len(constraint_agents(c) or g.agents) if g.equilibrium == "generalized" else 1
             multipliers += carriers
             nodes += _expression_nodes(constraint_text(c), True)
-        return Size(decisions, multipliers, 0, nodes, True, 0)
+        responses = tuple(len(a.variables) + _bounds(a.variables) + len(a.constraints)
+                          + sum(1 for c in g.shared_constraints if a.name in (constraint_agents(c) or [a.name]))
+                          for a in g.agents)
+        return Size(decisions, multipliers, 0, nodes, True, 0, responses)
     stages = g.horizon + 1
     auto_condensed = cfg.solver.formulation == "auto"  # decided below, once the size is known
 
@@ -163,4 +184,46 @@ def estimate(cfg: Config) -> Size:
     kkt = decisions + multipliers
     if auto_condensed and (kkt < SPARSE_FROM if isinstance(dynamics, LinearDynamics) else kkt * stages < SPARSE_WORK):
         dense = True
-    return Size(decisions, multipliers, len(g.states) * stages, nodes, dense, loop_steps)
+    responses = tuple((len(a.inputs) + _bounds(a.inputs)) * stages + sum(at(c) for c in a.constraints)
+                      + sum(at(c) for c in g.shared_constraints if a.name in (constraint_agents(c) or [a.name]))
+                      for a in g.agents)
+    return Size(decisions, multipliers, len(g.states) * stages, nodes, dense, loop_steps, responses)
+
+
+def from_extent(extent, game: dict, document: dict) -> Size | None:
+    """A lower bound of the size of a game from the counts of its unexpanded config (:mod:`gnerun.language.extent`),
+    so that a game too large to build is refused before it is written out; None where the config is not readable
+    enough to tell (its validation says why)."""
+    from pydantic import ValidationError
+
+    from .config import DisturbanceConfig, SolverConfig, obstacles
+
+    kind = game.get("kind")
+    if kind not in ("static", "dynamic"):
+        return None
+    try:
+        solver = SolverConfig.model_validate(document.get("solver") or {})
+        disturbance = DisturbanceConfig.model_validate(document.get("disturbance") or {})
+    except (ValidationError, AttributeError, TypeError):
+        return None
+    static = kind == "static"
+    stages = 1 if static else extent.stages
+    field = "variables" if static else "inputs"
+    decisions = extent.copies[("agents", "*", field, "*")] * stages
+    multipliers = (extent.keys[("agents", "*", field, "*", "lower")]
+                   + extent.keys[("agents", "*", field, "*", "upper")]) * stages
+    for rows in (("agents", "*", "constraints", "*"), ("shared_constraints", "*")):
+        staged = extent.staged[rows]
+        multipliers += (extent.copies[rows] - staged) * stages + staged
+    nodes = 0
+    for path, n in extent.expression_nodes.items():
+        once = path[-1] in ("staged", "cost", "terminal_cost")
+        nodes += n * (1 if once else stages)
+    states = 0 if static else extent.copies[("states", "*")] * stages
+    dense = bool(obstacles(static, solver, disturbance)) or solver.formulation == "condensed"
+    dynamics = game.get("dynamics")
+    linear = isinstance(dynamics, dict) and "A" in dynamics
+    kkt = decisions + multipliers
+    if solver.formulation == "auto" and (kkt < SPARSE_FROM if linear else kkt * stages < SPARSE_WORK):
+        dense = True
+    return Size(decisions, multipliers, states, nodes, dense, 0)

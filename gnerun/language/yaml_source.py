@@ -62,6 +62,11 @@ class SourceMap:
         pos = self.values.get(p, Position(1, 1))
         return f"{self.file}:{pos.line}:{pos.column}{self._note(tuple(path))}"
 
+    def has(self, path: PathKey) -> bool:
+        """Whether the value at ``path`` was written (in the text or by an override), not filled in by a default."""
+        p = tuple(path)
+        return p in self.values or any(p[:n] in self.overridden for n in range(len(p), 0, -1))
+
     def _note(self, path: PathKey) -> str:
         """`` (for i = 2, j = 3)`` when ``path`` lies in a copy of a family (the index values that made it)."""
         for n in range(len(path), 0, -1):

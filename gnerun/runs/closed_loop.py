@@ -23,13 +23,14 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from ..game.building import no_check, polled
 from ..game.compile import CompiledGame, StageConstraints, compile_game, compile_stage_constraints
 from ..language.config import Config, PlantDisturbance
 from ..log.mcap_log import json_ready
 from ..log.messages import MpcError, MpcIterate, MpcState
 from ..solvers.ssn import FAILURES, Status
 from .interrupt import Interrupt, Stopped
-from .rundir import RunDirectory, recording
+from .rundir import RunDirectory, ended_by, recording
 from .safeguard import Plan, choose, finite_or_inf, first_step_violation
 from .solving import make_solver, reference_solution
 
@@ -57,8 +58,9 @@ class ClosedLoopResult:
     z: np.ndarray = field(repr=False)  # (done, size): z^K(t)
     z_star: np.ndarray = field(repr=False)  # (done, size): z*(t)
     completed: int | None = None  # sampling times done; fewer than steps if the loop stopped or was interrupted
-    ended: str = "completed"  # completed | stopped (on_failure: stop) | interrupted
+    ended: str = "completed"  # completed | stopped (on_failure: stop) | diverged (the plant) | interrupted | error
     planned: int | None = None  # run.steps
+    message: str = ""  # why a loop ended early (diverged, error)
 
     @property
     def steps(self) -> int:
@@ -91,12 +93,12 @@ class ClosedLoopResult:
 
     def summary(self, game: CompiledGame) -> dict:
         done = self.done
-        states = done + 1 if self.ended == "completed" else done  # x(0..steps), or the states reached
         return json_ready({
             "K": self.K,
             "ended": self.ended,
+            **({"message": self.message} if self.message else {}),
             "completed_steps": done,
-            "x": self.x[:states].tolist(),
+            "x": self.x.tolist(),  # x(0..steps), or the states reached
             "u": self.u[:done].tolist(),
             "w": self.w[:done].tolist(),
             "e_norm": self.e_norm[:done].tolist(),
@@ -130,18 +132,27 @@ class Simulation(dict[int, ClosedLoopResult]):
     game: CompiledGame | None = None
     interrupted: bool = False
 
+    error: str | None = None  # what ended the run, if an exception did (status error)
+
     @property
     def status(self) -> str:
-        """completed | stopped (a loop ended at a failed step, on_failure: stop) | interrupted (Ctrl-C)."""
+        """completed | stopped (a loop ended at a failed step, on_failure: stop) | diverged (the plant's state left
+        the solver's range) | interrupted (Ctrl-C) | error (an exception ended the run: ``error`` says which)."""
+        if self.error is not None:
+            return "error"
         if self.interrupted:
             return "interrupted"
-        return "stopped" if any(r.ended == "stopped" for r in self.values()) else "completed"
+        for ended in ("diverged", "stopped"):
+            if any(r.ended == ended for r in self.values()):
+                return ended
+        return "completed"
 
     def summary(self) -> dict:
         assert self.game is not None
         return {
             "command": "simulate",
             "status": self.status,
+            **({"message": self.error} if self.error is not None else {}),
             "K": list(self),
             "steps": next(iter(self.values())).steps if self else 0,
             "state_names": self.game.state_names,
@@ -192,9 +203,64 @@ class StepReport:
 Progress = Callable[[StepReport], None]
 
 
+class LoopRecord:
+    """What a closed loop has made so far, sampling time by sampling time: the lists its result is made of. The loop
+    fills it as it runs, so that whoever started it can still take the result of the sampling times done when an
+    exception ends the loop (:meth:`result`)."""
+
+    def __init__(self, K: int, steps: int, game: CompiledGame):
+        self.K, self.steps = K, steps
+        self.nx, self.size = game.nx, game.size
+        self.nu = sum(len(v) for v in game.variable_names)
+        self.agents = game.agent_names
+        self.xs: list[np.ndarray] = []  # x(t) of every sampling time begun, then the state the loop ended in
+        self.us: list[np.ndarray] = []
+        self.ws: list[np.ndarray] = []
+        self.e: list[float] = []
+        self.e_agent: dict[str, list[float]] = {a: [] for a in self.agents}
+        self.res: list[float] = []
+        self.its: list[int] = []
+        self.times: list[float] = []
+        self.viol: list[float] = []
+        self.worst: list[str | None] = []  # the last of a sampling time's lists to be filled
+        self.fallback: list[bool] = []
+        self.status: list[str] = []
+        self.ref_status: list[str] = []
+        self.zs: list[np.ndarray] = []
+        self.zstars: list[np.ndarray] = []
+        self.reached: np.ndarray | None = np.array(game.x0, dtype=float)  # the state after the last time done
+
+    def result(self, ended: str, completed: int | None = None, message: str = "") -> ClosedLoopResult:
+        """The loop's result: ``completed`` sampling times (default: those fully recorded), every list cut to them."""
+        per_step = len(self.worst) if completed is None else completed
+
+        def rows(values: list, width: int, n: int) -> np.ndarray:
+            values = values[:n]
+            return np.array(values, dtype=float).reshape(len(values), width)
+
+        if ended == "completed":
+            xs = self.xs[:per_step + 1]
+        elif ended in ("diverged", "error") and self.reached is not None:
+            xs = [*self.xs[:per_step], self.reached]  # and the state the last sampling time done reached
+        else:
+            xs = self.xs[:per_step]
+        return ClosedLoopResult(
+            K=self.K, x=rows(xs, self.nx, len(xs)), u=rows(self.us, self.nu, per_step),
+            w=rows(self.ws, self.nx, per_step), e_norm=np.array(self.e[:per_step], dtype=float),
+            e_norm_agent={a: np.array(v[:per_step], dtype=float) for a, v in self.e_agent.items()},
+            residual_norm=np.array(self.res[:per_step], dtype=float),
+            iterations=np.array(self.its[:per_step], dtype=int),
+            solve_time_s=np.array(self.times[:per_step], dtype=float), status=self.status[:per_step],
+            reference_status=self.ref_status[:per_step],
+            constraint_violation=np.array(self.viol[:per_step], dtype=float), worst_constraint=self.worst[:per_step],
+            fallback=np.array(self.fallback[:per_step], dtype=bool), z=rows(self.zs, self.size, per_step),
+            z_star=rows(self.zstars, self.size, per_step), completed=per_step, ended=ended, planned=self.steps,
+            message=message)
+
+
 def closed_loop(cfg: Config, game: CompiledGame, K: int, run: RunDirectory | None = None,
                 progress: Progress | None = None, interrupt: Interrupt | None = None,
-                stage: StageConstraints | None = None) -> ClosedLoopResult:
+                stage: StageConstraints | None = None, record: LoopRecord | None = None) -> ClosedLoopResult:
     """One closed loop of ``cfg.run.steps`` sampling times with at most K solver steps each.
 
     ``run.initial`` says whether the first sampling time is solved without a budget, ``run.safeguard`` which plan
@@ -205,6 +271,8 @@ def closed_loop(cfg: Config, game: CompiledGame, K: int, run: RunDirectory | Non
     sampling time reports the largest violation of a stage-0 constraint row at the inputs applied and the state they
     produced (plant disturbance included).
     Nothing is allocated by the number of steps planned: the result's arrays hold the sampling times run.
+    A plant state that is not finite, or beyond ``solver.divergence_limit``, ends the loop there (``ended``: diverged),
+    with the state it reached. ``record`` (a :class:`LoopRecord`) receives the loop's progress as it is made.
     """
     solver = make_solver(cfg, game)
     stage = stage if stage is not None else compile_stage_constraints(cfg)
@@ -218,23 +286,14 @@ def closed_loop(cfg: Config, game: CompiledGame, K: int, run: RunDirectory | Non
     shift = cfg.run.warm_start == "shift"
 
     x = np.array(game.x0, dtype=float)
-    xs: list[np.ndarray] = []
-    us: list[np.ndarray] = []
-    ws: list[np.ndarray] = []
-    e: list[float] = []
-    e_agent: dict[str, list[float]] = {a: [] for a in agents}
-    res: list[float] = []
-    its: list[int] = []
-    times: list[float] = []
-    viol: list[float] = []
-    worst: list[str | None] = []
-    fallback: list[bool] = []
-    status: list[str] = []
-    ref_status: list[str] = []
+    rec = record if record is not None else LoopRecord(K, steps, game)
+    xs, us, ws, e, e_agent, res, its, times = rec.xs, rec.us, rec.ws, rec.e, rec.e_agent, rec.res, rec.its, rec.times
+    viol, worst, fallback, status, ref_status = rec.viol, rec.worst, rec.fallback, rec.status, rec.ref_status
+    zs, zstars = rec.zs, rec.zstars
     exact = cfg.run.reference == "exact"  # z*(t) and e(t), or neither (run.reference: none)
-    zs: list[np.ndarray] = []
-    zstars: list[np.ndarray] = []
     unknown = np.full(size, np.nan)
+    limit = cfg.solver.divergence_limit
+    message = ""
 
     z_warm = game.z_start()
     applied = z_warm  # the plan applied at the last sampling time
@@ -356,16 +415,31 @@ def closed_loop(cfg: Config, game: CompiledGame, K: int, run: RunDirectory | Non
         us.append(u)
         w = plant()
         ws.append(w)
-        x_next = game.step_dynamics(x, u) + w
-        violation, label = stage.violation(x_next, u)
+        with np.errstate(all="ignore"):  # a plant that overflows is reported below, as a state that diverged
+            x_next = game.step_dynamics(x, u) + w
+            violation, label = stage.violation(x_next, u)
         viol.append(violation)
         worst.append(label)
+        rec.reached = x_next
 
         if run is not None:
             record(t, trace, z_star, x, u)
         if progress is not None:
             progress(StepReport(K, t, steps, x.copy(), u.copy(), status[t], bool(fallback[t]), float(viol[t]),
                                 int(its[t]), float(res[t]), e[t], float(elapsed)))
+        size_of_x = float(np.max(np.abs(x_next))) if np.all(np.isfinite(x_next)) else math.inf
+        if size_of_x > limit:
+            ended, completed = "diverged", t + 1
+            message = (f"K={K} t={t}: the plant's state x(t + 1) " + ("is not finite" if math.isinf(size_of_x) else
+                       f"reached |x| = {size_of_x:.3g}, beyond solver.divergence_limit = {limit:g}")
+                       + f" (plant disturbance {cfg.disturbance.plant.kind}, scale {cfg.disturbance.plant.scale}); "
+                       "the closed loop ends here (diverged)")
+            if run is not None:
+                run.at((t + 1) * cfg.run.sampling_time)
+                run.write(f"{topic}/state", MpcState(t=t + 1, x=x_next.tolist(), u=None, status="diverged",
+                                                     fallback=False, constraint_violation=None))
+                run.log("warning", message)
+            break
 
         x = x_next
         # the solver goes on from its own iterates (time-distributed optimisation), even where the plant got another
@@ -382,16 +456,7 @@ def closed_loop(cfg: Config, game: CompiledGame, K: int, run: RunDirectory | Non
                                                  constraint_violation=None))
             run.flush()
 
-    def rows(values: list, width: int) -> np.ndarray:
-        return np.array(values, dtype=float).reshape(len(values), width)
-
-    return ClosedLoopResult(K=K, x=rows(xs, nx), u=rows(us, nu), w=rows(ws, nx), e_norm=np.array(e, dtype=float),
-                            e_norm_agent={a: np.array(v, dtype=float) for a, v in e_agent.items()},
-                            residual_norm=np.array(res, dtype=float), iterations=np.array(its, dtype=int),
-                            solve_time_s=np.array(times, dtype=float), status=status, reference_status=ref_status,
-                            constraint_violation=np.array(viol, dtype=float), worst_constraint=worst,
-                            fallback=np.array(fallback, dtype=bool), z=rows(zs, size), z_star=rows(zstars, size),
-                            completed=completed, ended=ended, planned=steps)
+    return rec.result(ended, completed, message)
 
 
 def _safeguarded(game: CompiledGame, solver, stage: StageConstraints, x: np.ndarray, trace: list,
@@ -415,16 +480,27 @@ def simulate(cfg: Config, out: str | Path | None = None, *, force: bool = False,
         raise InputError(f"{cfg.source or cfg.name}: simulate needs a dynamic game (game.kind: dynamic); "
                          "solve a static game with gnerun.solve", cli=f"{cfg.source or cfg.name}: simulate needs a "
                          "dynamic game (game.kind: dynamic); use `gnerun solve` for a static game")
-    game = compile_game(cfg)
-    stage = compile_stage_constraints(cfg)
-    if cfg.run.warm_start == "shift":
-        game.shift_changed_rows  # noqa: B018 (found once, before the loop: it evaluates c at a test point)
+    with polled(no_check):  # built in a helper thread: a signal reaches this one at once (KeyboardInterrupt)
+        game = compile_game(cfg)
+        stage = compile_stage_constraints(cfg)
+        if cfg.run.warm_start == "shift":
+            game.shift_changed_rows  # noqa: B018 (found once, before the loop: it evaluates c at a test point)
     run = RunDirectory.create(out, cfg, command="simulate", force=force) if out is not None else None
     sim = Simulation()
     sim.game = game
     sim.run_dir = run.path if run is not None else None
     interrupt = Interrupt()
-    with recording(run), interrupt.installed():
+
+    def failed(exc: BaseException) -> dict:  # the summary of a run an exception ended: the loops as far as they went
+        status, sim.error = ended_by(exc)
+        sim.interrupted = status == "interrupted"
+        if status == "interrupted":
+            sim.error = None
+        out = sim.summary()
+        out["message"] = ended_by(exc)[1]
+        return out
+
+    with recording(run, failed), interrupt.installed(), polled(interrupt.check):  # builds in the loop stop too
         if run is not None:
             run.at(0.0)
             run.log("info", f"simulate {cfg.name}: K = {cfg.run.K}, {cfg.run.steps} steps, warm start "
@@ -437,7 +513,16 @@ def simulate(cfg: Config, out: str | Path | None = None, *, force: bool = False,
         for K in dict.fromkeys(cfg.run.K):
             if interrupt.requested:
                 break
-            sim[K] = r = closed_loop(cfg, game, K, run, progress, interrupt, stage)
+            record = LoopRecord(K, cfg.run.steps, game)
+            try:
+                sim[K] = r = closed_loop(cfg, game, K, run, progress, interrupt, stage, record)
+            except Stopped:  # a stop request while something was built: the loop as far as it went
+                sim[K] = record.result("interrupted")
+                break
+            except BaseException as exc:  # the loop as far as it went, for the summary
+                status, message = ended_by(exc)
+                sim[K] = record.result(status, message=message)
+                raise
             if run is not None:
                 errors = (f"max e {_nanmax(r.e_norm):.3e}, final e {r.final_e_norm:.3e}" if cfg.run.reference != "none"
                           else "no e (run.reference: none)")

@@ -9,15 +9,16 @@ import json
 import math
 import subprocess
 import warnings
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 from .. import __version__
-from ..errors import InputError, WriteError
+from ..errors import InputError, WriteError, shorten
 from ..files import replace_text, write_text
 from ..language.config import Config
 from ..log.mcap_log import RunLog, json_ready
 from ..log.messages import Message, SolveIterate
+from .interrupt import Stopped
 from .lock import DirectoryLock, contents
 
 
@@ -68,17 +69,20 @@ class RunDirectory:
         self.path = path
         self.log_sink = log
         self._lock = lock
+        self.summary_written = False
 
     @classmethod
     def create(cls, out: str | Path, cfg: Config, *, command: str, force: bool = False) -> RunDirectory:
         path = Path(out)
-        if path.exists() and not path.is_dir():
-            raise InputError(f"{path}: exists and is not a directory")
+        shown = shorten(str(path), 100)
         try:
+            if path.exists() and not path.is_dir():
+                raise InputError(f"{shown}: exists and is not a directory")
             path.mkdir(parents=True, exist_ok=True)
-        except OSError as e:
-            raise InputError(f"{path}: cannot write the run directory: {e.strerror or e}") from None
+        except OSError as e:  # a name too long, a path through a file, no permission
+            raise InputError(f"{shown}: cannot write the run directory: {e.strerror or e}") from None
         lock = DirectoryLock.acquire(path)
+        made: list[Path] = []  # what a directory that could not be made complete loses again: none is left half-made
         try:
             if contents(path) and not force:
                 raise InputError(f"{path}: the run directory exists and is not empty (force=True overwrites it)",
@@ -86,6 +90,7 @@ class RunDirectory:
             config_yaml = cfg.resolved_yaml()
             for stale in ("summary.json", "summary.json.tmp"):  # unlink never follows a link
                 (path / stale).unlink(missing_ok=True)
+            made.append(path / "config.yaml")
             write_text(path / "config.yaml", config_yaml)
             metadata = {
                 "version": __version__,
@@ -99,13 +104,16 @@ class RunDirectory:
                 "log_time": (f"simulated: t x run.sampling_time ({cfg.run.sampling_time:g} s)"
                              if command == "simulate" else "iteration: k x 1 s"),
             }
+            made.append(path / "run.mcap")
             log = RunLog(path / "run.mcap", config_yaml=config_yaml, metadata=metadata)
             log.set_time(0)  # the run's start on its own time axis
-        except OSError as e:
+        except BaseException as exc:
+            for f in made:
+                with contextlib.suppress(OSError):
+                    f.unlink()
             lock.release()
-            raise InputError(f"{path}: cannot write the run directory: {e.strerror or e}") from None
-        except BaseException:
-            lock.release()
+            if isinstance(exc, OSError):
+                raise InputError(f"{path}: cannot write the run directory: {exc.strerror or exc}") from None
             raise
         return cls(path, log, lock)
 
@@ -141,6 +149,7 @@ class RunDirectory:
     def write_summary(self, summary: dict) -> None:
         try:
             replace_text(self.path / "summary.json", json.dumps(json_ready(summary), indent=2, allow_nan=False) + "\n")
+            self.summary_written = True
         except OSError as e:
             raise WriteError(f"{self.path / 'summary.json'}: cannot write the summary: {e.strerror or e} "
                              "(is the disk full?); the run log holds every flushed step") from None
@@ -177,20 +186,40 @@ def numerical_warnings(run: RunDirectory | None) -> Iterator[None]:
         yield
 
 
+def ended_by(exc: BaseException) -> tuple[str, str]:
+    """The status and message of a run that an exception ended: ``interrupted`` for Ctrl-C (a second one stops at
+    once), ``error`` for anything else (a callback that raised, a failure inside the solver, a log that cannot be
+    written)."""
+    if isinstance(exc, KeyboardInterrupt | Stopped):
+        return "interrupted", ("interrupted at once (KeyboardInterrupt: Ctrl-C before the run could stop at the end "
+                               "of a step, a second signal, or a callback); the summary holds what was done")
+    text = str(exc).strip()
+    return "error", f"the run stopped: {type(exc).__name__}" + (f": {text}" if text else "")
+
+
 @contextlib.contextmanager
-def recording(run: RunDirectory | None) -> Iterator[RunDirectory | None]:
-    """Log an exception that ends the run to ``/log`` and always close the log (a finished MCAP); numerical
+def recording(run: RunDirectory | None,
+              summary: Callable[[BaseException], dict] | None = None) -> Iterator[RunDirectory | None]:
+    """Whatever ends the run, the directory is complete: an exception that ends it is logged to ``/log``, and unless
+    the run wrote its summary, ``summary(exc)`` is written as ``summary.json`` (status ``error`` or ``interrupted``,
+    and the message); the log is always closed (a finished MCAP) and the directory's lock released. Numerical
     warnings go to the log too (:func:`numerical_warnings`)."""
     with numerical_warnings(run):
         try:
             yield run
         except BaseException as exc:
             if run is not None:
-                # the error that ends the run is on its way: a log that cannot be written must not replace it
-                with contextlib.suppress(WriteError):
-                    run.log("error", f"the run stopped: {type(exc).__name__}: {exc}")
-                with contextlib.suppress(WriteError):
-                    run.close()
+                # the error that ends the run is on its way: nothing here may replace it (a log that cannot be written,
+                # a summary that cannot be made), and the lock is released whatever happens
+                try:
+                    with contextlib.suppress(Exception):
+                        run.log("error", f"the run stopped: {type(exc).__name__}: {exc}")
+                    if summary is not None and not run.summary_written:
+                        with contextlib.suppress(Exception):
+                            run.write_summary(summary(exc))
+                finally:
+                    with contextlib.suppress(Exception):
+                        run.close()
             raise
         else:
             if run is not None:

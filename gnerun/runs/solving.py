@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..game.building import no_check, polled
 from ..game.compile import CompiledGame, compile_game
 from ..language.config import Config, sparse_obstacles
 from ..log.mcap_log import json_ready
@@ -20,7 +21,7 @@ from ..solvers.hybrid import globalized
 from ..solvers.ssn import SemismoothNewton, SSNState, Status
 from ..threads import single_threaded_blas
 from .interrupt import Interrupt, Stopped
-from .rundir import RunDirectory, recording
+from .rundir import RunDirectory, ended_by, recording
 
 
 def make_solver(cfg: Config, game: CompiledGame, *, disturbed: bool = True) -> SemismoothNewton:
@@ -420,19 +421,59 @@ def solve(cfg: Config, out: str | Path | None = None, *, force: bool = False,
     ``on_stage(text)`` is told what a long solve is doing besides iterating (the exact solution, the certificate).
     """
     t0 = time.perf_counter()
-    game = compile_game(cfg)
-    compile_time = time.perf_counter() - t0
-    solver = make_solver(cfg, game)
+    with polled(no_check):  # built in a helper thread: a signal reaches this one at once (KeyboardInterrupt)
+        game = compile_game(cfg)
+        compile_time = time.perf_counter() - t0
+        solver = make_solver(cfg, game)
+        game.kkt_residual(game.z_start(), game.x0)  # built now: what an interrupted solve reports is read from it
     run = RunDirectory.create(out, cfg, command="solve", force=force) if out is not None else None
     interrupt = Interrupt()
-    with recording(run), interrupt.installed():
-        result = _solve(cfg, game, solver, run, compile_time, on_iterate, interrupt, on_stage)
+    seen: list[SSNState] = []  # the iterates made, for the summary of a solve that an exception ends
+    doing = ["solving"]
+
+    def watched(state: SSNState, error_norm: float | None) -> None:
+        seen.append(state)
+        if on_iterate is not None:
+            on_iterate(state, error_norm)
+
+    def stage(text: str) -> None:
+        doing[0] = text
+        if on_stage is not None:
+            on_stage(text)
+
+    def failed(exc: BaseException) -> dict:
+        return failed_solve_summary(exc, game, seen, doing[0], time.perf_counter() - t0, compile_time)
+
+    with recording(run, failed), interrupt.installed(), polled(interrupt.check):  # builds (the certificate's) stop too
+        result = _solve(cfg, game, solver, run, compile_time, watched, interrupt, stage)
     if result.status == INTERRUPTED:
         raise KeyboardInterrupt  # after the summary and a finished log: the caller decides what it means
     return result
 
 
 INTERRUPTED = "interrupted"  # the status of a solve stopped by Ctrl-C, SIGTERM or SIGHUP
+
+
+def failed_solve_summary(exc: BaseException, game: CompiledGame, seen: list[SSNState], doing: str, elapsed: float,
+                         compile_time: float) -> dict:
+    """summary.json of a solve that an exception ended (status error, or interrupted at once by a second signal): the
+    message with what the solve was doing, and the last iterate made."""
+    status, message = ended_by(exc)
+    last = seen[-1] if seen else None
+    z = last.z if last is not None else game.z_start()
+    return json_ready({
+        "status": status,
+        "message": f"{message} (while {doing})" if status == "error" else message,
+        "iterations": last.k if last is not None else 0,
+        "residual_norm": last.residual_norm if last is not None else None,
+        "solution": game.solution_by_agent(z[: game.n]),
+        "multipliers": game.multipliers_by_agent(z[game.n:]),
+        "residual_history": [s.residual_norm for s in seen],
+        "z": z.tolist(),
+        "x": None if game.x0 is None else np.asarray(game.x0, dtype=float).tolist(),
+        "time_s": elapsed,
+        "compile_time_s": compile_time,
+    })
 
 
 def _solve(cfg: Config, game: CompiledGame, solver: SemismoothNewton, run: RunDirectory | None,
@@ -470,7 +511,7 @@ def _solve(cfg: Config, game: CompiledGame, solver: SemismoothNewton, run: RunDi
 
     from ..solvers.certificate import NewtonResponses
 
-    responses = NewtonResponses(cfg, game)
+    responses = NewtonResponses(cfg, game, interrupt.check)  # a stop request is honoured between two steps
     try:
         if exact:
             if on_stage is not None:

@@ -271,7 +271,8 @@ def run_point(task: dict[str, Any]) -> list[dict[str, Any]]:
         except (InputError, OSError) as e:
             message = str(e) if isinstance(e, InputError) else f"{out}: cannot write the point: {e.strerror or e}"
             return [_row(task, K=None, status="error", message=message, wall=time.perf_counter() - t0)]
-        return _run_point(task, out, t0)
+        with lock.lent():  # the run inside writes the point's directory under this lock
+            return _run_point(task, out, t0)
     except (_Stopped, KeyboardInterrupt):  # stopped: the point ended (interrupted) or was cut short
         _abandon(143)
     finally:
@@ -577,7 +578,7 @@ def _finished(sweep_dir: Path, point: Point) -> tuple[dict[str, Any], dict[str, 
     except InputError:
         return None
     if (meta.get("config_hash") == point.config_hash and meta.get("status") != "error"
-            and summary.get("status") != "interrupted"):
+            and summary.get("status") not in ("interrupted", "error")):
         return meta, summary
     return None
 
@@ -722,9 +723,9 @@ def read_index(sweep_dir: str | Path) -> list[dict[str, Any]]:
     if not path.exists():
         raise InputError(f"{sweep_dir}: no sweep index here (expected {INDEX_CSV})")
     data = read_regular(path, MAX_JSON_BYTES, INDEX_CSV)
-    try:
-        return [{k: _parse_cell(v) for k, v in r.items()}
-                for r in csv.DictReader(io.StringIO(data.decode(), newline=""))]
+    try:  # a row cut short has its missing cells empty; the cells of a row too long are left out
+        return [{k: _parse_cell(v) for k, v in r.items() if k is not None}
+                for r in csv.DictReader(io.StringIO(data.decode(), newline=""), restval="")]
     except (UnicodeDecodeError, csv.Error) as e:
         raise InputError(f"{path}: damaged {INDEX_CSV}: {str(e).splitlines()[0][:80]}") from None
 

@@ -211,9 +211,10 @@ class NewtonResponses:
 
     MAX_ITER = 200
 
-    def __init__(self, cfg, game: CompiledGame):
+    def __init__(self, cfg, game: CompiledGame, check=None):
         self.cfg = cfg
         self.game = game
+        self.check = check  # called before every step (a stop request raises there)
         self._solvers: dict[int, tuple[CompiledGame, object, np.ndarray]] = {}
 
     def _solver(self, agent: int):
@@ -256,6 +257,8 @@ class NewtonResponses:
                 lam = multipliers[order]
             state = solver.init(np.concatenate([np.asarray(s, dtype=float), lam]), p)
             while not solver.terminate(state)[0]:
+                if self.check is not None:
+                    self.check()
                 state = solver.step(state)
             converged = solver.terminate(state)[1] == Status.CONVERGED and state.status not in FAILURES
             ends.append((state.z[: problem.n].copy(), converged))

@@ -18,8 +18,11 @@ rerun-sdk is imported here only, so that ``gnerun --help`` stays fast.
 
 from __future__ import annotations
 
+import contextlib
 import math
+import os
 import re
+import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -447,18 +450,57 @@ def rerun_executable() -> list[str]:
     return [found] if found else [sys.executable, "-m", "rerun"]
 
 
+def viewer_binary() -> list[str]:
+    """The viewer's own binary (the `rerun` script runs it as its child; started directly, it is the process that
+    learns of our death), or the script where the binary is not found."""
+    try:
+        import rerun_cli
+    except ImportError:
+        return rerun_executable()
+    binary = Path(rerun_cli.__file__).parent / "rerun"
+    return [str(binary)] if binary.is_file() and os.access(binary, os.X_OK) else rerun_executable()
+
+
 def serve_command(rrd: Path, web_port: int, grpc_port: int) -> list[str]:
     """The web viewer and its gRPC server for a saved recording, bound to 127.0.0.1 only."""
-    return [*rerun_executable(), "--serve-web", "--bind", "127.0.0.1", "--web-viewer-port", str(web_port),
+    return [*viewer_binary(), "--serve-web", "--bind", "127.0.0.1", "--web-viewer-port", str(web_port),
             "--port", str(grpc_port), str(rrd)]
 
 
 def _start(command: list[str], **kwargs):
-    """A viewer process in a process group of its own: the `rerun` script runs the real binary as its child,
-    and stopping the group stops both (and the terminal's Ctrl-C reaches us, not them)."""
+    """A viewer process in a process group of its own (the terminal's Ctrl-C reaches us, not it; stopping the group
+    stops it and any child of it). On Linux it gets SIGTERM when we die, however we die (SIGKILL included): a viewer
+    never outlives the gnerun that started it."""
     import subprocess
 
-    return subprocess.Popen(command, stdin=subprocess.DEVNULL, start_new_session=True, **kwargs)
+    parent = os.getpid()
+
+    def die_with_parent() -> None:  # in the child, before the viewer starts
+        if sys.platform.startswith("linux"):
+            import ctypes
+            import signal
+
+            with contextlib.suppress(OSError, AttributeError):
+                ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+            if os.getppid() != parent:  # we died before the line above
+                os._exit(1)
+
+    return subprocess.Popen(command, stdin=subprocess.DEVNULL, start_new_session=True, preexec_fn=die_with_parent,
+                            **kwargs)
+
+
+def has_open(pid: int, path: Path) -> bool | None:
+    """Whether process ``pid`` has ``path`` open (None where /proc cannot tell)."""
+    target = str(path.resolve())
+    try:
+        fds = os.listdir(f"/proc/{pid}/fd")
+    except OSError:
+        return None
+    for fd in fds:
+        with contextlib.suppress(OSError):
+            if os.readlink(f"/proc/{pid}/fd/{fd}") == target:
+                return True
+    return False
 
 
 def _stop(proc, grace: float = 10.0) -> None:
@@ -510,9 +552,11 @@ def _listening(port: int) -> bool:
         return s.connect_ex(("127.0.0.1", port)) == 0
 
 
-def serve(rrd: Path, web_port: int, grpc_port: int, ready=None, timeout: float = 60.0) -> int:
+def serve(rrd: Path, web_port: int, grpc_port: int, ready=None, timeout: float = 60.0, loaded=None) -> int:
     """Run the web viewer until it stops, or until we are interrupted or terminated (then stop it too).
-    ``ready()`` is called once both ports answer; a viewer that stops before is an error with its last words."""
+    ``ready()`` is called once both ports answer; a viewer that stops before is an error with its last words.
+    ``loaded()`` is called once the viewer has read the recording and closed it (it serves from memory then): a
+    temporary recording can go at once, so that nothing of it is left if we are killed."""
     import os
     import signal
     import subprocess
@@ -541,6 +585,11 @@ def serve(rrd: Path, web_port: int, grpc_port: int, ready=None, timeout: float =
             time.sleep(0.2)
         if ready is not None:
             ready()
+        if loaded is not None:
+            while has_open(proc.pid, rrd) and proc.poll() is None:
+                time.sleep(0.1)
+            if proc.poll() is None:
+                loaded()
         return proc.wait()
     except KeyboardInterrupt:
         return 0
@@ -601,7 +650,7 @@ class _HeadlessViewer:
         if not os.environ.get("XDG_RUNTIME_DIR"):
             env["XDG_RUNTIME_DIR"] = self._tmp.name
         with open(self._log_path, "wb") as log:
-            self.proc = _start([*rerun_executable(), "--headless", "--bind", "127.0.0.1", "--port", str(self.port),
+            self.proc = _start([*viewer_binary(), "--headless", "--bind", "127.0.0.1", "--port", str(self.port),
                                 "--hide-welcome-screen", "--window-size", size], stdout=log, stderr=subprocess.STDOUT,
                                env=env)
         self.started = time.monotonic()
