@@ -100,7 +100,7 @@ def test_a_failure_at_each_stage_of_a_solve_leaves_a_complete_directory(stage: s
     elif stage == "certificate":
         from gnerun.solvers.certificate import NewtonResponses
 
-        monkeypatch.setattr(NewtonResponses, "best_response", _raiser("the best response failed"))
+        monkeypatch.setattr(NewtonResponses, "solve_from", _raiser("the best response failed"))
     elif stage == "stage callback":
         def on_stage(text):
             if "best response" in text:
