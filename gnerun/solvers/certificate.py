@@ -514,7 +514,14 @@ def check_player(game: CompiledGame, agent: int, z: np.ndarray, x: np.ndarray | 
 def _convex_player(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | None) -> bool:
     """The agent's problem is convex for certain: an LQ game (constant derivatives, affine rows) whose agent's own
     Hessian block is positive semidefinite. Its KKT points are its minima."""
-    if not game.affine:
+    # whether the game is LQ, where that is known without building its condensed derivatives (a game solved in the
+    # sparse formulation has not built them, and at long horizons they cost more than the solve)
+    if "_derivatives" in game.__dict__ or game.kind == "static":
+        affine = game.affine
+    else:
+        sparse = game.derived.get("sparse")
+        affine = bool(sparse is not None and sparse.affine)
+    if not affine:
         return False
     w = np.linalg.eigvalsh(0.5 * (lambda H: H + H.T)(game.agent_hessian(agent, a, x)))
     return bool(w.size == 0 or w[0] >= -1e-10 * max(1.0, float(np.max(np.abs(w)))))
