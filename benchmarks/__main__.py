@@ -1,6 +1,7 @@
 """`python -m benchmarks`: gnerun's speed against baselines run in the same process.
 
-(`python -m benchmarks robustness` runs the robustness suite instead: benchmarks/robustness.py.)
+(`python -m benchmarks robustness` runs the robustness suite instead: benchmarks/robustness.py; `python -m benchmarks
+certificate` what the certificate costs next to the solve: benchmarks/certificate.py.)
 
 Prints a markdown table and writes JSON to benchmarks/results/. Every number is a median over repeats;
 every ratio is baseline time / gnerun time, both measured here, in this run.
@@ -566,4 +567,8 @@ if __name__ == "__main__":
         from .robustness import main as robustness
 
         sys.exit(robustness(sys.argv[2:]))
+    if sys.argv[1:2] == ["certificate"]:
+        from .certificate import main as certificate_cost
+
+        sys.exit(certificate_cost(sys.argv[2:]))
     sys.exit(main())

@@ -443,7 +443,8 @@ def check_player(game: CompiledGame, agent: int, z: np.ndarray, x: np.ndarray | 
 
     # the box search (small players): a global statement, or a witness
     box_result, box = None, None
-    if 0 < ni <= global_response.MAX_DIM:
+    convex = _convex_player(game, agent, a, x)  # then a local solve is global already: no box search
+    if 0 < ni <= global_response.MAX_DIM and not convex:
         box_result, box = _box_search(game, agent, a, x, J0 - tol, tol)
         if box_result is not None and box_result.witness is not None:
             consider([box_result.witness], strict=False)
@@ -494,7 +495,7 @@ def check_player(game: CompiledGame, agent: int, z: np.ndarray, x: np.ndarray | 
     if box_result is not None and box_result.complete and gap is not None:
         kind = "global on the box"  # no feasible point of the box is cheaper than the best one found by more than tol
         bound = gap + tol
-    elif gap is not None and gap <= tol and _convex_player(game, agent, a, x):
+    elif gap is not None and gap <= tol and convex:
         kind = "global (convex)"  # the candidate is a KKT point of the player's own convex problem
         bound = None
     else:
