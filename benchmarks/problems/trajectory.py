@@ -1070,14 +1070,15 @@ def _overtaking_config_yaml(start: str) -> str:
         terminal = _weighted_squares([OVERTAKING_TERMINAL * dt] * 3, names, targets)
         agents.append({
             "name": f"car{k}",
-            "inputs": {f"w{k}": {"start": U[i, :, 0]}, f"a{k}": {"start": U[i, :, 1]}},
+            "inputs": {f"{u}{k}": {"start": U[i, :, j] if U[i, :, j].any() else 0} for j, u in enumerate("wa")},
             "stage_cost": f"{state} + {_num(dt * OVERTAKING_INPUT_WEIGHT)}*(w{k}**2 + a{k}**2)",
             "terminal_cost": terminal,
             "constraints": [c.expr() for c in _overtaking_own(i)],
         })
     header = [
-        "Two-car overtaking in ALGAMES's style (benchmarks/problems/trajectory.py): inertial unicycles, RK4, dt = 0.2,",
-        "T = 12; the faster car 1 starts 0.4 behind the slower car 2 in the right lane of a two-lane road of width 0.34;",
+        "Two-car overtaking in ALGAMES's style (benchmarks/problems/trajectory.py): inertial unicycles, RK4,",
+        "dt = 0.2, T = 12; the faster car 1 starts 0.4 behind the slower car 2 in the right lane of a two-lane road",
+        "of width 0.34;",
         f"start: {OVERTAKING_STARTS[start]}.",
     ]
     return _yaml(f"overtaking-{start}", header, OVERTAKING_HORIZON, states, ode, np.asarray(OVERTAKING_X0), agents,
