@@ -130,7 +130,16 @@ def test_without_answers_the_cold_overtaking_start_stalls_and_says_why(monkeypat
     _, solver = _overtaking()
     state = iterate(solver, solver.init())
     assert state.status == "stalled"
-    assert "no player has a feasible best answer" in state.message
+    assert "after 3 start(s): " in state.message and "no player has a feasible best answer" in state.message
+
+
+def test_a_stall_after_the_answers_says_how_many_starts_it_took(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Answers that are the zero-input plan itself: the three interior starts from them stall as before."""
+    monkeypatch.setattr(hybrid, "response_round", lambda game, a, x: np.array(a, dtype=float))
+    _, solver = _overtaking()
+    state = iterate(solver, solver.init())
+    assert state.status == "stalled" and state.search.answered
+    assert "after 3 start(s) from z^0 and 3 from the players' best answers" in state.message, state.message
 
 
 @pytest.mark.parametrize("config", ["paper_study1.yaml", "nonlinear_gne.yaml", "mcp_demo.yaml", "vehicles.yaml"])

@@ -271,14 +271,16 @@ class HybridNewton:
             if answered is not None:
                 return answered
             why += "; no player has a feasible best answer to the others' start plans"
-            memory = replace(memory, answered=True)
         if memory.attempt < RESTARTS + PIVOTS and self.game.affine and self.newton.condensed:
             pivoted = self._pivot(state, memory)
             if pivoted is not None:
                 return pivoted
             why += f"; Lemke's method ended on a ray from {PIVOTS} covering vectors"
+        starts = f"{memory.attempt + 1} start(s)"
+        if memory.answered:
+            starts = f"{RESTARTS + 1} start(s) from z^0 and {memory.attempt + 1} from the players' best answers"
         return replace(state, status=status,
-                       message=f"interior-point phase at iteration {state.k}, after {memory.attempt + 1} start(s): "
+                       message=f"interior-point phase at iteration {state.k}, after {starts}: "
                                f"{why} (||Phi|| = {state.residual_norm:.2e})")
 
     def _affine(self) -> bool:
