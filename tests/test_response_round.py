@@ -162,3 +162,10 @@ def test_one_player_problems_and_the_interior_phase_alone_take_no_round() -> Non
     assert not hybrid.HybridNewton(solver.newton, handover=False).answers
     one = load_config(text=ONE)
     assert not make_solver(one, compile_game(one)).answers
+
+
+def test_an_undefined_start_is_no_answer(static) -> None:
+    """A start where the cost is not finite gives no answer and raises nothing (failure is a status in the solver)."""
+    a = np.array([np.nan, 0.3])
+    assert best_answer(static, 0, a, None, [np.array([np.nan])]) is None
+    assert best_answer(static, 0, a, None, [np.array([np.nan]), np.array([0.0])])[1] == pytest.approx([0.1], abs=1e-6)

@@ -79,8 +79,11 @@ def best_answer(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | N
     for s in starts:
         with warnings.catch_warnings(), np.errstate(all="ignore"):
             warnings.simplefilter("ignore")
-            res = minimize(objective, np.array(s, dtype=float), jac=True, method="SLSQP", constraints=constraints,
-                           options={"maxiter": MAX_ITER})
+            try:  # a start where an expression is undefined is no answer, not a failure of the solve
+                res = minimize(objective, np.array(s, dtype=float), jac=True, method="SLSQP", constraints=constraints,
+                               options={"maxiter": MAX_ITER})
+            except (ValueError, ArithmeticError, np.linalg.LinAlgError):
+                continue
         ai = np.asarray(res.x, dtype=float)
         if not np.all(np.isfinite(ai)):
             continue
