@@ -21,10 +21,10 @@ certified (here that is the zero-input start itself); the nearest feasible point
 a homotopy on the violated rows (c - theta max(c(z^0), 0) <= 0, theta = 0.75, 0.5, 0.25, 0): 18; on the collision
 radius (0.5, 0.75, 1 of it): 20; a fourth interior start with a barrier of 1: 19 (0.1: 15); this round: 23 with SLSQP
 answers, 24 with Newton answers on each player's compiled problem. As the globalized method runs it, after its three
-interior starts (the other 98
-variants never get there and take the same steps as before): 19 of the 28 certified, a median of 110 iterations in
-all; the round itself takes about 0.1 s of SLSQP at 26 decisions per car (a quiet machine). ``MAX_ITER`` = 50, 100,
-200 and SLSQP's tolerance 1e-15 instead of its default gave 19, 19, 19 and 21 of the 28.
+interior starts (the other 98 variants never get there and take the same steps as before): 19 of the 28 certified, a
+median of 110 iterations in all; the round itself takes about 0.1 s of SLSQP at 26 decisions per car (a quiet
+machine). ``MAX_ITER`` = 50, 100, 200 and SLSQP's tolerance 1e-15 instead of its default gave 19, 19, 19 and 21 of
+the 28.
 """
 
 from __future__ import annotations
