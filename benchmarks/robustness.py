@@ -2,7 +2,8 @@
 
 The suite (``benchmarks/problems``): the Facchinei-Kanzow GNEP library A.1-A.18 at the literature's starting
 points, the bounded LQ dynamic game at T = 5, 20, 40 (variational and generalized), ALGAMES's ramp merge and
-T-intersection from random initial states (cold start from zero inputs), and the MCPTrajectoryGameSolver demo.
+T-intersection from random initial states (cold start from zero inputs), the MCPTrajectoryGameSolver demo, and a
+two-car overtaking game in ALGAMES's style from zero inputs and three other starts.
 Every problem is solved with each method asked for, with default settings otherwise (the configs carry no
 ``solver:`` block, and the iteration limit is the default one). A result counts as **certified** when the solver
 says converged, every agent's best-response gap is at most ``GAP_TOL`` by the problem's own check (written
@@ -47,6 +48,7 @@ from .problems import Problem
 RESULTS = Path(__file__).resolve().parent / "results"
 GAP_TOL = 1e-6  # a best-response gap above this, relative to max(1, |J_i|), is not an equilibrium
 REAL_TIME = 0.3  # seconds: ALGAMES's bound for a merge
+SINGLES = ("fk", "lq", "mcp-demo", "overtaking")  # families reported problem by problem (the others as a distribution)
 
 METHODS = {
     "default": {},
@@ -96,6 +98,8 @@ def problems(which: set[str], count: int, seed: int) -> list[Problem]:
         out += trajectory.intersection_problems(count, seed=seed)
     if "mcp-demo" in which:
         out.append(trajectory.mcp_demo_problem())
+    if "overtaking" in which:
+        out += trajectory.overtaking_problems()
     if "nonconvex" in which:
         from .problems import nonconvex
 
@@ -306,7 +310,7 @@ def tables(outcomes: list[Outcome], published: dict[tuple[str, str, str], dict[s
     lines: list[str] = []
     by = {(o.family, o.name, o.start, o.method): o for o in outcomes}
     pairs = list(dict.fromkeys((o.family, o.name, o.start) for o in outcomes))
-    singles = [p for p in pairs if p[0] in ("fk", "lq", "mcp-demo")]
+    singles = [p for p in pairs if p[0] in SINGLES]
     if singles:
         lines += ["| problem | start | n, m | " + " | ".join(methods) + " | published |",
                   "|---|---|---|" + "---|" * len(methods) + "---|"]
@@ -351,8 +355,8 @@ def main(argv: list[str]) -> int:
     import argparse
 
     parser = argparse.ArgumentParser(prog="python -m benchmarks robustness", description=__doc__.splitlines()[0])
-    parser.add_argument("--families", default="fk,lq,merge,intersection,mcp-demo,nonconvex",
-                        help="comma-separated: fk, lq, merge, intersection, mcp-demo, nonconvex")
+    parser.add_argument("--families", default="fk,lq,merge,intersection,mcp-demo,overtaking,nonconvex",
+                        help="comma-separated: fk, lq, merge, intersection, mcp-demo, overtaking, nonconvex")
     parser.add_argument("--methods", default="default,local,FB + line search",
                         help=f"comma-separated, of: {', '.join(METHODS)}")
     parser.add_argument("--count", type=int, default=100, help="random initial states per trajectory scenario")
@@ -370,7 +374,7 @@ def main(argv: list[str]) -> int:
     outcomes: list[Outcome] = []
     published: dict[tuple[str, str, str], dict[str, str]] = {}
     for problem in suite:
-        key = (problem.family, problem.name, problem.start) if problem.family in ("fk", "lq", "mcp-demo") else \
+        key = (problem.family, problem.name, problem.start) if problem.family in SINGLES else \
               (problem.family, "", "")
         if problem.published:
             published.setdefault(key, {}).update(problem.published)

@@ -496,6 +496,21 @@ def test_the_mcp_demo_template_is_the_written_demo() -> None:
     np.testing.assert_allclose(ra.z[:36], rb.z[:36], atol=1e-8)
 
 
+def test_the_overtaking_template_is_the_written_overtaking() -> None:
+    """configs/overtaking.yaml (families of cars and pairs, vector parameters, an RK4 ode) against the benchmark
+    library's overtaking game from zero inputs written out: the same functions to rounding, and the same solution."""
+    from benchmarks.problems import trajectory
+
+    written_cfg = load_config(text=trajectory.overtaking_problems()[0].config_yaml)
+    template_cfg = load_config(CONFIGS / "overtaking.yaml")
+    _same_functions(compile_game(template_cfg), compile_game(written_cfg), np.random.default_rng(8), tol=1e-12,
+                    labels=False)
+    np.testing.assert_allclose(compile_game(template_cfg).x0, trajectory.OVERTAKING_X0, atol=1e-15)
+    ra, rb = solve(template_cfg, out=None), solve(written_cfg, out=None)
+    assert ra.status == rb.status == "converged"
+    np.testing.assert_allclose(ra.z[:52], rb.z[:52], atol=1e-6)
+
+
 @pytest.mark.slow
 def test_the_intersection_config_is_the_written_intersection() -> None:
     """configs/algames_intersection.yaml (an RK3 ode, pi, families of states and pairs) against the benchmark

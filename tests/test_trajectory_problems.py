@@ -1,5 +1,6 @@
-"""The trajectory-game benchmarks (benchmarks/problems/trajectory.py): ALGAMES's ramp merge and T-intersection and
-MCPTrajectoryGameSolver.jl's demo as gnerun configs, checked against their independent numpy models."""
+"""The trajectory-game benchmarks (benchmarks/problems/trajectory.py): ALGAMES's ramp merge and T-intersection,
+MCPTrajectoryGameSolver.jl's demo and the two-car overtaking game as gnerun configs, checked against their independent
+numpy models."""
 
 from __future__ import annotations
 
@@ -24,8 +25,11 @@ from benchmarks.problems.trajectory import (
     merge_initial_states,
     merge_model,
     merge_problems,
+    overtaking_model,
+    overtaking_problems,
     planar_double_integrator_step,
     unicycle_rk3_step,
+    unicycle_rk4_step,
 )
 from gnerun.runs.solving import certified_solve
 
@@ -35,13 +39,14 @@ INTERSECTION_X0 = np.array([-0.50, -0.15, 0.0, 0.60, 1.40, 0.15, math.pi, 0.60, 
 
 @cache
 def _cases() -> tuple[tuple[str, str, GameModel], ...]:
-    """(label, config text, numpy model) for one merge, one intersection and the MCP demo."""
+    """(label, config text, numpy model) for one merge, one intersection, the MCP demo and the overtaking game."""
     merge = merge_problems(1, seed=3)[0]
     inter = intersection_problems(1, seed=4)[0]
     return (
         ("merge", merge.config_yaml, merge_model(merge_initial_states(1, seed=3)[0])),
         ("intersection", inter.config_yaml, intersection_model(intersection_initial_states(1, seed=4)[0])),
         ("mcp-demo", mcp_demo_problem().config_yaml, mcp_demo_model()),
+        ("overtaking", overtaking_problems()[0].config_yaml, overtaking_model()),
     )
 
 
@@ -51,7 +56,7 @@ def _compiled(label: str):
     return gnerun.compile_game(gnerun.load_config(text=text))
 
 
-LABELS = ("merge", "intersection", "mcp-demo")
+LABELS = ("merge", "intersection", "mcp-demo", "overtaking")
 
 
 def _model(label: str) -> GameModel:
@@ -368,3 +373,79 @@ def test_the_head_on_stop_is_no_equilibrium():
     assert abs(X[-1, 0] + 0.5) < 1e-12 and abs(X[-1, 4] - 0.5) < 1e-12
     gaps = model.best_response_gaps(a)
     assert min(gaps.values()) > 0.1
+
+
+def test_unicycle_rk4_step_is_a_fourth_order_runge_kutta_step_of_the_ode():
+    """Local error O(dt^5) against an accurate solution of the ODE (a ratio of 32 when dt halves), and th, v (linear
+    in t) exact."""
+    def ode(_t, s, u):
+        out = np.empty_like(s)
+        out[0::4] = s[3::4] * np.cos(s[2::4])
+        out[1::4] = s[3::4] * np.sin(s[2::4])
+        out[2::4], out[3::4] = u[0::2], u[1::2]
+        return out
+
+    rng = np.random.default_rng(4)
+    x, u = rng.normal(size=8), rng.normal(size=4)
+    errors = []
+    for dt in (0.2, 0.1):
+        exact = solve_ivp(ode, (0, dt), x, args=(u,), rtol=1e-13, atol=1e-13).y[:, -1]
+        errors.append(np.max(np.abs(unicycle_rk4_step(x, u, dt) - exact)))
+    assert errors[0] < 1e-5
+    assert 24 < errors[0] / errors[1] < 40
+    step = unicycle_rk4_step(x, u, 0.2)
+    np.testing.assert_allclose(step[2::4], x[2::4] + 0.2 * u[0::2], rtol=1e-15)
+    np.testing.assert_allclose(step[3::4], x[3::4] + 0.2 * u[1::2], rtol=1e-15)
+
+
+def test_the_overtaking_problems():
+    """Two cars, T = 12 (52 decisions), each car's two road edges and the shared collision row at 13 stages (65
+    rows), an RK4 ode; zero inputs first, then three other starts; at zero inputs the cars coincide at x(4) (car 1
+    closes 0.5 per second on a gap of 0.4), so the start violates the collision row there by the whole 0.16^2."""
+    problems = overtaking_problems()
+    assert [p.family for p in problems] == ["overtaking"] * 4
+    assert len({p.start for p in problems}) == 4 and problems[0].start.startswith("u = 0")
+    starts = []
+    for p in problems:
+        cfg = gnerun.load_config(text=p.config_yaml)
+        g = cfg.game
+        assert "\nsolver:" not in p.config_yaml and cfg.solver.globalization == "auto"
+        assert g.horizon == 12 and g.equilibrium == "variational" and g.dynamics.integrator == "rk4"
+        game = gnerun.compile_game(cfg)
+        assert (game.n, game.m) == (52, 65)
+        starts.append(game.a_start)
+        assert p.best_response_gaps is not None and p.reference is None
+    assert not starts[0].any() and all(s.any() for s in starts[1:])
+    model = overtaking_model()
+    X = model.rollout(np.zeros(model.n))
+    assert np.hypot(X[4, 0] - X[4, 4], X[4, 1] - X[4, 5]) == pytest.approx(0.0, abs=1e-12)
+    assert model.constraint_values(np.zeros(model.n)).min() == pytest.approx(-0.16 ** 2, abs=1e-12)
+
+
+def test_the_overtaking_costs_by_hand():
+    """At zero inputs each car keeps its lane centre, heading 0 and its desired speed: both costs are zero. Car 1
+    accelerating at 0.5 during stage 0 only then drives straight at 1.1: 13 stages of dt 0.1^2, dt 0.1 0.5^2 for the
+    input and 10 dt 0.1^2 at the end, 0.026 + 0.005 + 0.02."""
+    game = _compiled("overtaking")
+    np.testing.assert_allclose(game.costs(np.zeros(game.n)), [0.0, 0.0], atol=1e-15)
+    a = np.zeros(game.n)
+    a[1] = 0.5
+    np.testing.assert_allclose(game.costs(a), [0.051, 0.0], rtol=1e-13, atol=1e-15)
+
+
+def test_the_overtaking_game_from_zero_inputs_converges_and_is_certified():
+    """The default solver (``globalization: auto``) from zero inputs: converged, which ``gnerun.solve`` reports only
+    for a point its own certificate confirms; and the independent numpy model's best responses (SLSQP from three
+    starts per car) find nothing better for either car. Car 1 passes car 2 and both keep the road."""
+    problem, model = overtaking_problems()[0], overtaking_model()
+    res = gnerun.solve(gnerun.load_config(text=problem.config_yaml), out=None)
+    assert res.status == "converged", res.message
+    assert res.residual_norm <= 1e-10
+    assert max(res.certificate["best_response_gap"].values()) <= 1e-6
+    a = res.z[: model.n]
+    assert model.constraint_values(a).min() >= -1e-9
+    gaps = problem.best_response_gaps(a)
+    costs = model.costs(a)
+    assert all(gap <= 1e-6 * max(1.0, abs(cost)) for gap, cost in zip(gaps.values(), costs, strict=True)), gaps
+    X = model.rollout(a)
+    assert X[-1, 0] > X[-1, 4] + 0.16  # car 1 ends ahead of car 2

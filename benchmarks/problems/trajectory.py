@@ -1,7 +1,8 @@
 """The field's trajectory-game benchmarks as gnerun configs: ALGAMES's 3-car ramp merge and 3-player T-intersection
-(two cars and a pedestrian) from random initial states drawn as ALGAMES's Monte Carlo analysis draws them, and the
-two-player demo game of MCPTrajectoryGameSolver.jl. Every config is built here in Python from the published
-definitions; nothing is copied from the sources' code.
+(two cars and a pedestrian) from random initial states drawn as ALGAMES's Monte Carlo analysis draws them, the
+two-player demo game of MCPTrajectoryGameSolver.jl, and a two-car overtaking game in ALGAMES's style (defined here,
+below). Every config is built here in Python from the published definitions; nothing is copied from the sources'
+code.
 
 Sources
 -------
@@ -89,9 +90,25 @@ constraints on X_2..X_10. U_10 moves no state, so it is 0 at every solution and 
 (inputs U_1..U_9, states X_2..X_10), terminal cost the constant |p_i(x0) - g_i|^2 (the X_1 term). Cold start: the
 demo's initial guess is the zero-input rollout, as here.
 
+Two-car overtaking
+------------------
+A scenario of this suite, not a published one, built from ALGAMES's ingredients: two inertial unicycles (state
+(px, py, th, v), input (w, a), the same ODE as above) integrated by the classical RK4 step (``integrator: rk4``, the
+input held over dt = 0.2), T = 12 (13 stages x 2 inputs x 2 cars = 52 decisions), on a straight two-lane road of
+ALGAMES's merge width 0.34 (lanes of 0.17, centres py = -0.085 and 0.085). The faster car 1 (speed and desired speed
+1.0) starts 0.4 behind the slower car 2 (0.5) in the right lane; both want to stay in it. Costs in ALGAMES's
+quadratic form, charged on the state each input produces: dt (1 (py - (-0.085))^2 + 0.1 th^2 + 1 (v - v_i)^2 +
+0.1 (w^2 + a^2)) per stage, and 10 dt ((py + 0.085)^2 + th^2 + (v - v_i)^2) on the last state. Each car's own
+constraints are the road's edges for a car of radius 0.08, |py| <= 0.09; the collision distance (px1 - px2)^2 +
+(py1 - py2)^2 >= 0.16^2 is shared with one multiplier (variational, as ALGAMES poses it). At zero inputs the cars
+are in each other's way from stage 1 on (car 1 closes 0.5 per second on a gap of 0.4 - 0.16) and exactly aligned,
+so the collision row's gradient has no sideways part: the start is infeasible and degenerate, and the faster car
+has to leave its lane to pass. ALGAMES-class solvers are expected to solve such a scenario from zero inputs; the
+starts (:data:`OVERTAKING_STARTS`) are zero inputs, car 1 pulling out, car 1 braking and seeded small inputs.
+
 Independent check
 -----------------
-:class:`GameModel` re-implements each game in numpy (its own RK3 and double-integrator steps, the costs in the
+:class:`GameModel` re-implements each game in numpy (its own RK3, RK4 and double-integrator steps, the costs in the
 sources' indexing, the constraints as numpy functions) and computes each player's best response with the others
 fixed by scipy's SLSQP (gradients by central differences) from three starts: the player's current inputs, zero
 inputs and a seeded perturbation of the current inputs. The gap J_i(a) - min is a local check: on these nonconvex
@@ -120,8 +137,11 @@ __all__ = [
     "merge_initial_states",
     "merge_model",
     "merge_problems",
+    "overtaking_model",
+    "overtaking_problems",
     "planar_double_integrator_step",
     "unicycle_rk3_step",
+    "unicycle_rk4_step",
 ]
 
 FEAS_TOL = 1e-6  # a point violating a player's constraints by more than this has an infinite best-response gap
@@ -221,6 +241,18 @@ def unicycle_rk3_step(x: np.ndarray, u: np.ndarray, dt: float) -> np.ndarray:
     k2 = dt * _unicycle_field(x + k1 / 2, u)
     k3 = dt * _unicycle_field(x - k1 + 2 * k2, u)
     return x + (k1 + 4 * k2 + k3) / 6
+
+
+def unicycle_rk4_step(x: np.ndarray, u: np.ndarray, dt: float) -> np.ndarray:
+    """One classical fourth-order Runge-Kutta step of the inertial unicycles, the input held over the step;
+    layouts as in :func:`unicycle_rk3_step`."""
+    x = np.asarray(x, dtype=float)
+    u = np.asarray(u, dtype=float)
+    k1 = _unicycle_field(x, u)
+    k2 = _unicycle_field(x + dt / 2 * k1, u)
+    k3 = _unicycle_field(x + dt / 2 * k2, u)
+    k4 = _unicycle_field(x + dt * k3, u)
+    return x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
 
 
 def planar_double_integrator_step(x: np.ndarray, u: np.ndarray, dt: float = 0.1, m: float = 1.0) -> np.ndarray:
@@ -741,8 +773,10 @@ INTERSECTION = _intersection_scenario()
 
 
 def _yaml(name: str, header: Sequence[str], T: int, states: Sequence[str], dynamics: dict[str, str],
-          x0: np.ndarray, agents: Sequence[dict], shared: Sequence[str], equilibrium: str) -> str:
-    """A gnerun dynamic-game config (no ``solver:`` block); strings as JSON, which YAML reads as they are."""
+          x0: np.ndarray, agents: Sequence[dict], shared: Sequence[str], equilibrium: str,
+          ode: tuple[str, float] | None = None) -> str:
+    """A gnerun dynamic-game config (no ``solver:`` block); strings as JSON, which YAML reads as they are.
+    ``dynamics``: x(t+1) per state, or with ``ode`` = (integrator, dt) dx/dt per state."""
     q = json.dumps
     lines = [f"# {h}" for h in header]
     lines += [
@@ -753,14 +787,19 @@ def _yaml(name: str, header: Sequence[str], T: int, states: Sequence[str], dynam
         f"  states: [{', '.join(states)}]",
         "  dynamics:",
     ]
-    lines += [f"    {s}: {q(dynamics[s])}" for s in states]
+    if ode is None:
+        lines += [f"    {s}: {q(dynamics[s])}" for s in states]
+    else:
+        lines.append("    ode:")
+        lines += [f"      {s}: {q(dynamics[s])}" for s in states]
+        lines += [f"    integrator: {ode[0]}", f"    dt: {_num(ode[1])}"]
     lines.append(f"  x0: [{', '.join(repr(float(v)) for v in x0)}]")
     lines.append("  agents:")
     for ag in agents:
         lines.append(f"    - name: {ag['name']}")
         lines.append("      inputs:")
         for u, spec in ag["inputs"].items():
-            lines.append(f"        {u}: {{{', '.join(f'{k}: {v}' for k, v in spec.items())}}}")
+            lines.append(f"        {u}: {{{', '.join(f'{k}: {_value(v)}' for k, v in spec.items())}}}")
         lines.append(f"      stage_cost: {q(ag['stage_cost'])}")
         lines.append(f"      terminal_cost: {q(ag['terminal_cost'])}")
         lines.append("      constraints:")
@@ -769,6 +808,13 @@ def _yaml(name: str, header: Sequence[str], T: int, states: Sequence[str], dynam
     lines += [f"    - {q(c)}" for c in shared]
     lines.append(f"  equilibrium: {equilibrium}")
     return "\n".join(lines) + "\n"
+
+
+def _value(v) -> str:
+    """A start value (a number, or a list of them over the stages) as YAML flow text."""
+    if isinstance(v, (list, tuple, np.ndarray)):
+        return "[" + ", ".join(_num(float(x)) for x in v) + "]"
+    return str(v)
 
 
 def merge_initial_states(count: int = 100, seed: int = 0) -> list[np.ndarray]:
@@ -929,3 +975,133 @@ def mcp_demo_problem() -> Problem:
             "the symmetry; nonconvex (collision constraint), no reference"
         ),
     )
+
+
+# ------------------------------------------------------------------------------------------------
+# Two-car overtaking (ALGAMES's style; see the module docstring)
+# ------------------------------------------------------------------------------------------------
+
+OVERTAKING_DT = 0.2
+OVERTAKING_HORIZON = 12  # T: stages 0..12, 13 x 2 inputs x 2 cars = 52 decisions
+OVERTAKING_RADIUS = 0.08  # each car's; the collision distance is twice this
+OVERTAKING_ROAD = 0.34  # the road's width (ALGAMES's merge road): two lanes of 0.17
+OVERTAKING_LANE = -OVERTAKING_ROAD / 4  # the right lane's centre, where both cars start and want to be
+OVERTAKING_SPEEDS = (1.0, 0.5)  # each car's initial and desired speed: car 1 is the faster one
+OVERTAKING_X0 = (-0.6, OVERTAKING_LANE, 0.0, OVERTAKING_SPEEDS[0], -0.2, OVERTAKING_LANE, 0.0, OVERTAKING_SPEEDS[1])
+OVERTAKING_WEIGHTS = (1.0, 0.1, 1.0)  # on (py - lane)^2, th^2, (v - v_i)^2, times dt per stage
+OVERTAKING_INPUT_WEIGHT = 0.1  # on w^2 + a^2, times dt per stage
+OVERTAKING_TERMINAL = 10.0  # the last state: this times dt times ((py - lane)^2 + th^2 + (v - v_i)^2)
+
+
+def _overtaking_start(kind: str) -> np.ndarray:
+    """Start inputs (2 cars, 13 stages, (w, a)) of one kind: ``zero``; ``pull-out``: car 1 turns left at 0.6 for two
+    stages and back for two (a lane change's shape); ``brake``: car 1 decelerates at 1 for three stages;
+    ``random``: N(0, 0.1^2) inputs for both cars (numpy default_rng(0))."""
+    H = OVERTAKING_HORIZON + 1
+    U = np.zeros((2, H, 2))
+    if kind == "pull-out":
+        U[0, 0:2, 0], U[0, 2:4, 0] = 0.6, -0.6
+    elif kind == "brake":
+        U[0, 0:3, 1] = -1.0
+    elif kind == "random":
+        U = 0.1 * np.random.default_rng(0).standard_normal(U.shape)
+    elif kind != "zero":
+        raise ValueError(f"unknown start {kind!r}")
+    return U
+
+
+OVERTAKING_STARTS: dict[str, str] = {
+    "zero": "u = 0, lambda = 0 (zero inputs)",
+    "pull-out": "car 1 pulls out: w1 = 0.6, 0.6, -0.6, -0.6 at tau = 0..3, else 0",
+    "brake": "car 1 brakes: a1 = -1 at tau = 0..2, else 0",
+    "random": "seeded inputs: N(0, 0.1^2), default_rng(0)",
+}
+
+
+def _overtaking_costs(X: np.ndarray, U: np.ndarray) -> np.ndarray:
+    """The cars' costs in gnerun's indexing: X (..., T + 2, 8) = x(0)..x(T+1), U (..., T + 1, 4); stage tau is charged
+    on x(tau + 1) and u(tau), the terminal cost on x(T + 1)."""
+    dt = OVERTAKING_DT
+    qy, qth, qv = OVERTAKING_WEIGHTS
+    out = []
+    for i, speed in enumerate(OVERTAKING_SPEEDS):
+        py, th, v = X[..., 1:, 4 * i + 1], X[..., 1:, 4 * i + 2], X[..., 1:, 4 * i + 3]
+        dy, dv = py - OVERTAKING_LANE, v - speed
+        ui = U[..., 2 * i:2 * i + 2]
+        stage = dt * (qy * dy ** 2 + qth * th ** 2 + qv * dv ** 2) + dt * OVERTAKING_INPUT_WEIGHT * np.sum(ui ** 2, -1)
+        last = OVERTAKING_TERMINAL * dt * (dy[..., -1] ** 2 + th[..., -1] ** 2 + dv[..., -1] ** 2)
+        out.append(np.sum(stage, axis=-1) + last)
+    return np.stack(out, axis=-1)
+
+
+def _overtaking_own(i: int) -> tuple[_Bound, ...]:
+    """The road's edges for car i's centre: |py| <= road/2 - radius."""
+    edge = OVERTAKING_ROAD / 2 - OVERTAKING_RADIUS
+    return (_Bound(i, "y", True, edge), _Bound(i, "y", False, -edge))
+
+
+def overtaking_model() -> GameModel:
+    """The numpy model of the overtaking game (its own RK4 step, costs and constraints)."""
+    return GameModel(
+        agents=("car1", "car2"),
+        horizon=OVERTAKING_HORIZON,
+        x0=np.asarray(OVERTAKING_X0, dtype=float),
+        step=lambda x, u: unicycle_rk4_step(x, u, OVERTAKING_DT),
+        cost_fn=_overtaking_costs,
+        own=(_overtaking_own(0), _overtaking_own(1)),
+        shared=_collisions(2, 2 * OVERTAKING_RADIUS),
+    )
+
+
+def _overtaking_config_yaml(start: str) -> str:
+    dt = OVERTAKING_DT
+    qy, qth, qv = OVERTAKING_WEIGHTS
+    states = [f"{s}{i}" for i in (1, 2) for s in ("px", "py", "th", "v")]
+    ode: dict[str, str] = {}
+    for i in (1, 2):
+        ode.update({f"px{i}": f"v{i}*cos(th{i})", f"py{i}": f"v{i}*sin(th{i})", f"th{i}": f"w{i}", f"v{i}": f"a{i}"})
+    U = _overtaking_start(start)
+    agents = []
+    for i, speed in enumerate(OVERTAKING_SPEEDS):
+        k = i + 1
+        names = (f"py{k}", f"th{k}", f"v{k}")
+        targets = (OVERTAKING_LANE, 0.0, speed)
+        state = _weighted_squares([dt * w for w in (qy, qth, qv)], names, targets)
+        terminal = _weighted_squares([OVERTAKING_TERMINAL * dt] * 3, names, targets)
+        agents.append({
+            "name": f"car{k}",
+            "inputs": {f"{u}{k}": {"start": U[i, :, j] if U[i, :, j].any() else 0} for j, u in enumerate("wa")},
+            "stage_cost": f"{state} + {_num(dt * OVERTAKING_INPUT_WEIGHT)}*(w{k}**2 + a{k}**2)",
+            "terminal_cost": terminal,
+            "constraints": [c.expr() for c in _overtaking_own(i)],
+        })
+    header = [
+        "Two-car overtaking in ALGAMES's style (benchmarks/problems/trajectory.py): inertial unicycles, RK4,",
+        "dt = 0.2, T = 12; the faster car 1 starts 0.4 behind the slower car 2 in the right lane of a two-lane road",
+        "of width 0.34;",
+        f"start: {OVERTAKING_STARTS[start]}.",
+    ]
+    return _yaml(f"overtaking-{start}", header, OVERTAKING_HORIZON, states, ode, np.asarray(OVERTAKING_X0), agents,
+                 [c.expr() for c in _collisions(2, 2 * OVERTAKING_RADIUS)], "variational", ode=("rk4", dt))
+
+
+def overtaking_problems() -> list[Problem]:
+    """The two-car overtaking game from each of :data:`OVERTAKING_STARTS` (zero inputs first)."""
+    model = overtaking_model()
+    return [
+        Problem(
+            family="overtaking",
+            name="two-car overtaking",
+            start=label,
+            config_yaml=_overtaking_config_yaml(start),
+            reference=None,
+            reference_source="",
+            best_response_gaps=model.best_response_gaps,
+            published={},
+            notes=(
+                "a scenario of this suite in ALGAMES's style (no published numbers); nonconvex, no reference: "
+                "which car gives way, and where, is not unique"
+            ),
+        )
+        for start, label in OVERTAKING_STARTS.items()
+    ]

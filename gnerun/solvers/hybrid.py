@@ -33,6 +33,11 @@ first, judged by a nonmonotone watchdog; a more robust method when it fails; res
    problem, is solved by Lemke's method from z^0 (covering vectors: all ones, then seeded random ones). The
    central path of the interior phase gives the copies of a shared constraint equal multipliers, so it misses
    plain GNEs that have no variational counterpart (FK A.8); complementary pivoting does not.
+5. **A round of best responses** (nonlinear games of several players). When every interior start from z^0 has
+   failed, each player's best answer to the others' start plans (:mod:`gnerun.solvers.response_round`) is the new
+   start, and the interior phase begins again from it, with the small barrier of a warm start and then its other
+   starting points; once per solve. Cold-started trajectory games (the overtaking game of the robustness suite)
+   stall from z^0 and converge from there.
 
 One call of ``step`` is one iteration: one accepted step (a Newton step tried and refused costs an extra
 evaluation inside it). The iterate z = (a, lambda) and ||Phi|| are the semismooth Newton method's in every phase,
@@ -48,6 +53,7 @@ import numpy as np
 
 from .avi import AffineVI
 from .interior_point import STARTS, InteriorIterate, InteriorPoint
+from .response_round import response_round
 from .ssn import FAILURES, SemismoothNewton, SSNState, Status, _norm
 
 MEMORY = 4  # nonmonotone reference: the largest ||Phi|| of this many last accepted Newton iterates
@@ -77,6 +83,7 @@ class Memory:
     handover0: float  # the first hand-over threshold (restarts begin with it)
     attempt: int = 0  # interior-phase starts so far
     crash: bool = False  # the first step is still to be the affine VI's solution (LQ games, gnerun.solvers.avi)
+    answered: bool = False  # z^0 is the players' best answers to the start (gnerun.solvers.response_round)
 
 
 class HybridNewton:
@@ -95,6 +102,9 @@ class HybridNewton:
         d = newton.disturbance
         exact = d.kind == "none" or d.scale == 0
         self.avi = AffineVI.of(self.game) if handover and exact and newton.condensed else None
+        # games of several players: a round of best responses after every interior start has failed (not for LQ
+        # games, which pivot instead; whether the game is LQ is asked only then)
+        self.answers = handover and len(self.game.agent_names) > 1
 
     # the step-wise interface (STYLE.md) ----------------------------------------------------
     def init(self, z0: np.ndarray | None = None, x: np.ndarray | None = None,
@@ -256,14 +266,38 @@ class HybridNewton:
         method; or the end of the solve."""
         if memory.attempt < RESTARTS:
             return self._start_interior(replace(state, search=memory), memory.attempt + 1)
+        if self.answers and not memory.answered and not self._affine():
+            answered = self._answer(state, memory)
+            if answered is not None:
+                return answered
+            why += "; no player has a feasible best answer to the others' start plans"
         if memory.attempt < RESTARTS + PIVOTS and self.game.affine and self.newton.condensed:
             pivoted = self._pivot(state, memory)
             if pivoted is not None:
                 return pivoted
             why += f"; Lemke's method ended on a ray from {PIVOTS} covering vectors"
+        starts = f"{memory.attempt + 1} start(s)"
+        if memory.answered:
+            starts = f"{RESTARTS + 1} start(s) from z^0 and {memory.attempt + 1} from the players' best answers"
         return replace(state, status=status,
-                       message=f"interior-point phase at iteration {state.k}, after {memory.attempt + 1} start(s): "
+                       message=f"interior-point phase at iteration {state.k}, after {starts}: "
                                f"{why} (||Phi|| = {state.residual_norm:.2e})")
+
+    def _affine(self) -> bool:
+        """An LQ game (constant KKT derivatives), read from the formulation in use (no condensed derivatives built
+        for a sparse one)."""
+        return self.game.affine if self.newton.condensed else self.newton.system.affine
+
+    def _answer(self, state: SSNState, memory: Memory) -> SSNState | None:
+        """The interior phase from the players' best answers to the start plans (one iteration: the round and the
+        warm interior start), its other starting points after it; None if no player has a feasible answer."""
+        n = self.game.n
+        a = response_round(self.game, memory.origin[:n], state.x)
+        if a is None:
+            return None
+        origin = np.concatenate([a, np.zeros(self.game.m)])
+        memory = replace(memory, origin=origin, answered=True)
+        return self._start_interior(replace(state, search=memory), 0, warm=True)
 
     def _pivot(self, state: SSNState, memory: Memory) -> SSNState | None:
         """LQ games: the KKT system is a linear complementarity problem; solve it by Lemke's method from z^0 with

@@ -1,0 +1,171 @@
+"""A round of best responses (gnerun/solvers/response_round.py): each player's answer against closed forms, the round's
+Jacobi order, and its place in the globalized method (after every interior start from z^0 has failed, once)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from benchmarks.problems.trajectory import overtaking_model, overtaking_problems
+from gnerun.game.compile import compile_game
+from gnerun.language.config import load_config
+from gnerun.runs.solving import iterate, make_solver
+from gnerun.solvers import hybrid, response_round
+from gnerun.solvers.response_round import answer_starts, best_answer
+
+from .conftest import CONFIGS
+
+# p1: min (x1 - 2 x2)^2 + x1, so x1 = 2 x2 - 1/2 unless x1 + x2 <= 1 stops it; p2: min (x2 - x1/2 - 1/4)^2, so
+# x2 = x1/2 + 1/4 unless the bound or the shared row stops it
+STATIC = """
+name: answers
+game:
+  kind: static
+  agents:
+    - name: p1
+      variables: {x1: {lower: -5, upper: 5, start: 0}}
+      cost: "(x1 - 2*x2)**2 + x1"
+    - name: p2
+      variables: {x2: {lower: -1, upper: 1, start: 0.9}}
+      cost: "(x2 - 0.5*x1 - 0.25)**2"
+  shared_constraints: ["x1 + x2 <= 1"]
+  equilibrium: variational
+"""
+
+
+ONE = """
+name: one
+game:
+  kind: static
+  agents:
+    - name: p1
+      variables: {x1: {lower: -5, upper: 5, start: 0}}
+      cost: "(x1 - 0.6)**2 + x1"
+"""
+
+
+@pytest.fixture(scope="module")
+def static():
+    return compile_game(load_config(text=STATIC))
+
+
+@pytest.mark.parametrize(("x2", "x1"), [(0.3, 0.1), (0.9, 0.1), (-0.2, -0.9)])
+def test_an_answer_is_the_closed_form_best_response(static, x2: float, x1: float) -> None:
+    """x2 = 0.3: the unconstrained minimiser 2 x2 - 1/2 = 0.1; x2 = 0.9: 1.3 is cut to 1 - x2 = 0.1 by the shared row;
+    x2 = -0.2: -0.9."""
+    a = np.array([4.0, x2])
+    value, decision = best_answer(static, 0, a, None, answer_starts(static, 0, a))
+    assert decision == pytest.approx([x1], abs=1e-6)
+    assert value == pytest.approx((x1 - 2 * x2) ** 2 + x1, abs=1e-9)
+
+
+def test_answer_starts_are_the_plan_and_seeded_perturbations_inside_the_bounds(static) -> None:
+    a = np.array([4.8, 0.9])
+    for agent in (0, 1):
+        starts = answer_starts(static, agent, a)
+        assert len(starts) == 1 + len(response_round.PERTURBATIONS)
+        assert starts[0] == pytest.approx(a[agent:agent + 1])
+        assert all(static.a_lower[agent] <= s[0] <= static.a_upper[agent] for s in starts)
+        again = answer_starts(static, agent, a)
+        assert all(np.array_equal(s, t) for s, t in zip(starts, again, strict=True))  # seeded
+    assert len({s[0] for s in answer_starts(static, 0, a)}) == 3  # the perturbations move the plan
+
+
+def test_a_round_answers_the_start_plans_in_any_order(static) -> None:
+    """Jacobi: p2 answers p1's start plan x1 = 0 (x2 = 1/4), not p1's new answer."""
+    a = np.array([0.0, 0.9])
+    out = response_round.response_round(static, a, None)
+    assert out == pytest.approx([0.1, 0.25], abs=1e-6)
+    assert a == pytest.approx([0.0, 0.9])  # not changed in place
+
+
+def test_a_player_without_a_feasible_answer_keeps_its_plan() -> None:
+    """p1's own row x1 >= 3 - x2 meets its bound x1 <= 1 only where x2 >= 2, which p2's plan 0 is not."""
+    text = STATIC.replace('shared_constraints: ["x1 + x2 <= 1"]', "shared_constraints: []").replace(
+        'cost: "(x1 - 2*x2)**2 + x1"', 'cost: "(x1 - 2*x2)**2 + x1"\n      constraints: ["x1 >= 3 - x2"]').replace(
+        "lower: -5, upper: 5", "lower: -5, upper: 1")
+    game = compile_game(load_config(text=text))
+    a = np.array([0.5, 0.0])
+    assert best_answer(game, 0, a, None, answer_starts(game, 0, a)) is None
+    assert response_round.response_round(game, a, None) == pytest.approx([0.5, 0.5], abs=1e-6)
+
+
+def test_no_feasible_answer_for_anyone_is_none() -> None:
+    text = STATIC.replace('"x1 + x2 <= 1"', '"x1 + x2 <= -7"')
+    game = compile_game(load_config(text=text))
+    assert response_round.response_round(game, np.array([0.0, 0.9]), None) is None
+
+
+def _overtaking(start: int = 0):
+    cfg = load_config(text=overtaking_problems()[start].config_yaml)
+    game = compile_game(cfg)
+    return game, make_solver(cfg, game)
+
+
+def test_the_round_comes_after_every_interior_start_from_the_cold_overtaking_start(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """From zero inputs the three interior starts stall (the cars coincide at a knot, where the collision row has no
+    gradient); after the round the warm interior start converges, to a point both cars' independent numpy best
+    responses confirm."""
+    game, solver = _overtaking()
+    calls: list[np.ndarray] = []
+    real = hybrid.response_round
+
+    def counted(g, a, x):
+        assert g is game
+        calls.append(a.copy())
+        return real(g, a, x)
+
+    monkeypatch.setattr(hybrid, "response_round", counted)
+    state = iterate(solver, solver.init())
+    assert len(calls) == 1 and not calls[0].any()  # once, answering the zero-input start
+    assert state.status == "converged", state.message
+    assert state.search.answered and state.k > 3 * hybrid.STALL
+    gaps = overtaking_model().best_response_gaps(state.z[: game.n])
+    assert max(gaps.values()) <= 1e-6
+
+
+def test_without_answers_the_cold_overtaking_start_stalls_and_says_why(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(hybrid, "response_round", lambda game, a, x: None)
+    _, solver = _overtaking()
+    state = iterate(solver, solver.init())
+    assert state.status == "stalled"
+    assert "after 3 start(s): " in state.message and "no player has a feasible best answer" in state.message
+
+
+def test_a_stall_after_the_answers_says_how_many_starts_it_took(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Answers that are the zero-input plan itself: the three interior starts from them stall as before."""
+    monkeypatch.setattr(hybrid, "response_round", lambda game, a, x: np.array(a, dtype=float))
+    _, solver = _overtaking()
+    state = iterate(solver, solver.init())
+    assert state.status == "stalled" and state.search.answered
+    assert "after 3 start(s) from z^0 and 3 from the players' best answers" in state.message, state.message
+
+
+@pytest.mark.parametrize("config", ["paper_study1.yaml", "nonlinear_gne.yaml", "mcp_demo.yaml", "vehicles.yaml"])
+def test_games_the_interior_starts_solve_never_ask_for_answers(monkeypatch: pytest.MonkeyPatch, config: str) -> None:
+    def refuse(*_):
+        raise AssertionError("a round of best responses was asked for")
+
+    monkeypatch.setattr(hybrid, "response_round", refuse)
+    cfg = load_config(CONFIGS / config, {"solver.globalization": "auto"})
+    game = compile_game(cfg)
+    solver = make_solver(cfg, game)
+    assert iterate(solver, solver.init()).status == "converged"
+
+
+def test_one_player_problems_and_the_interior_phase_alone_take_no_round() -> None:
+    """A round needs players to answer each other: not for one player (the certificate's and the distributed solver's
+    own problems), nor for ``globalization: interior_point``."""
+    _, solver = _overtaking()
+    assert solver.answers
+    assert not hybrid.HybridNewton(solver.newton, handover=False).answers
+    one = load_config(text=ONE)
+    assert not make_solver(one, compile_game(one)).answers
+
+
+def test_an_undefined_start_is_no_answer(static) -> None:
+    """A start where the cost is not finite gives no answer and raises nothing (failure is a status in the solver)."""
+    a = np.array([np.nan, 0.3])
+    assert best_answer(static, 0, a, None, [np.array([np.nan])]) is None
+    assert best_answer(static, 0, a, None, [np.array([np.nan]), np.array([0.0])])[1] == pytest.approx([0.1], abs=1e-6)
