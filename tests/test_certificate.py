@@ -548,3 +548,31 @@ def test_without_best_responses_a_kkt_point_is_not_called_converged(tmp_path) ->
     assert res.solution["p1"]["x1"] == pytest.approx(1.25, abs=1e-9)  # the KKT point (p1's maximum)
     full = solve(load_config(config, {"run.certificate": True}))
     assert full.status == "converged" and full.solution["p1"]["x1"] == pytest.approx(-5.0, abs=1e-9)
+
+
+def test_a_fixed_decision_gets_an_empty_box_not_a_crash() -> None:
+    """p1 owns x1 (a double well) and y1 fixed by lower = upper = 0.5. The certificate's design over p1's box is
+    degenerate along y1: it is drawn there at the fixed value, and the gap is the double well's, on a grid."""
+    text = """game:
+  kind: static
+  agents:
+    - name: p1
+      variables: {x1: {start: 1.9}, y1: {lower: 0.5, upper: 0.5, start: 0.5}}
+      cost: "(x1**2 - 4)**2 + x1 + y1*x2"
+    - name: p2
+      variables: {x2: {start: 0}}
+      cost: "(x2 - 0.1*x1)**2"
+"""
+    game = compile_game(load_config(text=text))
+    x1 = 1.9371  # near p1's right-hand stationary point; the gap is measured from wherever x1 is
+    z = _z(game, [x1, 0.5, 0.1 * x1])
+
+    def j(g):
+        return (g**2 - 4) ** 2 + g + 0.5 * 0.1 * x1
+
+    best, arg = _grid_min(j, -10, 10)
+    cert = certificate(game, z)
+    assert arg < -1.9  # the left well is the deeper one
+    assert cert["best_response_gap"]["p1"] == pytest.approx(j(x1) - best, rel=1e-6)
+    with pytest.raises(Exception, match="not a boolean"):
+        load_config(text=text.replace("upper: 0.5", "upper: false"))

@@ -84,6 +84,7 @@ class ConstraintInfo:
     equality: bool
     stage: int | None = None
     carriers: tuple[int, ...] | None = None  # a common multiplier's row: the agents that carry it (None: all)
+    bound: bool = False  # the row of a variable's lower or upper bound
 
 
 class KKTParts(NamedTuple):
@@ -495,24 +496,33 @@ class CompiledGame:
         built once per agent)."""
         cache = self.derived.setdefault("hessians", {})
         if agent not in cache:
-            sym = self._symbolic
-            ai = sym.a[self.agent_slices[agent]]
-            cache[agent] = Evaluator(ca.Function("H_ii", [sym.a, sym.x],
-                                                 [ca.densify(ca.hessian(sym.J[agent], ai)[0])]))
+            cache[agent] = self._agent_hessian(agent)
         return cache[agent](a, self._x(x))[0]
+
+    @stoppable
+    def _agent_hessian(self, agent: int) -> Evaluator:
+        sym = self._symbolic
+        ai = sym.a[self.agent_slices[agent]]
+        return Evaluator(ca.Function("H_ii", [sym.a, sym.x], [ca.densify(ca.hessian(sym.J[agent], ai)[0])]))
 
     def agent_functions(self, agent: int) -> tuple[ca.Function, ca.Function, ca.Function]:
         """Agent ``agent``'s cost J_i(a; x), its gradient in the agent's own decisions, and the rows of its own
         problem c_i(a; x) (``constraint_rows``), as SX Functions of (a, x): what a best response's box search reads
-        as instruction tapes (gnerun.game.tape)."""
+        as instruction tapes (gnerun.game.tape). The rows of the agent's own bounds are left out (a search box lies
+        inside them); ``box_rows`` are the rows kept, in the order of ``c``."""
         sym = self._symbolic
         sl = self.agent_slices[agent]
         Ji = sym.J[agent]
-        rows = self.constraint_rows(agent).tolist()
+        rows = self.box_rows(agent).tolist()
         ci = sym.c[rows] if rows else ca.SX(0, 1)
         return (ca.Function("J", [sym.a, sym.x], [Ji]),
                 ca.Function("dJ", [sym.a, sym.x], [ca.densify(ca.gradient(Ji, sym.a[sl]))]),
                 ca.Function("c", [sym.a, sym.x], [ca.densify(ci)]))
+
+    def box_rows(self, agent: int) -> np.ndarray:
+        """The rows of agent ``agent``'s own problem other than the bounds of its decisions."""
+        rows = self.constraint_rows(agent)
+        return rows[[not self.constraints[r].bound for r in rows]] if rows.size else rows
 
     def step_dynamics(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
         """The plant model f(x, u) (dynamic games)."""
@@ -653,9 +663,9 @@ def _bound_rows(var: ca.SX, name: str, lower: float | None, upper: float | None,
     rows = []
     suffix = f" [tau={stage}]" if stage is not None else ""
     if lower is not None and math.isfinite(lower):
-        rows.append(_Row(lower - var, ConstraintInfo(f"{name} >= {lower:g}{suffix}", owner, False, stage)))
+        rows.append(_Row(lower - var, ConstraintInfo(f"{name} >= {lower:g}{suffix}", owner, False, stage, bound=True)))
     if upper is not None and math.isfinite(upper):
-        rows.append(_Row(var - upper, ConstraintInfo(f"{name} <= {upper:g}{suffix}", owner, False, stage)))
+        rows.append(_Row(var - upper, ConstraintInfo(f"{name} <= {upper:g}{suffix}", owner, False, stage, bound=True)))
     return rows
 
 

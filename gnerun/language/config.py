@@ -77,6 +77,13 @@ def _bound(side: str, unbounded: float) -> Any:
     return AfterValidator(check)
 
 
+def _not_a_boolean(v: Any) -> Any:
+    # YAML's true/false would otherwise be read as the bound 1 or 0
+    if isinstance(v, bool):
+        raise PydanticCustomError("float_type", "Input should be a valid number, not a boolean")
+    return v
+
+
 def _finite_number(x: Any) -> float:
     if isinstance(x, bool) or not isinstance(x, int | float):
         raise PydanticCustomError("float_type", "Input should be a valid number")
@@ -95,8 +102,10 @@ def _start_value(v: Any) -> float | list[float]:
 class Variable(Strict):
     """A decision variable: bounds (constraints of its owner) and a start value; ±.inf is no bound."""
 
-    lower: Annotated[float | None, Field(allow_inf_nan=True), _bound("lower", -math.inf)] = None
-    upper: Annotated[float | None, Field(allow_inf_nan=True), _bound("upper", math.inf)] = None
+    lower: Annotated[float | None, Field(allow_inf_nan=True), BeforeValidator(_not_a_boolean),
+                     _bound("lower", -math.inf)] = None
+    upper: Annotated[float | None, Field(allow_inf_nan=True), BeforeValidator(_not_a_boolean),
+                     _bound("upper", math.inf)] = None
     start: Annotated[float | list[float], PlainValidator(_start_value)] = 0.0  # inputs: may be a list
 
 

@@ -153,7 +153,8 @@ def response_starts(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray
     # a scrambled Sobol design over the search box
     blo, bhi = search_box(game, agent, a)
     count = SOBOL_SMALL if ni <= global_response.MAX_DIM else SOBOL_LARGE
-    design = qmc.scale(qmc.Sobol(ni, scramble=True, seed=rng).random(count), blo, bhi) if ni else np.zeros((0, 0))
+    # blo + (bhi - blo) * u, not qmc.scale: a fixed decision (lower = upper) has an empty box there
+    design = blo + (bhi - blo) * qmc.Sobol(ni, scramble=True, seed=rng).random(count) if ni else np.zeros((0, 0))
     compare = local + corners + others + list(design)
     kinks = _kinks(game, agent, a, x)
     if kinks:
@@ -512,6 +513,9 @@ def check_player(game: CompiledGame, agent: int, z: np.ndarray, x: np.ndarray | 
     return PlayerCheck(gap, best_x, kind, note, box, bound, ray, True, starts.kinks)
 
 
+HESSIAN_BUILT_UP_TO = 100  # an LQ player with more decisions reads its Hessian from gradients
+
+
 def _convex_player(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | None) -> bool:
     """The agent's problem is convex for certain: an LQ game (constant derivatives, affine rows) whose agent's own
     Hessian block is positive semidefinite. Its KKT points are its minima."""
@@ -524,8 +528,30 @@ def _convex_player(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray 
         affine = bool(sparse is not None and sparse.affine)
     if not affine:
         return False
-    w = np.linalg.eigvalsh(0.5 * (lambda H: H + H.T)(game.agent_hessian(agent, a, x)))
+    sl = game.agent_slices[agent]
+    if sl.stop - sl.start <= HESSIAN_BUILT_UP_TO:
+        H = game.agent_hessian(agent, a, x)
+    else:
+        # J_i is quadratic: its gradient's differences are the Hessian's columns (building the Hessian's own
+        # function grows like T^3.7 at horizon T in a condensed dynamic game: 6 s at T = 400)
+        H = _hessian_from_gradients(game, agent, a, x)
+    w = np.linalg.eigvalsh(0.5 * (H + H.T))
     return bool(w.size == 0 or w[0] >= -1e-10 * max(1.0, float(np.max(np.abs(w)))))
+
+
+def _hessian_from_gradients(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | None) -> np.ndarray:
+    """The Hessian of a quadratic J_i in the agent's own decisions, column by column from differences of its
+    gradient (exact up to rounding for a quadratic: a unit step of the size of the point)."""
+    sl = game.agent_slices[agent]
+    a = np.asarray(a, dtype=float)
+    h = max(1.0, float(np.max(np.abs(a[sl]), initial=0.0)))
+    g0 = game.cost_gradients(a, x)[agent, sl]
+    H = np.empty((sl.stop - sl.start,) * 2)
+    for k in range(H.shape[1]):
+        b = a.copy()
+        b[sl.start + k] += h
+        H[:, k] = (game.cost_gradients(b, x)[agent, sl] - g0) / h
+    return H
 
 
 def _box_search(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | None, threshold: float,
@@ -538,7 +564,7 @@ def _box_search(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | N
         return None, None
     lo, hi = search_box(game, agent, a)
     xv = game.x0 if x is None else np.asarray(x, dtype=float)
-    rows = game.constraint_rows(agent)
+    rows = game.box_rows(agent)  # the bounds' rows hold on the whole box: they are left out of the search
     eq = game.equality_mask[rows]
 
     def embed(blo: np.ndarray, bhi: np.ndarray):
