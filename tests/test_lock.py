@@ -15,8 +15,9 @@ from mcap.reader import make_reader
 
 from gnerun.errors import InputError
 from gnerun.log.mcap_log import read_run
+from gnerun.log.sweep_index import read_index
 from gnerun.runs.lock import LOCK_FILE, DirectoryBusy, DirectoryLock, locked
-from gnerun.runs.sweep import load_sweep, read_index
+from gnerun.runs.sweep import load_sweep
 
 from .conftest import CONFIGS, gnerun_command
 

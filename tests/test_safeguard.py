@@ -14,7 +14,8 @@ from gnerun.log.mcap_log import read_run
 from gnerun.runs.closed_loop import StepReport, simulate
 from gnerun.runs.safeguard import SAFE, Plan, choose, first_step_violation
 from gnerun.solvers.ssn import FAILURES
-from gnerun.view.paths import FAILED, required_distances, vehicles
+from gnerun.view.panels import FAILED
+from gnerun.view.paths import required_distances, vehicles
 
 from .conftest import CONFIGS
 

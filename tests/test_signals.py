@@ -15,7 +15,8 @@ import pytest
 from mcap.reader import make_reader
 
 from gnerun.log.mcap_log import read_run
-from gnerun.runs.sweep import available_cpus, read_index
+from gnerun.log.sweep_index import read_index
+from gnerun.runs.sweep import available_cpus
 
 from .conftest import CONFIGS, gnerun_command
 from .test_reliability import _start, _steps_are_whole, _wait_for_steps
