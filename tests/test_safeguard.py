@@ -139,18 +139,18 @@ def test_the_safeguard_keeps_the_demo_in_its_arena_from_the_previous_iterate(saf
 
 def test_a_fallback_step_applies_the_shifted_previous_plan(monkeypatch: pytest.MonkeyPatch) -> None:
     """When no iterate of a sampling time beats it, the plant gets the previous plan's second input."""
-    from gnerun.runs import closed_loop, safeguard
+    from gnerun.runs import safeguard
 
     monkeypatch.setattr(safeguard, "SAFE", -1.0)  # no plan is safe: the least violation, then the first listed
     applied: list[np.ndarray] = []
-    original = closed_loop._safeguarded
+    original = safeguard.fallback_plan
 
     def spy(game, solver, stage, x, trace, plan_prev):
         plan = original(game, solver, stage, x, [trace[0]], plan_prev)  # the iterates withheld: the fallback only
         applied.append((plan_prev, plan))
         return plan
 
-    monkeypatch.setattr(closed_loop, "_safeguarded", spy)
+    monkeypatch.setattr(safeguard, "fallback_plan", spy)
     sim = simulate(load_config(DEMO, {"run.K": [3], "run.steps": 5, "run.reference": "none"}))
     r = sim[3]
     game = sim.game
