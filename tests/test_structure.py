@@ -29,9 +29,7 @@ LAYERS = {
 DEFERRED = {
     ("gnerun.language.config", "gnerun.language.size"): "open: the size estimate reads the config's classes",
     ("gnerun.language.size", "gnerun.language.config"): "open: the size estimate reads the config's classes",
-    ("gnerun.language.expand", "gnerun.language.extent"): "open: the extent raises the expander's problems",
     ("gnerun.language.expand", "gnerun.language.size"): "open: the size estimate reads the config's classes",
-    ("gnerun.language.extent", "gnerun.language.expand"): "open: the extent raises the expander's problems",
     ("gnerun.cli", "*"): "the CLI loads a command's modules when it runs, so that `gnerun --help` is fast",
     ("gnerun.runs.sweep", "gnerun.runs.closed_loop"): "a sweep worker loads the run it makes",
     ("gnerun.runs.sweep", "gnerun.runs.solving"): "a sweep worker loads the run it makes",
@@ -47,7 +45,9 @@ DEFERRED = {
 }
 # cycles closed by a deferred import, each as its sorted modules -> why it is still there
 CYCLES = {
-    ("gnerun.language.config", "gnerun.language.expand", "gnerun.language.extent", "gnerun.language.size"): "open",
+    ("gnerun.language.config", "gnerun.language.expand", "gnerun.language.size"): "open: the size estimate reads "
+    "the config's classes, and the config (Config.size_warnings, which runs/solving.py calls) and the expander's early "
+    "refusal read the estimate",
     ("gnerun.runs.smoothing", "gnerun.runs.solving"): "open: smoothing needs the driver, which moves to solvers/",
 }
 
