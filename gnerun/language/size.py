@@ -4,12 +4,8 @@ Compiling a game costs time and memory that grow with the KKT system (z = (a, la
 formulation (dynamic games solved by ssn, states and costates kept as unknowns), quadratically in a dense one
 (static games, jn, distributed, or ``formulation: condensed``: the Jacobian JPhi is a dense matrix). A config
 past the limits below is refused when it is loaded, with its estimate; one past the warning levels runs with a
-warning, and ``gnerun validate`` does not build it, so that validate stays fast on any config. Measured on the
-reference machine (2 cores; README, "Failures, interruptions and full disks"): a dense system of 3,000 unknowns
-builds in 2 s (0.5 GB), 6,000 in 8.5 s (1.5 GB), 15,000 in 86 s (8.9 GB); a sparse one of 39,000 unknowns
-(paper_study2 at horizon 3,000) in 16 s (0.2 GB), 130,000 (horizon 10,000) in 75 s (0.4 GB). Expression nodes take
-25-85 us each to build, whatever the unknowns: the 24-car merge (99,144 nodes) 8.4 s, 990 agents whose costs share
-a sum of 200 terms (600,930 nodes, 2,970 unknowns) 22 s and 0.6 GB, 1.8 million nodes 142 s and 0.8 GB.
+warning, and ``gnerun validate`` does not build it, so that validate stays fast on any config. The limits
+follow build times and memory measured on a 2-core machine (README, "Size limits").
 """
 
 from __future__ import annotations
@@ -42,9 +38,8 @@ SPARSE_FROM = 800
 SPARSE_WORK = 20_000
 LOOP_STEPS_WARN = 10_000_000  # from this many solver steps of a simulate on (sum over K of run.steps * K)
 # The certificate of a solve builds every agent's own problem, condensed and dense (gnerun.game.compile_agent_problem):
-# its decisions and constraint rows, the others' decisions as parameters. Measured (2 cores, loaded): paper_study1's
-# agents at horizon 100, 200, 400: 0.36, 0.89, 3.39 s each for 202, 402, 802 unknowns, about 5.5e-6 s per unknown
-# squared; at horizon 2,000 (4,002 unknowns each) 377 s and 6.3 GB for the three.
+# its decisions and constraint rows, the others' decisions as parameters; its time and memory grow with the square of
+# the unknowns (the constants below: fitted to measured builds, README "Size limits").
 RESPONSE_WARN = DENSE_WARN  # unknowns of the largest agent problem from which a solve warns
 RESPONSE_S = 5.5e-6  # seconds per squared unknown of an agent problem
 RESPONSE_BYTES = 93  # bytes per squared unknown, kept once built (the agents are built in turn and kept)
