@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 
 from gnerun.errors import ConfigError
 from gnerun.language import expand as expand_module
-from gnerun.language.config import load_config
+from gnerun.language.config import estimate_before_expanding, load_config
 from gnerun.language.expand import Expander
 from gnerun.language.extent import MAX_EXPRESSION_NODES, MAX_ITEMS, MAX_NODES, Rows, game_section
 from gnerun.language.yaml_source import SourceMap
@@ -159,9 +159,7 @@ def test_the_counts_of_the_shipped_templates_are_their_games() -> None:
         assert extent.copies[("shared_constraints", "*")] == len(cfg.game.shared_constraints), name
         if cfg.game.kind == "dynamic":
             assert extent.copies[("states", "*")] == len(cfg.game.states), name
-        from gnerun.language.size import from_extent
-
-        early = from_extent(extent, game, data)
+        early = estimate_before_expanding(extent, game, data)
         assert early is not None and early.decisions == cfg.size.decisions, name
         assert early.multipliers <= cfg.size.multipliers and early.nodes <= cfg.size.nodes, name
 

@@ -27,9 +27,6 @@ LAYERS = {
 
 # (importer, imported) -> why the import is made inside a function
 DEFERRED = {
-    ("gnerun.language.config", "gnerun.language.size"): "open: the size estimate reads the config's classes",
-    ("gnerun.language.size", "gnerun.language.config"): "open: the size estimate reads the config's classes",
-    ("gnerun.language.expand", "gnerun.language.size"): "open: the size estimate reads the config's classes",
     ("gnerun.cli", "*"): "the CLI loads a command's modules when it runs, so that `gnerun --help` is fast",
     ("gnerun.runs.sweep", "gnerun.runs.closed_loop"): "a sweep worker loads the run it makes",
     ("gnerun.runs.sweep", "gnerun.runs.solving"): "a sweep worker loads the run it makes",
@@ -45,9 +42,6 @@ DEFERRED = {
 }
 # cycles closed by a deferred import, each as its sorted modules -> why it is still there
 CYCLES = {
-    ("gnerun.language.config", "gnerun.language.expand", "gnerun.language.size"): "open: the size estimate reads "
-    "the config's classes, and the config (Config.size_warnings, which runs/solving.py calls) and the expander's early "
-    "refusal read the estimate",
     ("gnerun.runs.smoothing", "gnerun.runs.solving"): "open: smoothing needs the driver, which moves to solvers/",
 }
 

@@ -27,6 +27,7 @@ from __future__ import annotations
 import math
 import re
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -47,7 +48,7 @@ from .expr import (
     parse_expression,
     unparse,
 )
-from .extent import MAX_ITEMS, game_section
+from .extent import MAX_ITEMS, Extent, game_section
 from .located import Problem, is_expression
 from .templates import AGGREGATES, Aggregate, Entry, Hole, Template, Word, parse_template
 from .yaml_source import PathKey, SourceMap
@@ -95,8 +96,9 @@ def _uses(value: Any) -> bool:
 class Expander:
     """Expands the game section of one config document (see the module docstring)."""
 
-    def __init__(self, smap: SourceMap):
+    def __init__(self, smap: SourceMap, early_size: Callable[[Extent, dict, dict], Any] | None = None):
         self.src = smap
+        self.early_size = early_size  # (extent, game, document) -> a Size or None: the config's estimate
         self.out = SourceMap(smap.file, overridden=dict(smap.overridden))
         self.items = 0
         self.vectors: dict[str, list] = {}
@@ -196,12 +198,10 @@ class Expander:
 
     def _measure(self, game: dict, base: dict[str, int]) -> None:
         """Count what the game expands to before expanding it (:mod:`gnerun.language.extent`), and estimate the size
-        of the game from the counts (:mod:`gnerun.language.size`): past a limit, the config is refused here, with
-        the estimate, before anything is written out."""
-        from .size import from_extent
-
+        of the game from the counts (``early_size``, :func:`gnerun.language.config.estimate_before_expanding`): past
+        a limit, the config is refused here, with the estimate, before anything is written out."""
         self.extent = extent = game_section(self, game, base)
-        size = from_extent(extent, game, self.document)
+        size = self.early_size(extent, game, self.document) if self.early_size is not None else None
         too_large = size.problems()[0] if size is not None else []
         if too_large:
             where = ("game", "horizon") if game.get("kind") == "dynamic" and "horizon" in game else ("game", "agents")

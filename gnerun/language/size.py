@@ -12,18 +12,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
 
-from .config import (
-    Config,
-    ContinuousDynamics,
-    LinearDynamics,
-    StaticGame,
-    constraint_agents,
-    constraint_stages,
-    constraint_text,
-    sparse_obstacles,
-)
 from .expr import Binary, Call, Expression, ExpressionError, Node, Unary, parse_constraint, parse_expression
+from .parts import constraint_agents, constraint_stages, constraint_text, dynamics_kind, obstacles, sparse_obstacles
+
+if TYPE_CHECKING:
+    from .config import Config, DisturbanceConfig, SolverConfig
 
 DENSE_WARN = 3_000  # unknowns of a dense KKT system: a few seconds to build
 DENSE_LIMIT = 8_000  # refused: a dense JPhi of 6.4e7 entries, several GB while it is built
@@ -140,7 +135,7 @@ def estimate(cfg: Config) -> Size:
     """The size of ``cfg``'s game (see the module docstring); no derivative is built."""
     g = cfg.game
     dense = bool(sparse_obstacles(cfg)) or cfg.solver.formulation == "condensed"
-    if isinstance(g, StaticGame):
+    if g.kind == "static":
         decisions = sum(len(a.variables) for a in g.agents)
         multipliers = sum(_bounds(a.variables) + len(a.constraints) for a in g.agents)
         nodes = sum(_expression_nodes(a.cost, False) + sum(_expression_nodes(constraint_text(c), True)
@@ -170,14 +165,15 @@ def estimate(cfg: Config) -> Size:
         multipliers += carriers * at(c)
         nodes += _expression_nodes(constraint_text(c), True) * at(c)
     dynamics = g.dynamics
-    if isinstance(dynamics, LinearDynamics):
+    linear = dynamics_kind(dynamics) == "linear"
+    if linear:
         nodes += 2 * len(g.states) * (len(g.states) + decisions // stages) * stages
     else:
-        equations = dynamics.ode if isinstance(dynamics, ContinuousDynamics) else dynamics
+        equations = dynamics.ode if dynamics_kind(dynamics) == "continuous" else dynamics
         nodes += sum(_expression_nodes(text, False) for text in equations.values()) * stages
     loop_steps = cfg.run.steps * sum(dict.fromkeys(cfg.run.K))
     kkt = decisions + multipliers
-    if auto_condensed and (kkt < SPARSE_FROM if isinstance(dynamics, LinearDynamics) else kkt * stages < SPARSE_WORK):
+    if auto_condensed and (kkt < SPARSE_FROM if linear else kkt * stages < SPARSE_WORK):
         dense = True
     responses = tuple((len(a.inputs) + _bounds(a.inputs)) * stages + sum(at(c) for c in a.constraints)
                       + sum(at(c) for c in g.shared_constraints if a.name in (constraint_agents(c) or [a.name]))
@@ -185,21 +181,12 @@ def estimate(cfg: Config) -> Size:
     return Size(decisions, multipliers, len(g.states) * stages, nodes, dense, loop_steps, responses)
 
 
-def from_extent(extent, game: dict, document: dict) -> Size | None:
+def from_extent(extent: Any, game: dict, solver: SolverConfig, disturbance: DisturbanceConfig) -> Size | None:
     """A lower bound of the size of a game from the counts of its unexpanded config (:mod:`gnerun.language.extent`),
-    so that a game too large to build is refused before it is written out; None where the config is not readable
-    enough to tell (its validation says why)."""
-    from pydantic import ValidationError
-
-    from .config import DisturbanceConfig, SolverConfig, obstacles
-
+    so that a game too large to build is refused before it is written out, solved with these options; None where
+    the game section is not readable enough to tell (its validation says why)."""
     kind = game.get("kind")
     if kind not in ("static", "dynamic"):
-        return None
-    try:
-        solver = SolverConfig.model_validate(document.get("solver") or {})
-        disturbance = DisturbanceConfig.model_validate(document.get("disturbance") or {})
-    except (ValidationError, AttributeError, TypeError):
         return None
     static = kind == "static"
     stages = 1 if static else extent.stages
