@@ -330,6 +330,8 @@ class ClosedLoop:
         self.record = record if record is not None else LoopRecord(K, cfg.run.steps, game)
         self.agent_idx = [game.agent_indices(i) for i in range(len(game.agent_names))]
         self.nu = sum(len(v) for v in game.variable_names)
+        self.z_star_prev = game.z_start()  # z*(t-1), a start of the z*(t) solve
+        self.rng = None  # the solver's random state, from one sampling time to the next
 
     def _iterate(self, state, budget: int) -> tuple[object, list, float]:
         """Up to ``budget`` solver steps from ``state``, stopped at convergence or a failed step (whose iterate is
@@ -348,60 +350,70 @@ class ClosedLoop:
             trace.append((state.k, state.residual_norm, state.z))
         return state, trace, elapsed
 
-    def _interrupted(self, t: int) -> None:
+    def _interrupted(self, t: int, plural: bool = False) -> None:
         if self.log is not None:
             self.log.log("warning", f"K={self.K}: interrupted ({self.interrupt.reason}) after {t} sampling "
-                                    f"time{'s' * (t != 1)}")
+                                    f"time{'s' * (plural or t != 1)}")
+
+    def _z_star(self, t: int, x: np.ndarray, z_warm: np.ndarray) -> tuple[np.ndarray | None, str]:
+        """z*(t) (None where it is not found, or not asked for: run.reference none) and the status of its solve."""
+        if self.reference is None:
+            return None, "skipped"
+        ref = self.reference.track(z_warm, self.z_star_prev, x, self.interrupt)
+        if ref.converged:
+            self.z_star_prev = ref.z
+        elif self.log is not None:
+            self.log.log("warning", f"K={self.K} t={t}: the exact solution z*(t) was not found ({ref.message}); "
+                                    "e(t) is not available")
+        return (ref.z if ref.converged else None), str(ref.status)
+
+    def _solve(self, t: int, x: np.ndarray, z_warm: np.ndarray) -> tuple[object, list, float]:
+        """The solver steps of sampling time t from z_warm: at most K (at t = 0 with run.initial: solve, the solver's
+        max_iter); the last state, the iterates (:meth:`_iterate`) and the time of init and steps."""
+        cfg = self.cfg
+        budget = cfg.solver.max_iter if t == 0 and cfg.run.initial == "solve" else self.K
+        t0 = time.perf_counter()
+        state = self.solver.init(z_warm, x, self.rng)
+        elapsed = time.perf_counter() - t0
+        state, trace, stepping = self._iterate(state, budget)
+        self.rng = state.rng
+        return state, trace, elapsed + stepping
+
+    def _diverged(self, t: int, size_of_x: float) -> str:
+        limit, plant = self.cfg.solver.divergence_limit, self.cfg.disturbance.plant
+        return (f"K={self.K} t={t}: the plant's state x(t + 1) "
+                + ("is not finite" if math.isinf(size_of_x) else
+                   f"reached |x| = {size_of_x:.3g}, beyond solver.divergence_limit = {limit:g}")
+                + f" (plant disturbance {plant.kind}, scale {plant.scale}); the closed loop ends here (diverged)")
 
     def run(self) -> ClosedLoopResult:
-        cfg, game, K, solver, rec, log = self.cfg, self.game, self.K, self.solver, self.record, self.log
+        cfg, game, K, rec, log = self.cfg, self.game, self.K, self.record, self.log
         steps = cfg.run.steps
-        interrupt = self.interrupt
         unknown = np.full(game.size, np.nan)
-        limit = cfg.solver.divergence_limit
         message = ""
         x = np.array(game.x0, dtype=float)
         z_warm = game.z_start()
         applied_z = z_warm  # the plan applied at the last sampling time
-        z_star_prev = game.z_start()
-        rng = None
+        self.z_star_prev, self.rng = game.z_start(), None
         ended, completed = "completed", steps
 
         for t in range(steps):
             if log is not None:
                 log.at(t)
-            if interrupt is not None and interrupt.requested:
+            if self.interrupt is not None and self.interrupt.requested:
                 ended, completed = "interrupted", t
                 self._interrupted(t)
                 break
             rec.xs.append(x)
-            if self.reference is None:  # run.reference: none: neither z*(t) nor e(t)
-                z_star, ref_status = None, "skipped"
-            else:
-                try:
-                    ref = self.reference.track(z_warm, z_star_prev, x, interrupt)
-                except Stopped:  # a stop request during z*(t): this sampling time is not run
-                    rec.xs.pop()
-                    ended, completed = "interrupted", t
-                    if log is not None:
-                        log.log("warning", f"K={K}: interrupted ({interrupt.reason}) after {t} sampling times")
-                    break
-                z_star, ref_status = (ref.z if ref.converged else None), str(ref.status)
-                if z_star is not None:
-                    z_star_prev = z_star
-                elif log is not None:
-                    log.log("warning", f"K={K} t={t}: the exact solution z*(t) was not found ({ref.message}); "
-                                       "e(t) is not available")
-
-            # run.initial: solve: the first sampling time without a budget (the solver's max_iter)
-            budget = cfg.solver.max_iter if t == 0 and cfg.run.initial == "solve" else K
-            t0 = time.perf_counter()
-            state = solver.init(z_warm, x, rng)
-            elapsed = time.perf_counter() - t0
-            state, trace, stepping = self._iterate(state, budget)
-            elapsed += stepping
-            rng = state.rng
-            _, final = solver.terminate(state)
+            try:
+                z_star, ref_status = self._z_star(t, x, z_warm)
+            except Stopped:  # a stop request during z*(t): this sampling time is not run
+                rec.xs.pop()
+                ended, completed = "interrupted", t
+                self._interrupted(t, plural=True)
+                break
+            state, trace, elapsed = self._solve(t, x, z_warm)
+            _, final = self.solver.terminate(state)
             failed = final in FAILURES
             status = "converged" if final == Status.CONVERGED else str(final) if failed else "incomplete"
             z = state.z
@@ -449,13 +461,9 @@ class ClosedLoop:
                                          float(violation), int(state.k), float(state.residual_norm), e,
                                          float(elapsed)))
             size_of_x = float(np.max(np.abs(x_next))) if np.all(np.isfinite(x_next)) else math.inf
-            if size_of_x > limit:
+            if size_of_x > cfg.solver.divergence_limit:
                 ended, completed = "diverged", t + 1
-                message = (f"K={K} t={t}: the plant's state x(t + 1) " + (
-                    "is not finite" if math.isinf(size_of_x) else
-                    f"reached |x| = {size_of_x:.3g}, beyond solver.divergence_limit = {limit:g}")
-                    + f" (plant disturbance {cfg.disturbance.plant.kind}, scale {cfg.disturbance.plant.scale}); "
-                    "the closed loop ends here (diverged)")
+                message = self._diverged(t, size_of_x)
                 if log is not None:
                     log.at(t + 1)
                     log.last_state(t + 1, x_next, "diverged")
