@@ -429,7 +429,7 @@ def figures(
         bad = [f for f in formats if f not in ("png", "pdf", "svg")]
         if bad or not formats:
             raise InputError(f"--format {format_}: choose from png, pdf, svg")
-        from .runs.sweep import is_sweep_dir
+        from .log.sweep_index import is_sweep_dir
 
         sweeps = [r for r in runs if is_sweep_dir(r)]
         written = write_figures(_existing_logs([r for r in runs if r not in sweeps]), out, formats, sweeps=sweeps)

@@ -317,7 +317,7 @@ def test_reference_none_never_solves_for_z_star(monkeypatch: pytest.MonkeyPatch)
     def refused(*args, **kwargs):
         raise AssertionError("the reference solve was called")
 
-    monkeypatch.setattr(closed_loop, "reference_solution", refused)
+    monkeypatch.setattr(closed_loop.ReferenceSolver, "solve", refused)
     monkeypatch.setattr(solving, "reference_solution", refused)
     monkeypatch.setattr(certificate, "best_response", refused)
     monkeypatch.setattr(certificate.NewtonResponses, "best_response", refused)

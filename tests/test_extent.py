@@ -5,7 +5,6 @@ expansion writes; the wall-clock budget is the last guard."""
 from __future__ import annotations
 
 import re
-import time
 from pathlib import Path
 
 import pytest
@@ -15,14 +14,15 @@ from hypothesis import strategies as st
 
 from gnerun.errors import ConfigError
 from gnerun.language import expand as expand_module
-from gnerun.language.config import load_config
+from gnerun.language.config import estimate_before_expanding, load_config
 from gnerun.language.expand import Expander
 from gnerun.language.extent import MAX_EXPRESSION_NODES, MAX_ITEMS, MAX_NODES, Rows, game_section
 from gnerun.language.yaml_source import SourceMap
 
 from .conftest import CONFIGS, run_cli
 
-BOUND_S = 10.0  # each bomb is answered in about 1 s (process start included); the bound survives a loaded machine
+HANG_S = 60.0  # a hang guard, not a timing: each bomb is answered in about 1 s (process start included), and a bomb
+# that was expanded would run for minutes or run out of memory
 
 
 def _static(agents: list, **game) -> dict:
@@ -101,9 +101,7 @@ def test_validate_answers_every_expansion_bomb_at_once(name: str, config, overri
         path = tmp_path / "bomb.yaml"
         path.write_text(yaml.safe_dump(config(), sort_keys=False, width=10**9))
     args = [a for o in overrides for a in ("--set", o)]
-    t0 = time.perf_counter()
-    proc = run_cli("validate", str(path), *args, timeout=60)
-    elapsed = time.perf_counter() - t0
+    proc = run_cli("validate", str(path), *args, timeout=HANG_S)
     assert proc.returncode == code, (name, proc.stderr[-2000:])
     assert "Traceback" not in proc.stderr + proc.stdout
     out = proc.stderr if code else proc.stdout
@@ -112,7 +110,6 @@ def test_validate_answers_every_expansion_bomb_at_once(name: str, config, overri
     assert phrase in lines[0], lines[0]
     if code:
         assert lines[0].startswith(f"error: {path}:"), lines[0]  # located in the file
-    assert elapsed < BOUND_S, (name, elapsed)
 
 
 # the counts against the expansion -------------------------------------------------------------------------
@@ -162,9 +159,7 @@ def test_the_counts_of_the_shipped_templates_are_their_games() -> None:
         assert extent.copies[("shared_constraints", "*")] == len(cfg.game.shared_constraints), name
         if cfg.game.kind == "dynamic":
             assert extent.copies[("states", "*")] == len(cfg.game.states), name
-        from gnerun.language.size import from_extent
-
-        early = from_extent(extent, game, data)
+        early = estimate_before_expanding(extent, game, data)
         assert early is not None and early.decisions == cfg.size.decisions, name
         assert early.multipliers <= cfg.size.multipliers and early.nodes <= cfg.size.nodes, name
 

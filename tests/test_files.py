@@ -128,7 +128,8 @@ def test_a_refused_log_leaves_no_output_behind(tmp_path) -> None:
 def test_a_sweep_never_writes_a_point_through_a_planted_link(tmp_path) -> None:
     """A point's directory, or points/, replaced by a link to another directory: the sweep resumes with --force
     semantics inside its points, so it would have written config.yaml, run.mcap and summary.json there."""
-    from gnerun.runs.sweep import load_sweep, read_index, run_sweep
+    from gnerun.log.sweep_index import read_index
+    from gnerun.runs.sweep import load_sweep, run_sweep
 
     spec = tmp_path / "sweep.yaml"
     spec.write_text(f"base: {CONFIGS / 'paper_study2.yaml'}\nset: {{run.K: [1]}}\ngrid:\n  run.steps: [2, 3]\n")

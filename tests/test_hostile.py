@@ -13,10 +13,8 @@ import contextlib
 import copy
 import math
 import re
-import signal
 import uuid
 from collections.abc import Iterator
-from datetime import timedelta
 from pathlib import Path
 
 import casadi as ca
@@ -41,7 +39,7 @@ from gnerun.language.expr import (
 from gnerun.language.yaml_source import MAX_CONFIG_BYTES
 from gnerun.runs.solving import solve
 
-from .conftest import CONFIGS, run_cli
+from .conftest import CONFIGS, hang_guard, run_cli
 
 pytestmark = pytest.mark.slow
 
@@ -60,12 +58,12 @@ EXPECTED = {  # test name -> max_examples; the module checks that all of them ra
     "cli_validate": 30,
     "templates": 600,
 }
-HARD_LIMIT = 30.0  # seconds per case: a hang fails the case instead of stalling the suite
+HARD_LIMIT = 30.0  # seconds per case, far above any case's time: a hang fails the case instead of stalling the suite
 CANARY = Path(f"/tmp/gnerun-canary-{uuid.uuid4().hex}")  # must never be created
 
 
 def _settings(name: str):
-    return settings(max_examples=EXPECTED[name], derandomize=True, database=None, deadline=timedelta(seconds=10),
+    return settings(max_examples=EXPECTED[name], derandomize=True, database=None, deadline=None,
                     suppress_health_check=list(HealthCheck), print_blob=True)
 
 
@@ -73,20 +71,9 @@ def _count(name: str) -> None:
     CASES[name] = CASES.get(name, 0) + 1
 
 
-@contextlib.contextmanager
-def bounded(seconds: float = HARD_LIMIT) -> Iterator[None]:
-    """Raise TimeoutError in a case that runs longer than ``seconds`` (SIGALRM: the main thread)."""
-
-    def expire(signum, frame):
-        raise TimeoutError(f"a generated case ran longer than {seconds} s")
-
-    previous = signal.signal(signal.SIGALRM, expire)
-    signal.setitimer(signal.ITIMER_REAL, seconds)
-    try:
-        yield
-    finally:
-        signal.setitimer(signal.ITIMER_REAL, 0)
-        signal.signal(signal.SIGALRM, previous)
+def bounded() -> contextlib.AbstractContextManager[None]:
+    """A case that runs longer than HARD_LIMIT raises TimeoutError: a guard against a hang, not a timing."""
+    return hang_guard(HARD_LIMIT)
 
 
 @pytest.fixture(scope="module", autouse=True)
@@ -102,7 +89,8 @@ def _totals() -> Iterator[None]:
     if "templates" in CASES:  # the generator reaches valid families too, not only mistakes
         assert OUTCOMES.get("templates: loaded", 0) >= 10, OUTCOMES
     if "mutated_configs" in CASES:  # both outcomes are common: the generator reaches past the schema
-        assert OUTCOMES.get("refused when loaded", 0) >= 200 and OUTCOMES.get("solved: converged", 0) >= 200
+        solved = OUTCOMES.get("solved: converged", 0) + OUTCOMES.get("solved: kkt_point", 0)  # kkt_point: not certified
+        assert OUTCOMES.get("refused when loaded", 0) >= 200 and solved >= 200
 
 
 # -------------------------------------------------------------------------------------------------
@@ -130,14 +118,16 @@ def load_outcome(text: str):
         return None
 
 
-def run_outcome(cfg) -> None:
-    """Compile, build the solver and (for small games) solve: results or InputErrors only."""
+def run_outcome(cfg, certify: bool = True) -> None:
+    """Compile, build the solver and (for small games) solve: results or InputErrors only. ``certify``: False
+    solves without the best-response certificate (which test_certificate.py covers; it is most of a solve's time)."""
     g = cfg.game
     if g.kind == "dynamic" and g.horizon > 40:
         OUTCOMES["valid, long horizon (not solved)"] = OUTCOMES.get("valid, long horizon (not solved)", 0) + 1
         return  # valid, but compiling long horizons is not what this test is about
     small = cfg.model_copy(update={"solver": cfg.solver.model_copy(
-        update={"max_iter": min(cfg.solver.max_iter, 60), "inner_max_iter": min(cfg.solver.inner_max_iter, 10)})})
+        update={"max_iter": min(cfg.solver.max_iter, 60), "inner_max_iter": min(cfg.solver.inner_max_iter, 10)}),
+        **({} if certify else {"run": cfg.run.model_copy(update={"certificate": False})})})
     try:
         with np.errstate(all="ignore"):
             res = solve(small)
@@ -147,7 +137,7 @@ def run_outcome(cfg) -> None:
         return
     assert isinstance(res.status, str) and res.message
     OUTCOMES[f"solved: {res.status}"] = OUTCOMES.get(f"solved: {res.status}", 0) + 1
-    if res.status == "converged":
+    if res.status in ("converged", "kkt_point"):
         assert res.residual_norm <= small.solver.tol
 
 
@@ -354,8 +344,8 @@ VALID_COST = st.sampled_from(["x{i}**2 - c[i]*x{i}", "x{i}**2 + 0.1*x{i}*sum(x{k
        st.one_of(st.none(), st.just("sum(x{k} for k in 1..N)"), EXPR_TEXT),
        st.sampled_from([3, 3, 3, 0, -1, 2.5, 10**6]))
 def test_templates(family, name, cost, definition, n) -> None:
-    """A generated family of agents: loading gives a Config or located one-line messages, quickly; a Config
-    compiles and solves (or is refused in one line)."""
+    """A generated family of agents: loading gives a Config or located one-line messages; a Config compiles and
+    solves (or is refused in one line)."""
     _count("templates")
     doc = {"game": {"kind": "static", "parameters": {"N": n, "c": [1.0, 2.0, 3.0]},
                     "agents": [{"for": family, "name": "p" + name, "variables": {name: {"lower": -1, "upper": 1}},
@@ -363,7 +353,7 @@ def test_templates(family, name, cost, definition, n) -> None:
     if definition is not None:
         doc["game"]["definitions"] = {"S": definition}
     text = yaml.safe_dump(doc, sort_keys=False)
-    with bounded(10.0):
+    with bounded():
         cfg = load_outcome(text)
         if cfg is not None:
             OUTCOMES["templates: loaded"] = OUTCOMES.get("templates: loaded", 0) + 1
@@ -511,8 +501,8 @@ def test_mutated_configs(case, flow) -> None:
         cfg = load_outcome(text)
         if cfg is None:
             OUTCOMES["refused when loaded"] = OUTCOMES.get("refused when loaded", 0) + 1
-        else:
-            run_outcome(cfg)
+        else:  # the certificate on one case in four (fixed: the cases are derandomized)
+            run_outcome(cfg, certify=CASES["mutated_configs"] % 4 == 0)
     assert not CANARY.exists()
 
 

@@ -22,6 +22,7 @@ from gnerun.log.mcap_log import RunLog, read_run
 from gnerun.runs import closed_loop as closed_loop_module
 from gnerun.runs import solving as solving_module
 from gnerun.runs.lock import LOCK_FILE, DirectoryBusy
+from gnerun.runs.reference import ReferenceSolver
 
 from .conftest import CONFIGS, run_cli
 
@@ -186,7 +187,7 @@ def test_a_failure_at_each_stage_of_a_closed_loop_leaves_a_complete_directory(st
         original = closed_loop_module.make_solver
         monkeypatch.setattr(closed_loop_module, "make_solver", lambda *a, **kw: _FailingSolver(original(*a, **kw), n))
     elif stage == "reference":
-        original_ref = closed_loop_module.reference_solution
+        original_ref = ReferenceSolver.solve
         calls = []
 
         def reference(*args, **kwargs):
@@ -194,7 +195,7 @@ def test_a_failure_at_each_stage_of_a_closed_loop_leaves_a_complete_directory(st
             if len(calls) == 2:
                 raise Injected("the reference solve failed")
             return original_ref(*args, **kwargs)
-        monkeypatch.setattr(closed_loop_module, "reference_solution", reference)
+        monkeypatch.setattr(ReferenceSolver, "solve", reference)
     elif stage.startswith("logging"):
         n = int(stage.split()[-1])
         original_write = RunLog._write

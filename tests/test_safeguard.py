@@ -11,10 +11,12 @@ import pytest
 from gnerun.game.compile import compile_game, compile_stage_constraints
 from gnerun.language.config import load_config
 from gnerun.log.mcap_log import read_run
+from gnerun.runs import safeguard
 from gnerun.runs.closed_loop import StepReport, simulate
 from gnerun.runs.safeguard import SAFE, Plan, choose, first_step_violation
 from gnerun.solvers.ssn import FAILURES
-from gnerun.view.paths import FAILED, required_distances, vehicles
+from gnerun.view.panels import FAILED
+from gnerun.view.paths import required_distances, vehicles
 
 from .conftest import CONFIGS
 
@@ -138,18 +140,16 @@ def test_the_safeguard_keeps_the_demo_in_its_arena_from_the_previous_iterate(saf
 
 def test_a_fallback_step_applies_the_shifted_previous_plan(monkeypatch: pytest.MonkeyPatch) -> None:
     """When no iterate of a sampling time beats it, the plant gets the previous plan's second input."""
-    from gnerun.runs import closed_loop, safeguard
-
     monkeypatch.setattr(safeguard, "SAFE", -1.0)  # no plan is safe: the least violation, then the first listed
     applied: list[np.ndarray] = []
-    original = closed_loop._safeguarded
+    original = safeguard.fallback_plan
 
     def spy(game, solver, stage, x, trace, plan_prev):
         plan = original(game, solver, stage, x, [trace[0]], plan_prev)  # the iterates withheld: the fallback only
         applied.append((plan_prev, plan))
         return plan
 
-    monkeypatch.setattr(closed_loop, "_safeguarded", spy)
+    monkeypatch.setattr(safeguard, "fallback_plan", spy)
     sim = simulate(load_config(DEMO, {"run.K": [3], "run.steps": 5, "run.reference": "none"}))
     r = sim[3]
     game = sim.game
@@ -275,3 +275,26 @@ def test_the_shift_moves_each_multiplier_with_its_constraint() -> None:
     assert shifted[game.n + row[("x1 + x2 <= 3 [tau=0]", 0)]] == 0.0  # no row at tau = 1
     sim = simulate(load_config(text=STAGED, overrides={"run.K": [1, 3], "run.steps": 6, "run.reference": "none"}))
     assert all(set(r.status) <= {"converged", "incomplete"} for r in sim.values())
+
+
+def test_the_papers_rule_applies_z_K_or_after_a_failed_step_the_last_iterate_before_it() -> None:
+    z0, z1, zK = np.zeros(2), np.ones(2), np.full(2, 2.0)
+    trace = [(0, 1.0, z0), (1, 0.5, z1)]
+    rule = safeguard.PaperRule()
+    ok = rule.apply(np.zeros(1), trace, zK, 2, False, False, None)
+    assert ok.z is zK and not ok.fallback and ok.plan is None
+    assert rule.next_start(trace, ok, zK, False) is zK
+    failed = rule.apply(np.zeros(1), trace, zK, 2, False, True, None)
+    assert failed.z is z1 and failed.fallback
+    assert rule.next_start(trace, failed, zK, True) is z1
+
+
+def test_the_fallback_policy_goes_on_from_the_best_iterate_and_keeps_a_converged_one() -> None:
+    z0, z1, z2 = np.zeros(2), np.ones(2), np.full(2, 2.0)
+    policy = safeguard.Fallback(game=None, solver=None, stage=None)  # a converged iterate needs neither
+    converged = policy.apply(np.zeros(1), [(0, 1.0, z0), (1, 0.0, z1)], z1, 1, True, False, None)
+    assert converged.z is z1 and not converged.fallback and converged.plan is None
+    trace = [(0, 1.0, z0), (1, 0.25, z1), (2, np.nan, z2)]  # a non-finite ||Phi|| ranks last
+    assert policy.next_start(trace, converged, z2, False) is z1
+    assert policy.next_start(trace[:1], safeguard.Applied(z0, True), z2, True) is z0
+    assert policy.next_start(trace[:1], safeguard.Applied(z0, False), z2, False) is z2

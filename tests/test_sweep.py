@@ -17,7 +17,8 @@ import numpy as np
 import pytest
 
 from gnerun.errors import ConfigError
-from gnerun.runs.sweep import TIMING_COLUMNS, columns, load_sweep, loglog_slope, read_index, run_sweep
+from gnerun.log.sweep_index import loglog_slope, read_index
+from gnerun.runs.sweep import TIMING_COLUMNS, columns, load_sweep, run_sweep
 
 from .conftest import CONFIGS, gnerun_command, run_cli
 

@@ -43,6 +43,7 @@ from ..language.config import (
 )
 from ..language.expr import casadi_functions, evaluate, parse_constraint, parse_expression
 from .building import stoppable
+from .horizon import Horizon
 from .tape import kink_function, piecewise_outputs
 
 _BATCHES = (8, 64, 512)  # block sizes of CompiledGame.evaluate_many's mapped functions
@@ -574,72 +575,23 @@ class CompiledGame:
         return np.r_[np.arange(self.agent_slices[agent].start, self.agent_slices[agent].stop),
                      self.n + np.arange(ms.start, ms.stop)].astype(int)
 
+    # the receding horizon (gnerun.game.horizon): what the plant receives from a plan, and the next plan's start
+    @functools.cached_property
+    def plans(self) -> Horizon:
+        return Horizon(self)
+
     def shift(self, z: np.ndarray) -> np.ndarray:
-        """Shifted warm start of a dynamic game: the inputs drop stage 0 and repeat stage T; a row's multiplier moves
-        with its constraint to the stage before (the last stage keeps its own), except where that stage's row is
-        another function (a constraint that depends on tau, e.g. a safety margin that grows over the first stages,
-        :attr:`shift_changed_rows`) or the constraint does not hold at the next stage (``stages``): there it starts
-        from zero."""
-        out = np.array(z, dtype=float)
-        if self.kind != "dynamic":
-            return out
-        source = self._shift_source
-        out = np.where(source >= 0, out[np.maximum(source, 0)], 0.0)
-        changed = self.shift_changed_rows
-        if changed.any():
-            out[self.n:][changed] = 0.0
-        return out
+        """:meth:`gnerun.game.horizon.Horizon.shift`."""
+        return self.plans.shift(z)
 
-    @functools.cached_property
-    def _shift_source(self) -> np.ndarray:
-        """For every entry of z, the entry it takes in a shifted plan (-1: none, it starts from zero)."""
-        n, T = self.n, self.horizon
-        source = np.arange(self.size)
-        for sl in self.agent_slices:  # an agent's inputs are time-major, the same at every stage
-            b = source[sl].reshape(T + 1, (sl.stop - sl.start) // (T + 1))
-            source[sl] = np.concatenate([b[1:], b[-1:]]).reshape(-1)
-        # rows are matched by constraint (owner, text, carriers, and which occurrence at its stage) and stage
-        seen: dict[tuple, int] = {}
-        keys = []
-        for info in self.constraints:
-            base = (info.owner, info.label.rsplit(" [tau=", 1)[0], info.carriers, info.stage)
-            seen[base] = seen.get(base, -1) + 1
-            keys.append((*base[:3], seen[base]))
-        row = {(*key, info.stage): j for j, (key, info) in enumerate(zip(keys, self.constraints, strict=True))}
-        for j, (key, info) in enumerate(zip(keys, self.constraints, strict=True)):
-            if info.stage is not None and info.stage < T:
-                nxt = row.get((*key, info.stage + 1))
-                source[n + j] = -1 if nxt is None else n + nxt
-        source.flags.writeable = False
-        return source
-
-    @functools.cached_property
+    @property
     def shift_changed_rows(self) -> np.ndarray:
-        """Rows of c whose multiplier the shift would take from a different function: the row at stage tau compared
-        with the same constraint at tau + 1 on the same states and inputs (a shifted plan, one random point: two
-        different functions differ there almost surely)."""
-        changed = np.zeros(self.m, dtype=bool)
-        if self.kind != "dynamic" or not self.m or self._dynamics is None:
-            return changed
-        rng = np.random.default_rng(0)
-        a = self.a_start + rng.uniform(-0.5, 0.5, self.n)
-        x = self.x0 + rng.uniform(-0.5, 0.5, self.nx)
-        x1 = self.step_dynamics(x, self.first_inputs(a))
-        source = self._shift_source
-        a_shift = a[source[: self.n]]
-        before, after = self.constraint(a, x), self.constraint(a_shift, x1)
-        rows = source[self.n:] - self.n  # the row each multiplier comes from (negative: none)
-        moved = (rows >= 0) & (rows != np.arange(self.m))
-        with np.errstate(invalid="ignore"):
-            differ = ~np.isclose(after, before[np.maximum(rows, 0)], rtol=1e-9, atol=1e-12, equal_nan=True)
-        changed = moved & differ
-        changed.flags.writeable = False
-        return changed
+        """:attr:`gnerun.game.horizon.Horizon.changed_rows`."""
+        return self.plans.changed_rows
 
     def first_inputs(self, a: np.ndarray) -> np.ndarray:
-        """u(0): every agent's first input, in agent order (what the plant receives)."""
-        parts = [a[sl][: len(v)] for sl, v in zip(self.agent_slices, self.variable_names, strict=True)]
-        return np.concatenate(parts)
+        """:meth:`gnerun.game.horizon.Horizon.first_inputs`."""
+        return self.plans.first_inputs(a)
 
 
 def _num(v: float) -> float | None:

@@ -237,9 +237,9 @@ ORDERINGS = ("MMD_ATA", "COLAMD")
 class Ordering:
     """SuperLU's column ordering for one kind of matrix of one game, chosen at its first factorisation: the one of
     ``ORDERINGS`` with the least fill (nonzeros of L and U; deterministic, unlike a timing). Minimum degree on M^T M
-    keeps the fill linear in T for long horizons with few agents; COLAMD fills less with many agents (the 8-car
-    merge's interior matrix: 0.77 instead of 1.07 million nonzeros, factorised in 75 instead of 137 ms). The choice
-    is a property of the sparsity pattern, kept with the game's sparse system like the pattern itself."""
+    keeps the fill linear in T for long horizons with few agents; COLAMD fills less with many agents (README,
+    "Performance"). The choice is a property of the sparsity pattern, kept with the game's sparse system like the
+    pattern itself."""
 
     def __init__(self) -> None:
         self.spec: str | None = None

@@ -41,6 +41,11 @@ from .expr import (
     parse_constraint,
     parse_expression,
 )
+from .parts import constraint_agents as constraint_agents  # (the compiler reads these three from here)
+from .parts import constraint_stages as constraint_stages
+from .parts import constraint_text as constraint_text
+from .parts import sparse_obstacles
+from .size import Size, estimate, from_extent
 from .yaml_source import PathKey, SourceMap, parse_yaml, read_yaml
 from .yaml_source import dotted as show_path
 
@@ -153,21 +158,6 @@ StageConstraint = Annotated[Annotated[Expr, Tag("text")] | Annotated[StagedConst
                             Discriminator(_constraint_tag)]
 SharedSpec = Annotated[Annotated[Expr, Tag("text")] | Annotated[SharedConstraint, Tag("options")],
                        Discriminator(_constraint_tag)]
-
-
-def constraint_text(c: StageConstraint | SharedSpec) -> str:
-    """The expression of a constraint, with options or not."""
-    return c if isinstance(c, str) else c.expr
-
-
-def constraint_stages(c: StageConstraint | SharedSpec) -> list[int] | None:
-    """The stages a constraint is imposed at (None: every stage)."""
-    return None if isinstance(c, str) else c.stages
-
-
-def constraint_agents(c: StageConstraint | SharedSpec) -> list[str] | None:
-    """The agents that carry a shared constraint (None: every agent; an agent's own constraint names none)."""
-    return c.agents if isinstance(c, SharedConstraint) else None
 
 
 class DynamicAgent(Strict):
@@ -394,11 +384,9 @@ class Config(Strict):
         return self._source
 
     @property
-    def size(self) -> Any:
+    def size(self) -> Size:
         """The estimated size of the game (:class:`gnerun.language.size.Size`), computed before building it."""
         if self._size is None:
-            from .size import estimate
-
             self._size = estimate(self)
         return self._size
 
@@ -541,13 +529,11 @@ def load_config(
     if "name" not in data and path is not None:
         data["name"] = Path(str(path)).stem
     if expands(data):
-        data, smap = Expander(smap).expand(data)
+        data, smap = Expander(smap, early_size=estimate_before_expanding).expand(data)
     try:
         cfg = Config.model_validate(data)
     except ValidationError as e:
         raise ConfigError(one_per_template(_validation_problems(e, data, smap))) from None
-    from .size import estimate  # the size of the game, before anything is built from it
-
     with parse_cache():  # every expression parsed once, for the checks and the estimate
         problems = check_semantics(cfg, smap)
         if problems:
@@ -560,6 +546,18 @@ def load_config(
     cfg._source = str(path) if path is not None else None
     cfg._size = size
     return cfg
+
+
+def estimate_before_expanding(extent: Any, game: dict, document: dict) -> Size | None:
+    """:func:`gnerun.language.size.from_extent` of a document's game section with its solver and disturbance
+    options (:mod:`gnerun.language.expand` refuses a game too large to build before writing it out); None where the
+    options do not validate (their validation says why)."""
+    try:
+        solver = SolverConfig.model_validate(document.get("solver") or {})
+        disturbance = DisturbanceConfig.model_validate(document.get("disturbance") or {})
+    except (ValidationError, AttributeError, TypeError):
+        return None
+    return from_extent(extent, game, solver, disturbance)
 
 
 def _plain(value: Any, path: tuple) -> Any:
@@ -709,25 +707,6 @@ def _field_model(model: Any, part: Any, node: Any) -> Any:
 # ---------------------------------------------------------------------------------------------
 # Semantic checks: names, expressions, shapes
 # ---------------------------------------------------------------------------------------------
-
-
-def sparse_obstacles(cfg: Config) -> list[str]:
-    """Why the sparse formulation cannot solve this config (empty: it can)."""
-    return obstacles(isinstance(cfg.game, StaticGame), cfg.solver, cfg.disturbance)
-
-
-def obstacles(static: bool, solver: SolverConfig, disturbance: DisturbanceConfig) -> list[str]:
-    """:func:`sparse_obstacles` of a game, static or not, solved with these options."""
-    why = []
-    if static:
-        why.append("a static game has no states to keep")
-    if solver.kind != "ssn":
-        why.append(f"solver.kind is {solver.kind!r} (the sparse formulation is for 'ssn')")
-    if solver.complementarity != "min":
-        why.append("it takes min-map steps (solver.complementarity: min)")
-    if disturbance.kind in ("jacobian_noise", "residual") and disturbance.scale > 0:
-        why.append(f"disturbance {disturbance.kind!r} perturbs the whole condensed JPhi or its right-hand side")
-    return why
 
 
 def is_sweep_spec(data: Any) -> bool:

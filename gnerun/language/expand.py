@@ -27,6 +27,7 @@ from __future__ import annotations
 import math
 import re
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -47,7 +48,8 @@ from .expr import (
     parse_expression,
     unparse,
 )
-from .extent import MAX_ITEMS
+from .extent import MAX_ITEMS, Extent, game_section
+from .located import Problem, is_expression
 from .templates import AGGREGATES, Aggregate, Entry, Hole, Template, Word, parse_template
 from .yaml_source import PathKey, SourceMap
 
@@ -55,27 +57,6 @@ EXPANSION_SECONDS = 60.0  # the expansion's wall-clock budget behind the estimat
 _NAME = re.compile(r"(?<![\w.])([A-Za-z_]\w*)")
 _AGGREGATE = re.compile(r"(?<![\w.])(sum|prod|max|min)\s*\(")
 _TEMPLATE = re.compile(r"\{([^{}]*)\}")
-# where a string is an expression (indices are numbers there, sums and parameter indexing are written out);
-# "*" stands for any list index or mapping key
-_EXPRESSIONS = (
-    ("agents", "*", "stage_cost"), ("agents", "*", "terminal_cost"), ("agents", "*", "cost"),
-    ("agents", "*", "constraints", "*"), ("agents", "*", "constraints", "*", "expr"),
-    ("shared_constraints", "*"), ("shared_constraints", "*", "expr"),
-    ("dynamics", "*"), ("dynamics", "ode", "*"), ("definitions", "*"),
-)
-
-
-class _Problem(Exception):
-    def __init__(self, path: PathKey, message: str, bindings: dict[str, int] | None = None, *, key: bool = False,
-                 column: int | None = None):
-        super().__init__(message)
-        self.path = path
-        self.message = message
-        self.bindings = dict(bindings or {})
-        self.key = key  # located at the mapping key of ``path``
-        self.column = column  # located at this character of the string at ``path``
-
-
 @dataclass(frozen=True)
 class _Scope:
     """The integers a template may use: integer parameters and T (``base``), and the indices of the families
@@ -115,8 +96,9 @@ def _uses(value: Any) -> bool:
 class Expander:
     """Expands the game section of one config document (see the module docstring)."""
 
-    def __init__(self, smap: SourceMap):
+    def __init__(self, smap: SourceMap, early_size: Callable[[Extent, dict, dict], Any] | None = None):
         self.src = smap
+        self.early_size = early_size  # (extent, game, document) -> a Size or None: the config's estimate
         self.out = SourceMap(smap.file, overridden=dict(smap.overridden))
         self.items = 0
         self.vectors: dict[str, list] = {}
@@ -134,7 +116,7 @@ class Expander:
         self.deadline = time.perf_counter() + EXPANSION_SECONDS
         try:
             out = self._document(data)
-        except _Problem as p:
+        except Problem as p:
             if p.column is not None:
                 where = self.src.locate_in_text(p.path, p.column)
             else:
@@ -175,23 +157,23 @@ class Expander:
         scope = _Scope(base)
         definitions = game.get("definitions", {})
         if definitions is not None and not isinstance(definitions, dict):
-            raise _Problem(("game", "definitions"), "definitions must be a mapping of names to expressions")
+            raise Problem(("game", "definitions"), "definitions must be a mapping of names to expressions")
         for name, text in (definitions or {}).items():
             path = ("game", "definitions", name)
             if not isinstance(name, str) or _NAME.fullmatch(name) is None:
-                raise _Problem(path, f"a definition's name must be a name, not {name!r}")
+                raise Problem(path, f"a definition's name must be a name, not {name!r}")
             shadowed = _reserved(name, kept, self.vectors)
             if shadowed:
-                raise _Problem(path, f"definition {name!r} has the name of {shadowed}; a definition may not shadow a "
+                raise Problem(path, f"definition {name!r} has the name of {shadowed}; a definition may not shadow a "
                                      "variable, state, input, parameter or constant", key=True)
             if not isinstance(text, str | int | float) or isinstance(text, bool):
-                raise _Problem(path, f"definition {name!r} must be an expression string")
+                raise Problem(path, f"definition {name!r} must be an expression string")
             lhs, relation, _, _ = self._expanded(str(text), path, scope)
             if relation is not None:
-                raise _Problem(path, f"definition {name!r} is an expression, not a constraint ({relation!r})")
+                raise Problem(path, f"definition {name!r} is an expression, not a constraint ({relation!r})")
             names = _dag_names(lhs, self.definition_names)
             if name in names:
-                raise _Problem(path, f"definition {name!r} refers to itself")
+                raise Problem(path, f"definition {name!r} refers to itself")
             self.definitions[name] = lhs
             self.definition_names[id(lhs)] = names
         out: dict[str, Any] = {}
@@ -210,23 +192,20 @@ class Expander:
         declared = _declared(out)
         for name in self.definitions:
             if name in declared:
-                raise _Problem(("game", "definitions", name), f"definition {name!r} has the name of {declared[name]}; "
+                raise Problem(("game", "definitions", name), f"definition {name!r} has the name of {declared[name]}; "
                                "a definition may not shadow a variable, state, input, parameter or constant", key=True)
         return out
 
     def _measure(self, game: dict, base: dict[str, int]) -> None:
         """Count what the game expands to before expanding it (:mod:`gnerun.language.extent`), and estimate the size
-        of the game from the counts (:mod:`gnerun.language.size`): past a limit, the config is refused here, with
-        the estimate, before anything is written out."""
-        from .extent import game_section
-        from .size import from_extent
-
+        of the game from the counts (``early_size``, :func:`gnerun.language.config.estimate_before_expanding`): past
+        a limit, the config is refused here, with the estimate, before anything is written out."""
         self.extent = extent = game_section(self, game, base)
-        size = from_extent(extent, game, self.document)
+        size = self.early_size(extent, game, self.document) if self.early_size is not None else None
         too_large = size.problems()[0] if size is not None else []
         if too_large:
             where = ("game", "horizon") if game.get("kind") == "dynamic" and "horizon" in game else ("game", "agents")
-            raise _Problem(where, too_large[0] + " (estimated before expanding the config)")
+            raise Problem(where, too_large[0] + " (estimated before expanding the config)")
 
     def template(self, text: str, path: PathKey) -> Template:
         """``text`` parsed as a template (a located problem if it does not parse)."""
@@ -244,16 +223,16 @@ class Expander:
         """The scopes of a ``for`` mapping's copies, in order (nested in the order written), counted before
         they are built."""
         if not isinstance(spec, dict) or not spec:
-            raise _Problem(path, "for: must map index names to ranges a..b, e.g. {i: 1..N}", scope.indices)
+            raise Problem(path, "for: must map index names to ranges a..b, e.g. {i: 1..N}", scope.indices)
         names = list(spec)
         for name in names:
             if not isinstance(name, str) or _NAME.fullmatch(name) is None:
-                raise _Problem(path, f"an index must be a name, not {name!r}", scope.indices)
+                raise Problem(path, f"an index must be a name, not {name!r}", scope.indices)
             if name in scope.base or name in scope.indices:
-                raise _Problem(path, f"index {name!r} is already in use here (a parameter, T or an outer index)",
+                raise Problem(path, f"index {name!r} is already in use here (a parameter, T or an outer index)",
                                scope.indices)
             if name in self.definitions:
-                raise _Problem(path, f"index {name!r} is the name of a definition", scope.indices)
+                raise Problem(path, f"index {name!r} is the name of a definition", scope.indices)
         scopes: list[_Scope] = []
         described = "the family for: {" + ", ".join(f"{k}: {v}" for k, v in spec.items()) + "}"
 
@@ -276,14 +255,14 @@ class Expander:
     def _count(self, n: int, path: PathKey, scope: _Scope) -> None:
         self.items += n
         if self.items > MAX_ITEMS:
-            raise _Problem(path, f"the game expands to more than {MAX_ITEMS} family copies and aggregate terms "
+            raise Problem(path, f"the game expands to more than {MAX_ITEMS} family copies and aggregate terms "
                                  "(the limit of one config)", scope.indices)
 
     def _range(self, text: Any, path: PathKey, scope: _Scope) -> tuple[int, int]:
         if isinstance(text, int) and not isinstance(text, bool):
             return text, text
         if not isinstance(text, str) or text.count("..") != 1:
-            raise _Problem(path, f"a range is written a..b (both ends included), not {text!r}", scope.indices)
+            raise Problem(path, f"a range is written a..b (both ends included), not {text!r}", scope.indices)
         a, b = text.split("..")
         return self._bounds(self._parsed_integer(a, path, scope), self._parsed_integer(b, path, scope), text.strip(),
                             path, scope)
@@ -296,7 +275,7 @@ class Expander:
         used = names_in(lo) | names_in(hi)
         if b < a - 1 and not used & set(scope.indices):
             given = ", ".join(f"{k} = {scope.base[k]}" for k in sorted(used) if k in scope.base)
-            raise _Problem(path, f"the range {text!r} is {a}..{b}, a negative count ({b - a + 1} values"
+            raise Problem(path, f"the range {text!r} is {a}..{b}, a negative count ({b - a + 1} values"
                                  + (f", with {given}" if given else "") + f"): a range may be empty ({a}..{a - 1}) "
                                  "but not shorter", scope.indices)
         return a, b
@@ -305,7 +284,7 @@ class Expander:
         try:
             return self.integer_tree(text)
         except ExpressionError as e:
-            raise _Problem(path, f"in the integer expression {text.strip()!r}: {e.message}", scope.indices) from None
+            raise Problem(path, f"in the integer expression {text.strip()!r}: {e.message}", scope.indices) from None
 
     def _integer(self, text: str, path: PathKey, scope: _Scope) -> int:
         return self._value(self._parsed_integer(text, path, scope), text, path, scope)
@@ -316,14 +295,14 @@ class Expander:
         for name in names_in(tree):
             if name not in env:
                 known = ", ".join(sorted(env)) or "none"
-                raise _Problem(path, f"{name!r} in {text.strip()!r} is not an index, an integer parameter or T "
+                raise Problem(path, f"{name!r} in {text.strip()!r} is not an index, an integer parameter or T "
                                      f"(known here: {known})", scope.indices)
         with _quiet():
             value = evaluate(tree, env, numpy_functions())
         if not (isinstance(value, int | float) and math.isfinite(value) and float(value).is_integer()):
-            raise _Problem(path, f"{text.strip()!r} is {value!r}, not an integer", scope.indices)
+            raise Problem(path, f"{text.strip()!r} is {value!r}, not an integer", scope.indices)
         if abs(value) > 10**12:
-            raise _Problem(path, f"{text.strip()!r} = {value:.0f} is out of range", scope.indices)
+            raise Problem(path, f"{text.strip()!r} = {value:.0f} is out of range", scope.indices)
         return int(value)
 
     # walking -------------------------------------------------------------------------------------------
@@ -333,11 +312,11 @@ class Expander:
             out: dict[Any, Any] = {}
             for k, v in value.items():
                 if k == "for":
-                    raise _Problem(src + (k,), "for: belongs to an item of a list (agents, states, constraints, "
+                    raise Problem(src + (k,), "for: belongs to an item of a list (agents, states, constraints, "
                                                "shared constraints, dynamics)", scope.indices)
                 nk = self._template(k, src + (k,), scope) if isinstance(k, str) else k
                 if nk in out:
-                    raise _Problem(src + (k,), f"key {nk!r} appears twice after expansion", scope.indices)
+                    raise Problem(src + (k,), f"key {nk!r} appears twice after expansion", scope.indices)
                 self._copy_position(src + (k,), dst + (nk,), key=True, scope=scope)
                 if nk == "stages" and isinstance(v, str):  # a range of stages: the list of tau values
                     lo, hi = self._range(v, src + (k,), scope)
@@ -360,7 +339,7 @@ class Expander:
                 if isinstance(item, dict) and "for" in item:
                     body = {k: v for k, v in item.items() if k != "for"}
                     if not body:
-                        raise _Problem(src + (idx,), "this item has nothing but for: (a family item is an item with "
+                        raise Problem(src + (idx,), "this item has nothing but for: (a family item is an item with "
                                                      "for: {i: a..b} added, e.g. an agent's name, variables and cost)",
                                        scope.indices)
                     for inner in self._family(item["for"], src + (idx, "for"), scope):
@@ -371,7 +350,7 @@ class Expander:
         if isinstance(value, str):
             if logical == ("x0", "*"):
                 return self._number(value, src, scope)
-            if _matches(logical):
+            if is_expression(logical):
                 return self._expression(value, src, scope)
             return self._template(value, src, scope)
         return value
@@ -383,15 +362,15 @@ class Expander:
             return value
         tree, relation, _, _ = self._expanded(value, path, scope)
         if relation is not None:
-            raise _Problem(path, f"{value!r} is a comparison, not a number", scope.indices)
+            raise Problem(path, f"{value!r} is a comparison, not a number", scope.indices)
         env = dict(self.scalars)
         unknown = sorted(_dag_names(tree, self.definition_names) - set(env) - set(CONSTANTS))
         if unknown:
-            raise _Problem(path, f"{unknown[0]!r} in {value!r} is not an index or a numeric parameter", scope.indices)
+            raise Problem(path, f"{unknown[0]!r} in {value!r} is not an index or a numeric parameter", scope.indices)
         with _quiet():
             number = float(evaluate(tree, env, numpy_functions()))
         if not math.isfinite(number):
-            raise _Problem(path, f"{value!r} is {number}, not a finite number", scope.indices)
+            raise Problem(path, f"{value!r} is {number}, not a finite number", scope.indices)
         return number
 
     def _emit(self, body: dict, src: PathKey, dst: PathKey, items: list, scope: _Scope, logical: tuple) -> None:
@@ -424,19 +403,19 @@ class Expander:
             if isinstance(part, str) and what != "dynamics":
                 name = self._template(part, src + (idx,), scope)
                 if name in merged:
-                    raise _Problem(src + (idx,), f"{name!r} is declared twice", scope.indices)
+                    raise Problem(src + (idx,), f"{name!r} is declared twice", scope.indices)
                 self._copy_position(src + (idx,), dst + (name,), key=True, scope=scope)
                 merged[name] = {}
                 continue
             if not isinstance(part, dict):
-                raise _Problem(src + (idx,), f"an item of {what} must be a mapping (name: ...)", scope.indices)
+                raise Problem(src + (idx,), f"an item of {what} must be a mapping (name: ...)", scope.indices)
             if set(part) <= {"for", "names"} and isinstance(part.get("names"), list) and what != "dynamics":
                 scopes = self._family(part["for"], src + (idx, "for"), scope) if "for" in part else [scope]
                 for inner in scopes:
                     for j, text in enumerate(part["names"]):
                         name = self._template(str(text), src + (idx, "names", j), inner)
                         if name in merged:
-                            raise _Problem(src + (idx, "names", j), f"{name!r} is declared twice", inner.indices)
+                            raise Problem(src + (idx, "names", j), f"{name!r} is declared twice", inner.indices)
                         self._copy_position(src + (idx, "names", j), dst + (name,), key=True, scope=inner)
                         merged[name] = {}
                 continue
@@ -449,7 +428,7 @@ class Expander:
                 for k, v in body.items():
                     name = self._template(k, src + (idx, k), inner) if isinstance(k, str) else k
                     if name in merged:
-                        raise _Problem(src + (idx, k), f"{name!r} is given twice in {what}", inner.indices)
+                        raise Problem(src + (idx, k), f"{name!r} is given twice in {what}", inner.indices)
                     self._copy_position(src + (idx, k), dst + (name,), key=True, scope=inner)
                     merged[name] = self._walk(v, src + (idx, k), dst + (name,), inner, logical + ("*",))
         return merged
@@ -461,7 +440,7 @@ class Expander:
             return text
         out = _TEMPLATE.sub(lambda m: str(self._integer(m.group(1), path, scope)), text)
         if "{" in out or "}" in out:
-            raise _Problem(path, f"unbalanced or nested braces in {text!r} (a template is {{integer expression}})",
+            raise Problem(path, f"unbalanced or nested braces in {text!r} (a template is {{integer expression}})",
                            scope.indices)
         return out
 
@@ -471,7 +450,7 @@ class Expander:
             try:
                 template = parse_template(text)
             except ExpressionError as e:
-                raise _Problem(path, e.describe(), scope.indices, column=e.column) from None
+                raise Problem(path, e.describe(), scope.indices, column=e.column) from None
             self.templates[text] = template
         return template
 
@@ -518,16 +497,16 @@ class Expander:
                 if isinstance(n, Aggregate):
                     self.changed = True
                     if n.index in sc.base or n.index in sc.indices:
-                        raise _Problem(path, f"index {n.index!r} of {n.function}() is already in use here",
+                        raise Problem(path, f"index {n.index!r} of {n.function}() is already in use here",
                                        sc.indices, column=n.column)
                     if n.index in self.definitions:
-                        raise _Problem(path, f"index {n.index!r} of {n.function}() is the name of a definition",
+                        raise Problem(path, f"index {n.index!r} of {n.function}() is the name of a definition",
                                        sc.indices, column=n.column)
                     lo, hi = self._bounds(n.lo, n.hi, n.range_text, path, sc)
                     count = max(0, hi - lo + 1)
                     self._count(count, path, sc)
                     if not count and n.function in ("max", "min"):
-                        raise _Problem(path, f"{n.function}() over the empty range {n.range_text!r}", sc.indices,
+                        raise Problem(path, f"{n.function}() over the empty range {n.range_text!r}", sc.indices,
                                        column=n.column)
                     stack.append((n, sc, count))
                     stack.extend((n.body, sc.bind(n.index, v), -1) for v in range(hi, lo - 1, -1))
@@ -555,7 +534,7 @@ class Expander:
         """The wall-clock budget of the expansion, the last guard behind the estimate (checked every 4,096 nodes)."""
         self.ticks += 1
         if self.ticks & 4095 == 0 and time.perf_counter() > self.deadline:
-            raise _Problem(path, f"expanding {what} took more than {EXPANSION_SECONDS:g} s (the expansion's time "
+            raise Problem(path, f"expanding {what} took more than {EXPANSION_SECONDS:g} s (the expansion's time "
                                  "limit); write the game with fewer or smaller families, sums or definitions",
                            scope.indices)
 
@@ -573,7 +552,7 @@ class Expander:
         """A templated name (``x{i}``) with its integers written in; what it makes must be a name."""
         text = "".join(p if isinstance(p, str) else str(self._value(p.tree, p.text, path, scope)) for p in word.pieces)
         if _NAME.fullmatch(text) is None:
-            raise _Problem(path, f"{word.text!r} makes {text!r}, which is not a name (a template inside a name must "
+            raise Problem(path, f"{word.text!r} makes {text!r}, which is not a name (a template inside a name must "
                                  "give a non-negative integer)", scope.indices, column=word.column)
         return text
 
@@ -581,20 +560,20 @@ class Expander:
         """``name[i]``, ``name[i][j]`` of a vector or matrix parameter: the entry (1-based)."""
         if entry.name not in self.vectors:
             known = ", ".join(sorted(self.vectors)) or "none"
-            raise _Problem(path, f"{entry.name!r} is indexed but is not a vector or matrix parameter (those here: "
+            raise Problem(path, f"{entry.name!r} is indexed but is not a vector or matrix parameter (those here: "
                                  f"{known})", scope.indices, column=entry.column)
         value: Any = self.vectors[entry.name]
         for index in entry.indices:
             k = self._value(index, unparse(index), path, scope)
             if not isinstance(value, list):
-                raise _Problem(path, f"{entry.name!r} has fewer dimensions than indices", scope.indices,
+                raise Problem(path, f"{entry.name!r} has fewer dimensions than indices", scope.indices,
                                column=entry.column)
             if not 1 <= k <= len(value):
-                raise _Problem(path, f"index {k} of {entry.name!r} is outside 1..{len(value)}", scope.indices,
+                raise Problem(path, f"index {k} of {entry.name!r} is outside 1..{len(value)}", scope.indices,
                                column=entry.column)
             value = value[k - 1]
         if isinstance(value, list):
-            raise _Problem(path, f"{entry.name!r} needs more indices (it is a matrix)", scope.indices,
+            raise Problem(path, f"{entry.name!r} needs more indices (it is a matrix)", scope.indices,
                            column=entry.column)
         return value
 
@@ -602,11 +581,11 @@ class Expander:
         def check(v: Any, depth: int) -> None:
             if isinstance(v, list):
                 if depth >= 2 or not v:
-                    raise _Problem(path, "a parameter is a number, a vector (list) or a matrix (list of lists)")
+                    raise Problem(path, "a parameter is a number, a vector (list) or a matrix (list of lists)")
                 for x in v:
                     check(x, depth + 1)
             elif isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
-                raise _Problem(path, f"the entries of a vector or matrix parameter must be finite numbers, not {v!r}")
+                raise Problem(path, f"the entries of a vector or matrix parameter must be finite numbers, not {v!r}")
         check(value, 0)
         return value
 
@@ -702,11 +681,6 @@ def _declared(game: dict) -> dict[str, str]:
             who = f" of {agent['name']!r}" if isinstance(agent.get("name"), str) else ""
             out.update((v, what + who) for v in names if isinstance(v, str))
     return out
-
-
-def _matches(logical: tuple) -> bool:
-    return any(len(p) == len(logical) and all(a == "*" or a == b for a, b in zip(p, logical, strict=True))
-               for p in _EXPRESSIONS)
 
 
 class _quiet:

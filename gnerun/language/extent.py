@@ -32,6 +32,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .expr import MAX_LENGTH, Binary, Call, ExpressionError, Name, Unary, evaluate, names_in, numpy_functions
+from .located import Problem, is_expression
 from .templates import Aggregate, Template
 
 if TYPE_CHECKING:
@@ -81,19 +82,15 @@ class Counter:
 
     # the limits ----------------------------------------------------------------------------------------
     def _add_items(self, n: int, path: PathKey, what: str) -> None:
-        from .expand import _Problem
-
         self.extent.items += n
         if self.extent.items > MAX_ITEMS:
-            raise _Problem(path, f"the game expands to more than {MAX_ITEMS:,} family copies and aggregate terms "
+            raise Problem(path, f"the game expands to more than {MAX_ITEMS:,} family copies and aggregate terms "
                                  f"(the limit of one config; counted before expanding it, every value of an index "
                                  f"visited, an empty inner range included): {what}")
 
     def _check_nodes(self, n: int, path: PathKey, what: str) -> None:
-        from .expand import _Problem
-
         if n > MAX_EXPRESSION_NODES:
-            raise _Problem(path, f"{what} expands to {n:,.0f} expression nodes, more than one expression may hold "
+            raise Problem(path, f"{what} expands to {n:,.0f} expression nodes, more than one expression may hold "
                                  f"({MAX_EXPRESSION_NODES:,} characters; counted before expanding it)")
 
     # ranges --------------------------------------------------------------------------------------------
@@ -209,8 +206,6 @@ class Counter:
 
 def game_section(expander: Expander, game: dict, base: dict[str, int]) -> Extent:
     """The extent of an (unexpanded) game section; raises the expander's problem past a limit."""
-    from .expand import _matches, _Problem
-
     c = Counter(expander, base)
     stages = (base["T"] + 1) if "T" in base and game.get("kind") == "dynamic" else 1
     one = Rows(1)
@@ -230,7 +225,7 @@ def game_section(expander: Expander, game: dict, base: dict[str, int]) -> Extent
         total = float(n.sum())
         c.extent.nodes += int(total)
         if c.extent.nodes > MAX_NODES:
-            raise _Problem(path, f"the game expands to more than {MAX_NODES:,} expression nodes (the limit of one "
+            raise Problem(path, f"the game expands to more than {MAX_NODES:,} expression nodes (the limit of one "
                                  f"config, its stages not counted; counted before expanding it): {total:,.0f} here")
         c.extent.expression_nodes[logical + (("staged",) if staged else ())] += int(total)
 
@@ -278,7 +273,7 @@ def game_section(expander: Expander, game: dict, base: dict[str, int]) -> Extent
                 else:
                     c.extent.copies[logical + ("*",)] += rows.n
                     walk(item, rows, logical + ("*",), path + (idx,), staged)
-        elif isinstance(value, str) and _matches(logical) and logical[:1] != ("definitions",):
+        elif isinstance(value, str) and is_expression(logical) and logical[:1] != ("definitions",):
             expression(value, rows, path, logical, staged)
 
     def emit(body: dict, rows: Rows, logical: tuple, path: PathKey) -> None:

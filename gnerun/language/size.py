@@ -4,30 +4,21 @@ Compiling a game costs time and memory that grow with the KKT system (z = (a, la
 formulation (dynamic games solved by ssn, states and costates kept as unknowns), quadratically in a dense one
 (static games, jn, distributed, or ``formulation: condensed``: the Jacobian JPhi is a dense matrix). A config
 past the limits below is refused when it is loaded, with its estimate; one past the warning levels runs with a
-warning, and ``gnerun validate`` does not build it, so that validate stays fast on any config. Measured on the
-reference machine (2 cores; README, "Failures, interruptions and full disks"): a dense system of 3,000 unknowns
-builds in 2 s (0.5 GB), 6,000 in 8.5 s (1.5 GB), 15,000 in 86 s (8.9 GB); a sparse one of 39,000 unknowns
-(paper_study2 at horizon 3,000) in 16 s (0.2 GB), 130,000 (horizon 10,000) in 75 s (0.4 GB). Expression nodes take
-25-85 us each to build, whatever the unknowns: the 24-car merge (99,144 nodes) 8.4 s, 990 agents whose costs share
-a sum of 200 terms (600,930 nodes, 2,970 unknowns) 22 s and 0.6 GB, 1.8 million nodes 142 s and 0.8 GB.
+warning, and ``gnerun validate`` does not build it, so that validate stays fast on any config. The limits
+follow build times and memory measured on a 2-core machine (README, "Size limits").
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
 
-from .config import (
-    Config,
-    ContinuousDynamics,
-    LinearDynamics,
-    StaticGame,
-    constraint_agents,
-    constraint_stages,
-    constraint_text,
-    sparse_obstacles,
-)
 from .expr import Binary, Call, Expression, ExpressionError, Node, Unary, parse_constraint, parse_expression
+from .parts import constraint_agents, constraint_stages, constraint_text, dynamics_kind, obstacles, sparse_obstacles
+
+if TYPE_CHECKING:
+    from .config import Config, DisturbanceConfig, SolverConfig
 
 DENSE_WARN = 3_000  # unknowns of a dense KKT system: a few seconds to build
 DENSE_LIMIT = 8_000  # refused: a dense JPhi of 6.4e7 entries, several GB while it is built
@@ -42,9 +33,8 @@ SPARSE_FROM = 800
 SPARSE_WORK = 20_000
 LOOP_STEPS_WARN = 10_000_000  # from this many solver steps of a simulate on (sum over K of run.steps * K)
 # The certificate of a solve builds every agent's own problem, condensed and dense (gnerun.game.compile_agent_problem):
-# its decisions and constraint rows, the others' decisions as parameters. Measured (2 cores, loaded): paper_study1's
-# agents at horizon 100, 200, 400: 0.36, 0.89, 3.39 s each for 202, 402, 802 unknowns, about 5.5e-6 s per unknown
-# squared; at horizon 2,000 (4,002 unknowns each) 377 s and 6.3 GB for the three.
+# its decisions and constraint rows, the others' decisions as parameters; its time and memory grow with the square of
+# the unknowns (the constants below: fitted to measured builds, README "Size limits").
 RESPONSE_WARN = DENSE_WARN  # unknowns of the largest agent problem from which a solve warns
 RESPONSE_S = 5.5e-6  # seconds per squared unknown of an agent problem
 RESPONSE_BYTES = 93  # bytes per squared unknown, kept once built (the agents are built in turn and kept)
@@ -145,7 +135,7 @@ def estimate(cfg: Config) -> Size:
     """The size of ``cfg``'s game (see the module docstring); no derivative is built."""
     g = cfg.game
     dense = bool(sparse_obstacles(cfg)) or cfg.solver.formulation == "condensed"
-    if isinstance(g, StaticGame):
+    if g.kind == "static":
         decisions = sum(len(a.variables) for a in g.agents)
         multipliers = sum(_bounds(a.variables) + len(a.constraints) for a in g.agents)
         nodes = sum(_expression_nodes(a.cost, False) + sum(_expression_nodes(constraint_text(c), True)
@@ -175,14 +165,15 @@ def estimate(cfg: Config) -> Size:
         multipliers += carriers * at(c)
         nodes += _expression_nodes(constraint_text(c), True) * at(c)
     dynamics = g.dynamics
-    if isinstance(dynamics, LinearDynamics):
+    linear = dynamics_kind(dynamics) == "linear"
+    if linear:
         nodes += 2 * len(g.states) * (len(g.states) + decisions // stages) * stages
     else:
-        equations = dynamics.ode if isinstance(dynamics, ContinuousDynamics) else dynamics
+        equations = dynamics.ode if dynamics_kind(dynamics) == "continuous" else dynamics
         nodes += sum(_expression_nodes(text, False) for text in equations.values()) * stages
     loop_steps = cfg.run.steps * sum(dict.fromkeys(cfg.run.K))
     kkt = decisions + multipliers
-    if auto_condensed and (kkt < SPARSE_FROM if isinstance(dynamics, LinearDynamics) else kkt * stages < SPARSE_WORK):
+    if auto_condensed and (kkt < SPARSE_FROM if linear else kkt * stages < SPARSE_WORK):
         dense = True
     responses = tuple((len(a.inputs) + _bounds(a.inputs)) * stages + sum(at(c) for c in a.constraints)
                       + sum(at(c) for c in g.shared_constraints if a.name in (constraint_agents(c) or [a.name]))
@@ -190,21 +181,12 @@ def estimate(cfg: Config) -> Size:
     return Size(decisions, multipliers, len(g.states) * stages, nodes, dense, loop_steps, responses)
 
 
-def from_extent(extent, game: dict, document: dict) -> Size | None:
+def from_extent(extent: Any, game: dict, solver: SolverConfig, disturbance: DisturbanceConfig) -> Size | None:
     """A lower bound of the size of a game from the counts of its unexpanded config (:mod:`gnerun.language.extent`),
-    so that a game too large to build is refused before it is written out; None where the config is not readable
-    enough to tell (its validation says why)."""
-    from pydantic import ValidationError
-
-    from .config import DisturbanceConfig, SolverConfig, obstacles
-
+    so that a game too large to build is refused before it is written out, solved with these options; None where
+    the game section is not readable enough to tell (its validation says why)."""
     kind = game.get("kind")
     if kind not in ("static", "dynamic"):
-        return None
-    try:
-        solver = SolverConfig.model_validate(document.get("solver") or {})
-        disturbance = DisturbanceConfig.model_validate(document.get("disturbance") or {})
-    except (ValidationError, AttributeError, TypeError):
         return None
     static = kind == "static"
     stages = 1 if static else extent.stages

@@ -25,7 +25,9 @@ from mcap.writer import CompressionType, Writer
 
 from ..errors import InputError, WriteError, shorten
 from ..files import open_for_writing, read_regular
+from ..language.yaml_source import parse_yaml
 from .messages import TOPICS, LogEntry, Message
+from .topics import LOG
 
 PROFILE = "gnerun"
 
@@ -119,7 +121,7 @@ class RunLog:
     def log(self, level: str, text: str) -> None:
         """A ``/log`` text event (a foxglove.Log; ``level``: debug, info, warning or error)."""
         t = self.now()
-        self.write("/log", LogEntry.make(level, text, t), log_time=t)
+        self.write(LOG, LogEntry.make(level, text, t), log_time=t)
 
     def flush(self) -> None:
         """Close the chunk in progress and write it out (a killed run keeps it)."""
@@ -194,8 +196,6 @@ def _config_mapping(text: str | None) -> tuple[dict, str | None]:
     it is not one (None: it is, or there is none)."""
     if not text:
         return {}, None
-    from ..language.yaml_source import parse_yaml
-
     try:
         data, _ = parse_yaml(text, "config.yaml")
     except InputError as e:

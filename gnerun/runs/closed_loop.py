@@ -26,13 +26,15 @@ from ..errors import InputError
 from ..game.building import no_check, polled
 from ..game.compile import CompiledGame, StageConstraints, compile_game, compile_stage_constraints
 from ..language.config import Config, PlantDisturbance
+from ..log import topics
 from ..log.mcap_log import json_ready
 from ..log.messages import MpcError, MpcIterate, MpcState
 from ..solvers.ssn import FAILURES, Status
 from .interrupt import Interrupt, Stopped
+from .reference import ReferenceSolver
 from .rundir import RunDirectory, ended_by, recording
-from .safeguard import Plan, choose, finite_or_inf, first_step_violation
-from .solving import make_solver, reference_solution
+from .safeguard import Fallback, PaperRule
+from .solving import make_solver
 
 
 @dataclass
@@ -203,10 +205,30 @@ class StepReport:
 Progress = Callable[[StepReport], None]
 
 
+@dataclass(frozen=True)
+class Sample:
+    """One sampling time as a closed loop recorded it."""
+
+    u: np.ndarray  # the inputs applied (NaN where the loop stopped)
+    w: np.ndarray  # the plant disturbance
+    e_norm: float  # ||z^K(t) - z*(t)|| (nan where z* is unknown)
+    e_norm_agent: dict[str, float]
+    residual_norm: float
+    iterations: int
+    solve_time_s: float
+    status: str  # converged | incomplete | a failure status
+    reference_status: str
+    constraint_violation: float
+    worst_constraint: str | None
+    fallback: bool
+    z: np.ndarray
+    z_star: np.ndarray
+
+
 class LoopRecord:
-    """What a closed loop has made so far, sampling time by sampling time: the lists its result is made of. The loop
-    fills it as it runs, so that whoever started it can still take the result of the sampling times done when an
-    exception ends the loop (:meth:`result`)."""
+    """What a closed loop has made so far: the state of every sampling time begun and the record of every sampling
+    time done. The loop fills it as it runs, so that whoever started it can still take the result of the sampling
+    times done when an exception ends the loop (:meth:`result`)."""
 
     def __init__(self, K: int, steps: int, game: CompiledGame):
         self.K, self.steps = K, steps
@@ -214,29 +236,25 @@ class LoopRecord:
         self.nu = sum(len(v) for v in game.variable_names)
         self.agents = game.agent_names
         self.xs: list[np.ndarray] = []  # x(t) of every sampling time begun, then the state the loop ended in
-        self.us: list[np.ndarray] = []
-        self.ws: list[np.ndarray] = []
-        self.e: list[float] = []
-        self.e_agent: dict[str, list[float]] = {a: [] for a in self.agents}
-        self.res: list[float] = []
-        self.its: list[int] = []
-        self.times: list[float] = []
-        self.viol: list[float] = []
-        self.worst: list[str | None] = []  # the last of a sampling time's lists to be filled
-        self.fallback: list[bool] = []
-        self.status: list[str] = []
-        self.ref_status: list[str] = []
-        self.zs: list[np.ndarray] = []
-        self.zstars: list[np.ndarray] = []
+        self.samples: list[Sample] = []
         self.reached: np.ndarray | None = np.array(game.x0, dtype=float)  # the state after the last time done
 
-    def result(self, ended: str, completed: int | None = None, message: str = "") -> ClosedLoopResult:
-        """The loop's result: ``completed`` sampling times (default: those fully recorded), every list cut to them."""
-        per_step = len(self.worst) if completed is None else completed
+    def add(self, sample: Sample, reached: np.ndarray | None) -> None:
+        """Sampling time t done: its record and the state it produced."""
+        self.samples.append(sample)
+        if reached is not None:
+            self.reached = reached
 
-        def rows(values: list, width: int, n: int) -> np.ndarray:
-            values = values[:n]
+    def result(self, ended: str, completed: int | None = None, message: str = "") -> ClosedLoopResult:
+        """The loop's result: ``completed`` sampling times (default: those recorded), every array cut to them."""
+        per_step = len(self.samples) if completed is None else completed
+        samples = self.samples[:per_step]
+
+        def rows(values: list, width: int) -> np.ndarray:
             return np.array(values, dtype=float).reshape(len(values), width)
+
+        def column(name: str, dtype: type = float) -> np.ndarray:
+            return np.array([getattr(s, name) for s in samples], dtype=dtype)
 
         if ended == "completed":
             xs = self.xs[:per_step + 1]
@@ -245,17 +263,224 @@ class LoopRecord:
         else:
             xs = self.xs[:per_step]
         return ClosedLoopResult(
-            K=self.K, x=rows(xs, self.nx, len(xs)), u=rows(self.us, self.nu, per_step),
-            w=rows(self.ws, self.nx, per_step), e_norm=np.array(self.e[:per_step], dtype=float),
-            e_norm_agent={a: np.array(v[:per_step], dtype=float) for a, v in self.e_agent.items()},
-            residual_norm=np.array(self.res[:per_step], dtype=float),
-            iterations=np.array(self.its[:per_step], dtype=int),
-            solve_time_s=np.array(self.times[:per_step], dtype=float), status=self.status[:per_step],
-            reference_status=self.ref_status[:per_step],
-            constraint_violation=np.array(self.viol[:per_step], dtype=float), worst_constraint=self.worst[:per_step],
-            fallback=np.array(self.fallback[:per_step], dtype=bool), z=rows(self.zs, self.size, per_step),
-            z_star=rows(self.zstars, self.size, per_step), completed=per_step, ended=ended, planned=self.steps,
-            message=message)
+            K=self.K, x=rows(xs, self.nx), u=rows([s.u for s in samples], self.nu),
+            w=rows([s.w for s in samples], self.nx), e_norm=column("e_norm"),
+            e_norm_agent={a: np.array([s.e_norm_agent[a] for s in samples], dtype=float) for a in self.agents},
+            residual_norm=column("residual_norm"), iterations=column("iterations", int),
+            solve_time_s=column("solve_time_s"), status=[s.status for s in samples],
+            reference_status=[s.reference_status for s in samples],
+            constraint_violation=column("constraint_violation"),
+            worst_constraint=[s.worst_constraint for s in samples], fallback=column("fallback", bool),
+            z=rows([s.z for s in samples], self.size), z_star=rows([s.z_star for s in samples], self.size),
+            completed=per_step, ended=ended, planned=self.steps, message=message)
+
+
+class LoopLog:
+    """A closed loop's messages in the run log: per sampling time its iterates, the state with the inputs applied
+    and the tracking error (topics /K<k>/mpc/iterate, /state, /error), on the loop's own time axis."""
+
+    def __init__(self, run: RunDirectory, K: int, sampling_time: float):
+        self.run, self.K, self.dt = run, K, sampling_time
+
+    def at(self, t: int) -> None:
+        self.run.at(t * self.dt)
+
+    def log(self, level: str, text: str) -> None:
+        self.run.log(level, text)
+
+    def sampling_time(self, t: int, trace: list, z_star: np.ndarray | None, x: np.ndarray, u: np.ndarray | None,
+                      sample: Sample) -> None:
+        """Sampling time t (flushed): its iterates, the state with the inputs applied, the error."""
+        for k, r, zk in trace:
+            err = None if z_star is None else float(np.linalg.norm(zk - z_star))
+            self.run.write(topics.mpc(self.K, "iterate"), MpcIterate(t=t, k=k, residual_norm=r, error_norm=err))
+        self.run.write(topics.mpc(self.K, "state"), MpcState(
+            t=t, x=x.tolist(), u=None if u is None else u.tolist(), status=sample.status,
+            fallback=bool(sample.fallback), constraint_violation=float(sample.constraint_violation)))
+        self.run.write(topics.mpc(self.K, "error"), MpcError(t=t, e_norm=sample.e_norm,
+                                                              e_norm_agent=dict(sample.e_norm_agent)))
+        self.run.flush()
+
+    def last_state(self, t: int, x: np.ndarray, status: str) -> None:
+        """The state the loop ended in, which no solver step produced (status: '' or diverged)."""
+        self.run.write(topics.mpc(self.K, "state"), MpcState(t=t, x=x.tolist(), u=None, status=status,
+                                                              fallback=False, constraint_violation=None))
+
+
+class ClosedLoop:
+    """One closed loop of ``cfg.run.steps`` sampling times with at most K solver steps each (:func:`closed_loop`).
+
+    Built once per loop: the solver, the z*(t) solver (:class:`~gnerun.runs.reference.ReferenceSolver`), the
+    safeguard (:class:`~gnerun.runs.safeguard.PaperRule` or :class:`~gnerun.runs.safeguard.Fallback`), the plant
+    noise; every sampling time goes to one :class:`LoopRecord` and, with a run directory, to one :class:`LoopLog`.
+    """
+
+    def __init__(self, cfg: Config, game: CompiledGame, K: int, run: RunDirectory | None = None,
+                 progress: Progress | None = None, interrupt: Interrupt | None = None,
+                 stage: StageConstraints | None = None, record: LoopRecord | None = None):
+        self.cfg, self.game, self.K = cfg, game, K
+        self.solver = make_solver(cfg, game)
+        self.stage = stage if stage is not None else compile_stage_constraints(cfg)
+        self.reference = ReferenceSolver(cfg, game) if cfg.run.reference == "exact" else None
+        self.safeguard = (Fallback(game, self.solver, self.stage) if cfg.run.safeguard == "fallback"
+                          else PaperRule())
+        self.plant = PlantNoise(cfg.disturbance.plant, game.nx)
+        self.log = LoopLog(run, K, cfg.run.sampling_time) if run is not None else None
+        self.progress, self.interrupt = progress, interrupt
+        self.record = record if record is not None else LoopRecord(K, cfg.run.steps, game)
+        self.agent_idx = [game.agent_indices(i) for i in range(len(game.agent_names))]
+        self.nu = sum(len(v) for v in game.variable_names)
+        self.z_star_prev = game.z_start()  # z*(t-1), a start of the z*(t) solve
+        self.rng = None  # the solver's random state, from one sampling time to the next
+
+    def _iterate(self, state, budget: int) -> tuple[object, list, float]:
+        """Up to ``budget`` solver steps from ``state``, stopped at convergence or a failed step (whose iterate is
+        not kept): the last state, the iterates as (k, ||Phi||, z^k) from the start on, the steps' time."""
+        solver = self.solver
+        trace = [(0, state.residual_norm, state.z)]
+        elapsed = 0.0
+        for _ in range(budget):
+            if solver.terminate(state)[1] in FAILURES | {Status.CONVERGED}:
+                break
+            t0 = time.perf_counter()
+            state = solver.step(state)
+            elapsed += time.perf_counter() - t0
+            if state.status in FAILURES:
+                break
+            trace.append((state.k, state.residual_norm, state.z))
+        return state, trace, elapsed
+
+    def _interrupted(self, t: int, plural: bool = False) -> None:
+        if self.log is not None:
+            self.log.log("warning", f"K={self.K}: interrupted ({self.interrupt.reason}) after {t} sampling "
+                                    f"time{'s' * (plural or t != 1)}")
+
+    def _z_star(self, t: int, x: np.ndarray, z_warm: np.ndarray) -> tuple[np.ndarray | None, str]:
+        """z*(t) (None where it is not found, or not asked for: run.reference none) and the status of its solve."""
+        if self.reference is None:
+            return None, "skipped"
+        ref = self.reference.track(z_warm, self.z_star_prev, x, self.interrupt)
+        if ref.converged:
+            self.z_star_prev = ref.z
+        elif self.log is not None:
+            self.log.log("warning", f"K={self.K} t={t}: the exact solution z*(t) was not found ({ref.message}); "
+                                    "e(t) is not available")
+        return (ref.z if ref.converged else None), str(ref.status)
+
+    def _solve(self, t: int, x: np.ndarray, z_warm: np.ndarray) -> tuple[object, list, float]:
+        """The solver steps of sampling time t from z_warm: at most K (at t = 0 with run.initial: solve, the solver's
+        max_iter); the last state, the iterates (:meth:`_iterate`) and the time of init and steps."""
+        cfg = self.cfg
+        budget = cfg.solver.max_iter if t == 0 and cfg.run.initial == "solve" else self.K
+        t0 = time.perf_counter()
+        state = self.solver.init(z_warm, x, self.rng)
+        elapsed = time.perf_counter() - t0
+        state, trace, stepping = self._iterate(state, budget)
+        self.rng = state.rng
+        return state, trace, elapsed + stepping
+
+    def _diverged(self, t: int, size_of_x: float) -> str:
+        limit, plant = self.cfg.solver.divergence_limit, self.cfg.disturbance.plant
+        return (f"K={self.K} t={t}: the plant's state x(t + 1) "
+                + ("is not finite" if math.isinf(size_of_x) else
+                   f"reached |x| = {size_of_x:.3g}, beyond solver.divergence_limit = {limit:g}")
+                + f" (plant disturbance {plant.kind}, scale {plant.scale}); the closed loop ends here (diverged)")
+
+    def run(self) -> ClosedLoopResult:
+        cfg, game, K, rec, log = self.cfg, self.game, self.K, self.record, self.log
+        steps = cfg.run.steps
+        unknown = np.full(game.size, np.nan)
+        message = ""
+        x = np.array(game.x0, dtype=float)
+        z_warm = game.z_start()
+        applied_z = z_warm  # the plan applied at the last sampling time
+        self.z_star_prev, self.rng = game.z_start(), None
+        ended, completed = "completed", steps
+
+        for t in range(steps):
+            if log is not None:
+                log.at(t)
+            if self.interrupt is not None and self.interrupt.requested:
+                ended, completed = "interrupted", t
+                self._interrupted(t)
+                break
+            rec.xs.append(x)
+            try:
+                z_star, ref_status = self._z_star(t, x, z_warm)
+            except Stopped:  # a stop request during z*(t): this sampling time is not run
+                rec.xs.pop()
+                ended, completed = "interrupted", t
+                self._interrupted(t, plural=True)
+                break
+            state, trace, elapsed = self._solve(t, x, z_warm)
+            _, final = self.solver.terminate(state)
+            failed = final in FAILURES
+            status = "converged" if final == Status.CONVERGED else str(final) if failed else "incomplete"
+            z = state.z
+            e = math.nan if z_star is None else float(np.linalg.norm(z - z_star))
+            e_agent = {a: math.nan if z_star is None else float(np.linalg.norm(z[idx] - z_star[idx]))
+                       for a, idx in zip(game.agent_names, self.agent_idx, strict=True)}
+            solved = dict(e_norm=e, e_norm_agent=e_agent, residual_norm=state.residual_norm, iterations=state.k,
+                          solve_time_s=elapsed, status=status, reference_status=ref_status, z=z,
+                          z_star=unknown if z_star is None else z_star)
+            if failed and log is not None:
+                action = ("the closed loop stops here (on_failure: stop)" if cfg.run.on_failure == "stop" else
+                          "the plant gets the best plan at hand (safeguard: fallback)"
+                          if cfg.run.safeguard == "fallback" else
+                          "the plant gets the inputs of the last iterate before it (on_failure: continue)")
+                log.log("warning", f"K={K} t={t}: {final}: {state.message}; {action}")
+            if failed and cfg.run.on_failure == "stop":
+                sample = Sample(u=np.full(self.nu, np.nan), w=np.zeros(game.nx), constraint_violation=math.nan,
+                                worst_constraint=None, fallback=False, **solved)
+                rec.add(sample, None)
+                if log is not None:
+                    log.sampling_time(t, trace, z_star, x, None, sample)
+                ended, completed = "stopped", t + 1
+                break
+            applied = self.safeguard.apply(x, trace, z, state.k, final == Status.CONVERGED, failed,
+                                           None if t == 0 else applied_z)
+            applied_z = applied.z
+            plan = applied.plan
+            if plan is not None and applied.fallback and log is not None and not failed:
+                which = "the shifted previous plan" if plan.k < 0 else f"iterate {plan.k}"
+                log.log("info", f"K={K} t={t}: fallback to {which} (||Phi|| {plan.residual_norm:.2e}, first step "
+                                f"violation {plan.violation:.2e}; z^K: ||Phi|| {state.residual_norm:.2e})")
+            u = game.first_inputs(applied_z[: game.n])
+            w = self.plant()
+            with np.errstate(all="ignore"):  # a plant that overflows is reported below, as a state that diverged
+                x_next = game.step_dynamics(x, u) + w
+                violation, label = self.stage.violation(x_next, u)
+            sample = Sample(u=u, w=w, constraint_violation=violation, worst_constraint=label,
+                            fallback=applied.fallback, **solved)
+            rec.add(sample, x_next)
+
+            if log is not None:
+                log.sampling_time(t, trace, z_star, x, u, sample)
+            if self.progress is not None:
+                self.progress(StepReport(K, t, steps, x.copy(), u.copy(), status, bool(applied.fallback),
+                                         float(violation), int(state.k), float(state.residual_norm), e,
+                                         float(elapsed)))
+            size_of_x = float(np.max(np.abs(x_next))) if np.all(np.isfinite(x_next)) else math.inf
+            if size_of_x > cfg.solver.divergence_limit:
+                ended, completed = "diverged", t + 1
+                message = self._diverged(t, size_of_x)
+                if log is not None:
+                    log.at(t + 1)
+                    log.last_state(t + 1, x_next, "diverged")
+                    log.log("warning", message)
+                break
+
+            x = x_next
+            z_next = self.safeguard.next_start(trace, applied, z, failed)
+            z_warm = game.shift(z_next) if cfg.run.warm_start == "shift" else z_next
+        else:
+            rec.xs.append(x)
+            if log is not None:
+                log.at(steps)
+                log.last_state(steps, x, "")
+                log.run.flush()
+
+        return rec.result(ended, completed, message)
 
 
 def closed_loop(cfg: Config, game: CompiledGame, K: int, run: RunDirectory | None = None,
@@ -274,203 +499,7 @@ def closed_loop(cfg: Config, game: CompiledGame, K: int, run: RunDirectory | Non
     A plant state that is not finite, or beyond ``solver.divergence_limit``, ends the loop there (``ended``: diverged),
     with the state it reached. ``record`` (a :class:`LoopRecord`) receives the loop's progress as it is made.
     """
-    solver = make_solver(cfg, game)
-    stage = stage if stage is not None else compile_stage_constraints(cfg)
-    steps = cfg.run.steps
-    nx, size = game.nx, game.size
-    nu = sum(len(v) for v in game.variable_names)
-    plant = PlantNoise(cfg.disturbance.plant, nx)
-    agents = game.agent_names
-    agent_idx = [game.agent_indices(i) for i in range(len(agents))]
-    guard = cfg.run.safeguard == "fallback"
-    shift = cfg.run.warm_start == "shift"
-
-    x = np.array(game.x0, dtype=float)
-    rec = record if record is not None else LoopRecord(K, steps, game)
-    xs, us, ws, e, e_agent, res, its, times = rec.xs, rec.us, rec.ws, rec.e, rec.e_agent, rec.res, rec.its, rec.times
-    viol, worst, fallback, status, ref_status = rec.viol, rec.worst, rec.fallback, rec.status, rec.ref_status
-    zs, zstars = rec.zs, rec.zstars
-    exact = cfg.run.reference == "exact"  # z*(t) and e(t), or neither (run.reference: none)
-    unknown = np.full(size, np.nan)
-    limit = cfg.solver.divergence_limit
-    message = ""
-
-    z_warm = game.z_start()
-    applied = z_warm  # the plan applied at the last sampling time
-    z_star_prev = game.z_start()
-    rng = None
-    topic = f"/K{K}/mpc"
-    ended, completed = "completed", steps
-
-    def record(t: int, trace: list, z_star: np.ndarray | None, x: np.ndarray, u: np.ndarray | None) -> None:
-        """Sampling time t in the log (flushed): its iterates, the state with the inputs applied, the error."""
-        for k, r, zk in trace:
-            err = None if z_star is None else float(np.linalg.norm(zk - z_star))
-            run.write(f"{topic}/iterate", MpcIterate(t=t, k=k, residual_norm=r, error_norm=err))
-        run.write(f"{topic}/state", MpcState(t=t, x=x.tolist(), u=None if u is None else u.tolist(),
-                                             status=status[t], fallback=bool(fallback[t]),
-                                             constraint_violation=float(viol[t])))
-        run.write(f"{topic}/error", MpcError(t=t, e_norm=e[t], e_norm_agent={a: v[t] for a, v in e_agent.items()}))
-        run.flush()
-
-    for t in range(steps):
-        if run is not None:  # the log's time axis is the loop's own
-            run.at(t * cfg.run.sampling_time)
-        if interrupt is not None and interrupt.requested:
-            ended, completed = "interrupted", t
-            if run is not None:
-                run.log("warning", f"K={K}: interrupted ({interrupt.reason}) after {t} sampling time{'s' * (t != 1)}")
-            break
-        xs.append(x)
-        # z*(t): the solution the solver reaches from the same warm start with an unlimited budget (so that e(t)
-        # measures the effect of the budget K, on the branch the loop follows when equilibria are not unique);
-        # then from z*(t-1), then cold
-        if not exact:
-            z_star = None
-            ref_status.append("skipped")
-        else:
-            try:
-                ref = reference_solution(game, cfg, z_warm, x, interrupt=interrupt)
-                for start in (z_star_prev, game.z_start()):
-                    if ref.converged:
-                        break
-                    ref = reference_solution(game, cfg, start, x, interrupt=interrupt)
-            except Stopped:  # a stop request during z*(t): this sampling time is not run
-                xs.pop()
-                ended, completed = "interrupted", t
-                if run is not None:
-                    run.log("warning", f"K={K}: interrupted ({interrupt.reason}) after {t} sampling times")
-                break
-            z_star = ref.z if ref.converged else None
-            ref_status.append(str(ref.status))
-        if z_star is not None:
-            z_star_prev = z_star
-        elif run is not None and exact:
-            run.log("warning", f"K={K} t={t}: the exact solution z*(t) was not found ({ref.message}); "
-                               "e(t) is not available")
-
-        # run.initial: solve: the first sampling time without a budget (the solver's max_iter)
-        budget = cfg.solver.max_iter if t == 0 and cfg.run.initial == "solve" else K
-        t0 = time.perf_counter()
-        state = solver.init(z_warm, x, rng)
-        elapsed = time.perf_counter() - t0
-        trace = [(0, state.residual_norm, state.z)]
-        for _ in range(budget):
-            if solver.terminate(state)[1] in FAILURES | {Status.CONVERGED}:
-                break
-            t0 = time.perf_counter()
-            state = solver.step(state)
-            elapsed += time.perf_counter() - t0
-            if state.status in FAILURES:
-                break
-            trace.append((state.k, state.residual_norm, state.z))
-        rng = state.rng
-        done, final = solver.terminate(state)
-        failed = final in FAILURES
-        if final == Status.CONVERGED:
-            status.append("converged")
-        elif failed:
-            status.append(str(final))
-        else:
-            status.append("incomplete")
-
-        z = state.z
-        zs.append(z)
-        res.append(state.residual_norm)
-        its.append(state.k)
-        times.append(elapsed)
-        zstars.append(unknown if z_star is None else z_star)
-        e.append(math.nan if z_star is None else float(np.linalg.norm(z - z_star)))
-        for a, idx in zip(agents, agent_idx, strict=True):
-            e_agent[a].append(math.nan if z_star is None else float(np.linalg.norm(z[idx] - z_star[idx])))
-        if failed and run is not None:
-            action = ("the closed loop stops here (on_failure: stop)" if cfg.run.on_failure == "stop" else
-                      "the plant gets the best plan at hand (safeguard: fallback)" if guard else
-                      "the plant gets the inputs of the last iterate before it (on_failure: continue)")
-            run.log("warning", f"K={K} t={t}: {final}: {state.message}; {action}")
-        if failed and cfg.run.on_failure == "stop":
-            us.append(np.full(nu, np.nan))
-            ws.append(np.zeros(nx))
-            viol.append(math.nan)
-            worst.append(None)
-            fallback.append(False)
-            if run is not None:
-                record(t, trace, z_star, x, None)
-            ended, completed = "stopped", t + 1
-            break
-        if guard and final != Status.CONVERGED:
-            plan = _safeguarded(game, solver, stage, x, trace, plan_prev=None if t == 0 else applied)
-            applied = plan.z
-            fallback.append(failed or plan.k != state.k)
-            if fallback[t] and run is not None and not failed:
-                which = "the shifted previous plan" if plan.k < 0 else f"iterate {plan.k}"
-                run.log("info", f"K={K} t={t}: fallback to {which} (||Phi|| {plan.residual_norm:.2e}, first step "
-                                f"violation {plan.violation:.2e}; z^K: ||Phi|| {state.residual_norm:.2e})")
-        else:
-            # the paper's rule: z^K(t); after a failed step the last iterate before it (a diverged or NaN one is not
-            # used)
-            applied = trace[-1][2] if failed else z
-            fallback.append(failed)
-        u = game.first_inputs(applied[: game.n])
-        us.append(u)
-        w = plant()
-        ws.append(w)
-        with np.errstate(all="ignore"):  # a plant that overflows is reported below, as a state that diverged
-            x_next = game.step_dynamics(x, u) + w
-            violation, label = stage.violation(x_next, u)
-        viol.append(violation)
-        worst.append(label)
-        rec.reached = x_next
-
-        if run is not None:
-            record(t, trace, z_star, x, u)
-        if progress is not None:
-            progress(StepReport(K, t, steps, x.copy(), u.copy(), status[t], bool(fallback[t]), float(viol[t]),
-                                int(its[t]), float(res[t]), e[t], float(elapsed)))
-        size_of_x = float(np.max(np.abs(x_next))) if np.all(np.isfinite(x_next)) else math.inf
-        if size_of_x > limit:
-            ended, completed = "diverged", t + 1
-            message = (f"K={K} t={t}: the plant's state x(t + 1) " + ("is not finite" if math.isinf(size_of_x) else
-                       f"reached |x| = {size_of_x:.3g}, beyond solver.divergence_limit = {limit:g}")
-                       + f" (plant disturbance {cfg.disturbance.plant.kind}, scale {cfg.disturbance.plant.scale}); "
-                       "the closed loop ends here (diverged)")
-            if run is not None:
-                run.at((t + 1) * cfg.run.sampling_time)
-                run.write(f"{topic}/state", MpcState(t=t + 1, x=x_next.tolist(), u=None, status="diverged",
-                                                     fallback=False, constraint_violation=None))
-                run.log("warning", message)
-            break
-
-        x = x_next
-        # the solver goes on from its own iterates (time-distributed optimisation), even where the plant got another
-        # plan: from the best of them (a nonmonotone method's last iterate may have climbed), or from the plan
-        # applied when no step was taken
-        z_next = min(trace[1:], key=lambda it: finite_or_inf(it[1]))[2] if guard and len(trace) > 1 else \
-            applied if failed else z
-        z_warm = game.shift(z_next) if shift else z_next
-    else:
-        xs.append(x)
-        if run is not None:
-            run.at(steps * cfg.run.sampling_time)
-            run.write(f"{topic}/state", MpcState(t=steps, x=x.tolist(), u=None, status="", fallback=False,
-                                                 constraint_violation=None))
-            run.flush()
-
-    return rec.result(ended, completed, message)
-
-
-def _safeguarded(game: CompiledGame, solver, stage: StageConstraints, x: np.ndarray, trace: list,
-                 plan_prev: np.ndarray | None) -> Plan:
-    """The plan to apply (gnerun.runs.safeguard): among the iterates of this sampling time (the last first) and the
-    fallback plan, the plan applied at t - 1 shifted (at t = 0 the warm start z^0)."""
-    candidates = [Plan(zk, r, first_step_violation(game, stage, x, zk), k) for k, r, zk in reversed(trace[1:])]
-    if plan_prev is None:
-        zf, merit = trace[0][2], trace[0][1]
-    else:
-        zf = game.shift(plan_prev)
-        merit = trace[0][1] if np.array_equal(zf, trace[0][2]) else solver.init(zf, x).residual_norm
-    candidates.append(Plan(zf, merit, first_step_violation(game, stage, x, zf), -1))
-    return choose(candidates)
+    return ClosedLoop(cfg, game, K, run, progress, interrupt, stage, record).run()
 
 
 def simulate(cfg: Config, out: str | Path | None = None, *, force: bool = False,

@@ -18,6 +18,7 @@ from ..files import replace_text, write_text
 from ..language.config import Config
 from ..log.mcap_log import RunLog, json_ready
 from ..log.messages import Message, SolveIterate
+from ..log.topics import SOLVE_ITERATE
 from .interrupt import Stopped
 from .lock import DirectoryLock, contents
 
@@ -121,7 +122,7 @@ class RunDirectory:
         """Iterate k at log_time k seconds (and what follows, until the next iterate)."""
         self.at(state.k)
         r = state.residual_norm
-        self.log_sink.write("/solve/iterate", SolveIterate(
+        self.log_sink.write(SOLVE_ITERATE, SolveIterate(
             k=state.k,
             z=state.z.tolist(),
             residual_norm=r,

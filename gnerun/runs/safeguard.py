@@ -72,3 +72,61 @@ def choose(candidates: list[Plan]) -> Plan:
 
 def finite_or_inf(v: float) -> float:
     return v if math.isfinite(v) else math.inf
+
+
+def fallback_plan(game: CompiledGame, solver, stage: StageConstraints, x: np.ndarray, trace: list,
+                  plan_prev: np.ndarray | None) -> Plan:
+    """The plan to apply among the iterates of this sampling time (the last first) and the fallback plan, the plan
+    applied at t - 1 shifted (at t = 0 the warm start z^0). ``trace``: (k, ||Phi||, z^k) from the warm start on."""
+    candidates = [Plan(zk, r, first_step_violation(game, stage, x, zk), k) for k, r, zk in reversed(trace[1:])]
+    if plan_prev is None:
+        zf, merit = trace[0][2], trace[0][1]
+    else:
+        zf = game.shift(plan_prev)
+        merit = trace[0][1] if np.array_equal(zf, trace[0][2]) else solver.init(zf, x).residual_norm
+    candidates.append(Plan(zf, merit, first_step_violation(game, stage, x, zf), -1))
+    return choose(candidates)
+
+
+@dataclass(slots=True, frozen=True)
+class Applied:
+    """What the plant gets at one sampling time: the plan whose first inputs are applied, whether it is not z^K(t)
+    (a fallback step), and the safeguard's choice where it made one."""
+
+    z: np.ndarray
+    fallback: bool
+    plan: Plan | None = None
+
+
+class PaperRule:
+    """``safeguard: none``: z^K(t) is applied; after a failed step the last iterate before it (a diverged or NaN one
+    is not used). The next sampling time starts from the plan applied."""
+
+    def apply(self, x: np.ndarray, trace: list, z: np.ndarray, k: int, converged: bool, failed: bool,
+              plan_prev: np.ndarray | None) -> Applied:
+        return Applied(trace[-1][2] if failed else z, failed)
+
+    def next_start(self, trace: list, applied: Applied, z: np.ndarray, failed: bool) -> np.ndarray:
+        return applied.z if failed else z
+
+
+class Fallback:
+    """``safeguard: fallback``: an iterate that is not converged is applied only if it is the best plan at hand
+    (:func:`fallback_plan`). The solver goes on from its own iterates (time-distributed optimisation), even where
+    the plant got another plan: from the best of them (a nonmonotone method's last iterate may have climbed), or
+    from the plan applied when no step was taken."""
+
+    def __init__(self, game: CompiledGame, solver, stage: StageConstraints):
+        self.game, self.solver, self.stage = game, solver, stage
+
+    def apply(self, x: np.ndarray, trace: list, z: np.ndarray, k: int, converged: bool, failed: bool,
+              plan_prev: np.ndarray | None) -> Applied:
+        if converged:
+            return Applied(z, failed)
+        plan = fallback_plan(self.game, self.solver, self.stage, x, trace, plan_prev)
+        return Applied(plan.z, failed or plan.k != k, plan)
+
+    def next_start(self, trace: list, applied: Applied, z: np.ndarray, failed: bool) -> np.ndarray:
+        if len(trace) > 1:
+            return min(trace[1:], key=lambda it: finite_or_inf(it[1]))[2]
+        return applied.z if failed else z

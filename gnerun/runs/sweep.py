@@ -34,7 +34,7 @@ import numpy as np
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from ..errors import ConfigError, InputError, Unavailable, shorten
-from ..files import MAX_JSON_BYTES, not_a_link, read_json_object, read_regular, replace_text, replacing, write_text
+from ..files import not_a_link, read_json_object, replace_text, replacing, write_text
 from ..language.config import (
     CONFIG_VERSION,
     MAX_NAME_BYTES,
@@ -45,16 +45,14 @@ from ..language.config import (
     safe_name,
 )
 from ..language.yaml_source import SourceMap, dotted, read_yaml
+from ..log.sweep_index import INDEX_CSV, SWEEP_JSON
 from .lock import DirectoryLock, contents, locked, release_all
 
 MAX_POINTS = 10_000  # every point's config is checked before the sweep starts
-INDEX_CSV = "index.csv"
 INDEX_PARQUET = "index.parquet"
 SPEC_FILE = "sweep.yaml"
-SWEEP_JSON = "sweep.json"
 POINT_JSON = "point.json"
 TIMING_COLUMNS = ("step_time_median_s", "step_time_max_s", "wall_s")
-SEED_AXES = ("disturbance.seed", "disturbance.plant.seed")  # averaged over in the sweep figures
 
 
 # ---------------------------------------------------------------------------------------------
@@ -714,51 +712,6 @@ def write_index(sweep: Sweep, sweep_dir: Path, rows: dict[int, list[dict[str, An
 
 def _parquet_value(v: Any) -> Any:
     return json.dumps(v) if isinstance(v, list | dict) else v
-
-
-def read_index(sweep_dir: str | Path) -> list[dict[str, Any]]:
-    """index.csv as rows of typed values (numbers as numbers, empty as None); a file that is not one (not text, not
-    a regular file, too large) is an InputError that says it is damaged."""
-    path = Path(sweep_dir) / INDEX_CSV
-    if not path.exists():
-        raise InputError(f"{sweep_dir}: no sweep index here (expected {INDEX_CSV})")
-    data = read_regular(path, MAX_JSON_BYTES, INDEX_CSV)
-    try:  # a row cut short has its missing cells empty; the cells of a row too long are left out
-        return [{k: _parse_cell(v) for k, v in r.items() if k is not None}
-                for r in csv.DictReader(io.StringIO(data.decode(), newline=""), restval="")]
-    except (UnicodeDecodeError, csv.Error) as e:
-        raise InputError(f"{path}: damaged {INDEX_CSV}: {str(e).splitlines()[0][:80]}") from None
-
-
-def _parse_cell(text: str) -> Any:
-    if text == "":
-        return None
-    for conv in (int, float):
-        try:
-            return conv(text)
-        except ValueError:
-            pass
-    if text[:1] in "[{":
-        try:
-            return json.loads(text)
-        except ValueError:
-            pass
-    return text
-
-
-def is_sweep_dir(path: str | Path) -> bool:
-    p = Path(path)
-    return p.is_dir() and (p / INDEX_CSV).is_file() and (p / SWEEP_JSON).is_file()
-
-
-def loglog_slope(x: list[float], y: list[float]) -> float | None:
-    """Least-squares slope of log10 y against log10 x over the positive finite pairs."""
-    pairs = [(a, b) for a, b in zip(x, y, strict=True) if a and b and a > 0 and b > 0
-             and math.isfinite(a) and math.isfinite(b)]
-    if len(pairs) < 2:
-        return None
-    lx, ly = np.log10([p[0] for p in pairs]), np.log10([p[1] for p in pairs])
-    return float(np.polyfit(lx, ly, 1)[0])
 
 
 def default_sweep_dir(sweep: Sweep) -> Path:

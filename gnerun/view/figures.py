@@ -27,24 +27,20 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..files import open_for_writing, output_directory
+from ..errors import InputError
+from ..files import open_for_writing, output_directory, read_json_object
 from ..log.mcap_log import RunRecord, read_run
-from .paths import FAILED, has_positions, paths_figure
-
-_K_TOPIC = re.compile(r"^/K(\d+)/mpc/(state|error|iterate)$")
+from ..log.sweep_index import SEED_AXES, SWEEP_JSON, loglog_slope, read_index
+from ..log.topics import LOG, SOLVE_ITERATE, parse_mpc
+from .panels import FAILED_LABEL, FALLBACK_LABEL, failed_steps, fallback_steps, legend, panels
+from .paths import has_positions, paths_figure
 
 FLOOR = 1e-13  # errors below this are rounding level (about 500 machine epsilons): drawn in the band
 ROW_DECADES = 0.5  # the band's rows are this far apart (in decades)
-COLUMN_WIDTH = 3.5  # inches: the paper's column (IEEEtran \columnwidth)
-TEXT_WIDTH = 7.16  # inches: both columns (\textwidth)
-PANEL_HEIGHT = 1.6  # inches, without the legend
-LEGEND_ROOM = 0.3  # inches under a panel's x label for its legend (two rows); a taller one makes the figure taller
 DPI = 300
 MARKERS = "osD^vPX*ph"
 # points: the last series' markers, how much larger each earlier series' are, how much larger the first's at most
 MARKER_SIZE, MARKER_STEP, MARKER_SPREAD = 3.0, 0.8, 2.0
-FAILED_LABEL, FALLBACK_LABEL = "failed step", "fallback step"  # (a fallback step: the budgeted iterate not applied)
-MARK_LABELS = (FAILED_LABEL, FALLBACK_LABEL)
 
 
 def run_name(run: RunRecord) -> str:
@@ -65,7 +61,7 @@ def disturbance(run: RunRecord) -> str:
 
 def final_status(run: RunRecord) -> str | None:
     """The status a solve ended with, from its last ``status ...`` entry in /log (None if it has none)."""
-    for entry in reversed(run.messages.get("/log", [])):
+    for entry in reversed(run.messages.get(LOG, [])):
         text = entry.get("message", "")
         if text.startswith("status "):
             return text.split()[1].rstrip(":")
@@ -76,21 +72,10 @@ def closed_loops(run: RunRecord) -> dict[int, dict[str, list[dict]]]:
     """Per K: the messages of /K<k>/mpc/state, /error, /iterate."""
     out: dict[int, dict[str, list[dict]]] = {}
     for topic, msgs in run.messages.items():
-        m = _K_TOPIC.match(topic)
-        if m:
-            out.setdefault(int(m.group(1)), {})[m.group(2)] = msgs
+        parsed = parse_mpc(topic)
+        if parsed:
+            out.setdefault(parsed[0], {})[parsed[1]] = msgs
     return dict(sorted(out.items()))
-
-
-def failed_steps(states: list[dict]) -> list[int]:
-    """Sampling times whose status is a failure (logs that do not record statuses have none; the last state, which
-    no solver step produced, has an empty one)."""
-    return [m["t"] for m in states if m.get("status") in FAILED]
-
-
-def fallback_steps(states: list[dict]) -> list[int]:
-    """Sampling times whose budgeted iterate was not applied (the closed-loop safeguard)."""
-    return [m["t"] for m in states if m.get("fallback")]
 
 
 def has_errors(loops: dict[int, dict[str, list[dict]]]) -> bool:
@@ -283,54 +268,6 @@ def _style() -> None:
     })
 
 
-def _panels(n: int):
-    """A figure of n panels, one column of the paper wide for up to two panels, both columns for more (four per
-    row); the legends go below the panels (:func:`_legend`)."""
-    import matplotlib.pyplot as plt
-
-    cols = min(n, 4) if n > 2 else n
-    rows = math.ceil(n / cols)
-    width = COLUMN_WIDTH if cols <= 2 else TEXT_WIDTH
-    fig, grid = plt.subplots(rows, cols, figsize=(width, (PANEL_HEIGHT + 0.75) * rows), squeeze=False,
-                             layout="constrained")
-    axes = [grid[i // cols][i % cols] for i in range(n)]
-    for ax in grid.flat[n:]:
-        ax.set_visible(False)
-    return fig, axes, width / cols
-
-
-def _legend(ax, width: float, notes: list = ()) -> None:
-    """The legend of ``ax`` below it (under its x label: outside the data), in as many columns as fit its
-    panel's ``width`` (inches); ``notes`` (the floor band's entry) last."""
-    from matplotlib.transforms import offset_copy
-
-    handles, labels = ax.get_legend_handles_labels()
-    found = dict(zip(labels, handles, strict=True))
-    # the series first, then the marks of failed and fallback steps, then the notes
-    entries = {k: v for k, v in found.items() if k not in MARK_LABELS}
-    entries.update({k: found[k] for k in MARK_LABELS if k in found})
-    entries.update({h.get_label(): h for h in notes})
-    if not entries:
-        return
-    # below the tick labels and the x label (in points, whatever the panel's height)
-    anchor = offset_copy(ax.transAxes, fig=ax.figure, y=-24, units="points")
-    renderer = ax.figure.canvas.get_renderer()
-    for column in range(len(entries), 0, -1):
-        legend = ax.legend(list(entries.values()), list(entries), loc="upper center", bbox_to_anchor=(0.5, 0),
-                           bbox_transform=anchor, ncol=column, frameon=False, handlelength=1.6, handletextpad=0.4,
-                           columnspacing=0.9, borderaxespad=0)
-        if column == 1 or legend.get_window_extent(renderer).width <= 0.97 * width * ax.figure.dpi:
-            break
-        legend.remove()
-    # a legend of many rows (a game of many states) gets room of its own instead of squeezing its panel
-    fig = ax.figure
-    excess = legend.get_window_extent(renderer).height / fig.dpi - LEGEND_ROOM
-    grown = getattr(fig, "_legend_growth", 0.0)
-    if excess > grown:
-        fig.set_figheight(fig.get_figheight() + excess - grown)
-        fig._legend_growth = excess
-
-
 def _integer_ticks(ax) -> None:
     from matplotlib.ticker import MaxNLocator
 
@@ -353,17 +290,17 @@ def _mark_steps(ax, failed: list[int], fallback: list[int]) -> None:
 
 def solve_has_errors(run: RunRecord) -> bool:
     """Whether a solve logged ||z^k - z*|| (not without z*: run.reference none)."""
-    return any(not math.isnan(number(m.get("error_norm"))) for m in run.messages.get("/solve/iterate", []))
+    return any(not math.isnan(number(m.get("error_norm"))) for m in run.messages.get(SOLVE_ITERATE, []))
 
 
 def study1_figure(runs: list[RunRecord]):
     """||z^k - z*|| vs k, one panel per solve run, on one y range (a solve without z*, run.reference none:
     ||Phi(z^k)||)."""
-    fig, axes, width = _panels(len(runs))
+    fig, axes, width = panels(len(runs))
     floors = []
     with_errors = [solve_has_errors(run) for run in runs]
     for ax, run, label, errors in zip(axes, runs, "abcdefghijklmnop", with_errors, strict=False):
-        its = run.messages.get("/solve/iterate", [])
+        its = run.messages.get(SOLVE_ITERATE, [])
         status = final_status(run)
         text = disturbance(run) + (f"; {status}" if status and status != "converged" else "")
         floor = FloorAxis(ax, "run")
@@ -380,7 +317,7 @@ def study1_figure(runs: list[RunRecord]):
     axes[0].set_ylabel(r"$\|z^k - z^*\|$" if all(with_errors) else r"$\|\Phi(z^k)\|$" if not any(with_errors)
                        else r"$\|z^k - z^*\|$, $\|\Phi(z^k)\|$")
     for ax, floor in zip(axes, floors, strict=True):
-        _legend(ax, width, floor.notes())
+        legend(ax, width, floor.notes())
     return fig
 
 
@@ -388,7 +325,7 @@ def study2_figure(run: RunRecord):
     """x(t) of the loop with the largest K, and ||e(t)|| per K (a loop without z*, run.reference none, has no
     e(t): its residual ||Phi(z^K(t))|| per K instead)."""
     loops = closed_loops(run)
-    fig, (ax_x, ax_e), width = _panels(2)
+    fig, (ax_x, ax_e), width = panels(2)
     K_max = max(loops)
     states = loops[K_max].get("state", [])
     names = (run.config.get("game") or {}).get("states") or []
@@ -418,8 +355,8 @@ def study2_figure(run: RunRecord):
     ax_e.set_ylabel(r"$\|e(t)\|$" if errors_logged else r"$\|\Phi(z^K(t))\|$")
     ax_e.set_title("(b) tracking error" if errors_logged else "(b) residual (no z*)")
     _integer_ticks(ax_e)
-    _legend(ax_x, width)
-    _legend(ax_e, width, floor.notes())
+    legend(ax_x, width)
+    legend(ax_e, width, floor.notes())
     return fig
 
 
@@ -427,7 +364,7 @@ def study3_figure(run: RunRecord):
     """||e_i(t)|| per agent, one panel per K, on one y range (a loop without z*, run.reference none, has no
     e_i(t): its residual ||Phi(z^K(t))|| instead)."""
     loops = closed_loops(run)
-    fig, axes, width = _panels(len(loops))
+    fig, axes, width = panels(len(loops))
     floors = []
     errors_logged = has_errors(loops)
     for ax, (K, topics), label in zip(axes, loops.items(), "abcdefghijklmnop", strict=False):
@@ -450,7 +387,7 @@ def study3_figure(run: RunRecord):
         ax.tick_params(labelleft=False)
     axes[0].set_ylabel(r"$\|e_i(t)\|$" if errors_logged else r"$\|\Phi(z^K(t))\|$")
     for ax, floor in zip(axes, floors, strict=True):
-        _legend(ax, width, floor.notes())
+        legend(ax, width, floor.notes())
     return fig
 
 
@@ -460,7 +397,7 @@ def make_figures(paths: list[str | Path]) -> dict[str, object]:
     _style()
     runs = [read_run(p) for p in paths]
     figures: dict[str, object] = {}
-    solves = [r for r in runs if "/solve/iterate" in r.messages]
+    solves = [r for r in runs if SOLVE_ITERATE in r.messages]
     if solves:
         figures["study1" if len(solves) > 1 else f"{run_name(solves[0])}-study1"] = study1_figure(solves)
     for run in runs:
@@ -482,8 +419,6 @@ SCALE_AXES = ("disturbance.scale", "disturbance.plant.scale")
 
 def _groups(rows: list[dict], axes: list[str], exclude: tuple[str, ...]) -> dict[str, list[dict]]:
     """Rows by the values of the axes that are neither plotted nor averaged (seeds), and by K."""
-    from ..runs.sweep import SEED_AXES
-
     keys = [a for a in axes if a not in exclude and a not in SEED_AXES]
     with_K = "run.K" not in exclude and len({r.get("K") for r in rows}) > 1
     out: dict[str, list[dict]] = {}
@@ -507,9 +442,7 @@ def _seed_means(rows: list[dict], x_of, y_key: str) -> tuple[list[float], list[f
 def iss_figure(name: str, rows: list[dict], axes: list[str], scale_axis: str):
     """Asymptotic ||e|| against the disturbance scale on log-log axes, seeds as dots, their mean as a
     line, and the fitted slope (the ISS gain's order) in the legend."""
-    from ..runs.sweep import loglog_slope
-
-    fig, (ax,), width = _panels(1)
+    fig, (ax,), width = panels(1)
     floor = FloorAxis(ax, "group")
     dots = []
     for i, (label, group) in enumerate(_groups(rows, axes, (scale_axis,)).items()):
@@ -526,13 +459,13 @@ def iss_figure(name: str, rows: list[dict], axes: list[str], scale_axis: str):
     ax.set_xlabel(f"disturbance scale ({scale_axis})")
     ax.set_ylabel(r"asymptotic $\|e(t)\|$ (mean, 2nd half)")
     ax.set_title(f"{name}: error against disturbance")
-    _legend(ax, width, floor.notes())
+    legend(ax, width, floor.notes())
     return fig
 
 
 def k_figure(name: str, rows: list[dict], axes: list[str]):
     """max_t ||e(t)|| against K (Theorem "bounded error"), mean over seeds."""
-    fig, (ax,), width = _panels(1)
+    fig, (ax,), width = panels(1)
     floor = FloorAxis(ax, "line")
     budgets = set()
     for i, (label, group) in enumerate(_groups(rows, axes, ("run.K",)).items()):
@@ -547,16 +480,12 @@ def k_figure(name: str, rows: list[dict], axes: list[str]):
         _integer_ticks(ax)
     ax.set_ylabel(r"$\max_t \|e(t)\|$")
     ax.set_title(f"{name}: tracking error against K")
-    _legend(ax, width, floor.notes())
+    legend(ax, width, floor.notes())
     return fig
 
 
 def sweep_figures(sweep_dir: str | Path) -> dict[str, object]:
     """The figures a sweep's index supports: <name>-iss (a disturbance-scale axis), <name>-k (a run.K axis)."""
-    from ..errors import InputError
-    from ..files import read_json_object
-    from ..runs.sweep import SWEEP_JSON, read_index
-
     _style()
     meta = read_json_object(Path(sweep_dir) / SWEEP_JSON)
     axes, name = meta.get("axes"), meta.get("name")

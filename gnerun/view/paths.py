@@ -16,12 +16,10 @@ import re
 
 from ..language.expr import CONSTANTS, Constraint, evaluate, numpy_functions, parse_constraint
 from ..log.mcap_log import RunRecord
+from .panels import failed_steps, fallback_steps, legend, panels
 
 _X = re.compile(r"^p?x(\d+)$")
 _DISTANCE = re.compile(r"^\(\s*(\w+)\s*-\s*(\w+)\s*\)\s*\*\*\s*2\s*\+\s*\(\s*(\w+)\s*-\s*(\w+)\s*\)\s*\*\*\s*2\s*>=")
-# the failure statuses of a sampling time (the solvers' FAILURES, which view does not import)
-FAILED = {"singular_jacobian", "diverged", "nan", "subproblem_failed", "line_search_failed",
-          "infeasible_stage_constraint", "stalled"}
 
 
 def vehicles(state_names: list[str]) -> list[tuple[str, int, int]]:
@@ -97,12 +95,10 @@ def paths_figure(run: RunRecord, loops: dict[int, dict[str, list[dict]]]):
     """Panel (a): every vehicle's path per K; panel (b): pairwise distances per K against the required ones."""
     import matplotlib.pyplot as plt
 
-    from .figures import _legend, _panels, failed_steps, fallback_steps
-
     names = list((run.config.get("game") or {}).get("states") or [])
     cars = vehicles(names)
     required = required_distances(run.config)
-    fig, (ax_p, ax_d), width = _panels(2)
+    fig, (ax_p, ax_d), width = panels(2)
     colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     styles = ["-", "--", ":", "-."]
     any_marked = False
@@ -149,7 +145,7 @@ def paths_figure(run: RunRecord, loops: dict[int, dict[str, list[dict]]]):
     ax_d.set_ylabel("distance")
     ax_d.set_title("(b) pairwise distances")
     for ax in (ax_p, ax_d):
-        _legend(ax, width)
+        legend(ax, width)
     return fig
 
 

@@ -30,14 +30,13 @@ from ..errors import InputError, Unavailable
 from ..files import output_directory, output_file, write_bytes
 from ..log.mcap_log import RunRecord, read_run
 from ..log.messages import level_name
+from ..log.topics import LOG, SOLVE_ITERATE
 from .figures import (
     FLOOR,
     band_for,
     below_floor,
     closed_loops,
     disturbance,
-    failed_steps,
-    fallback_steps,
     final_residuals,
     final_status,
     has_errors,
@@ -46,6 +45,7 @@ from .figures import (
     solve_has_errors,
     solver_kind,
 )
+from .panels import failed_steps, fallback_steps
 
 APPLICATION_ID = "gnerun"
 
@@ -176,7 +176,7 @@ def log_run(rec, run: RunRecord, prefix: str, contents: Contents, several: bool 
         rec.log(f"{prefix}/config", rr.TextDocument(run.config_yaml, media_type="text/plain"), static=True)
         contents.configs.append(f"{prefix}/config")
     base = _time_base(run)
-    for msg, t in zip(run.messages.get("/log", []), run.log_times.get("/log", []), strict=True):
+    for msg, t in zip(run.messages.get(LOG, []), run.log_times.get(LOG, []), strict=True):
         if base is None:  # (Rerun stamps everything with the wall clock on its own timeline log_time)
             rec.set_time("log_time", timestamp=t * 1e-9)
         else:  # at the run's own time: the sampling time t or the iteration k, beside the figures
@@ -184,11 +184,11 @@ def log_run(rec, run: RunRecord, prefix: str, contents: Contents, several: bool 
         level = {"warning": "WARN", "error": "ERROR", "debug": "DEBUG", "fatal": "CRITICAL"}.get(level_name(msg),
                                                                                                   "INFO")
         rec.log(f"{prefix}/log", rr.TextLog(msg.get("message", ""), level=level))
-    if "/log" in run.messages:
+    if LOG in run.messages:
         contents.logs.append(f"{prefix}/log")
     rec.reset_time()
 
-    iterates = run.messages.get("/solve/iterate", [])
+    iterates = run.messages.get(SOLVE_ITERATE, [])
     solve_errors = solve_has_errors(run)  # (none without z*: Fig. 1 then shows ||Phi(z^k)||)
     for m in iterates:
         for key in ("error_norm", "residual_norm", "step_norm"):

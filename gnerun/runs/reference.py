@@ -1,0 +1,41 @@
+"""z*(t), the exact solution a closed loop's iterates are measured against (the tracking error of Theorem "bounded
+error"): one object per loop, asked at every sampling time.
+
+Each solve is :func:`gnerun.runs.solving.reference_solution`, with solvers built for it. Solvers kept from one
+sampling time to the next would reuse the LQ fast path's factors per active set, and that changes z* in its last
+bits (e(t) of about 1e-14 where it is 0 today, paper_study2): the loop's outputs would no longer be those of a
+fresh solve at every sampling time.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..game.compile import CompiledGame
+from ..language.config import Config
+from .interrupt import Interrupt
+from .solving import Reference, reference_solution
+
+
+class ReferenceSolver:
+    """The exact solution z* of the game at a state x, from a given start."""
+
+    def __init__(self, cfg: Config, game: CompiledGame):
+        self.cfg, self.game = cfg, game
+
+    def solve(self, z0: np.ndarray, x: np.ndarray, interrupt: Interrupt | None = None) -> Reference:
+        """z* from z0 at x. A stop request (``interrupt``) raises :class:`~gnerun.runs.interrupt.Stopped` between two
+        iterates."""
+        return reference_solution(self.game, self.cfg, z0, x, interrupt=interrupt)
+
+    def track(self, z_warm: np.ndarray, z_previous: np.ndarray, x: np.ndarray,
+              interrupt: Interrupt | None = None) -> Reference:
+        """z*(t): the solution the solver reaches from the loop's warm start with an unlimited budget (so that e(t)
+        measures the effect of the budget K, on the branch the loop follows when equilibria are not unique); then
+        from z*(t-1), then cold."""
+        ref = self.solve(z_warm, x, interrupt)
+        for start in (z_previous, self.game.z_start()):
+            if ref.converged:
+                break
+            ref = self.solve(start, x, interrupt)
+        return ref
