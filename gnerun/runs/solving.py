@@ -129,9 +129,9 @@ def reference_solution(game: CompiledGame, cfg: Config, z0: np.ndarray, x: np.nd
         state = iterate(solver, solver.init(z0, x), check)
         last = state
         if state.converged:
-            newton = getattr(solver, "newton", solver)  # polishing takes plain Newton steps
+            newton = getattr(solver, "newton", solver)  # polishing takes plain Newton steps, on from a solution
             for _ in range(polish):
-                nxt = newton.step(state)
+                nxt = newton.iteration(state)
                 if nxt.status != Status.RUNNING or not nxt.residual_norm < state.residual_norm:
                     break
                 state = nxt

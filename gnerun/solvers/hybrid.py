@@ -139,8 +139,9 @@ class HybridNewton:
         return self.newton.finish(state)
 
     def step(self, state: SSNState) -> SSNState:
-        """Exactly one iteration (see the module docstring)."""
-        if state.status in FAILURES:
+        """Exactly one iteration (see the module docstring); a failed or converged state is returned unchanged (a
+        step at a solution keeps it: no phase change, no interior restart)."""
+        if state.status in FAILURES or self.newton.at_solution(state):
             return state
         memory: Memory = state.search
         if memory.phase == "newton":

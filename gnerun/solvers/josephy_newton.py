@@ -139,7 +139,14 @@ class JosephyNewton(SemismoothNewton):
         return super().init(z0, x, rng)
 
     def step(self, state: SSNState) -> SSNState:
-        """One (perturbed) Josephy-Newton step: the affine VI at a^k, solved exactly by Lemke's method."""
+        """One (perturbed) Josephy-Newton step: the affine VI at a^k, solved exactly by Lemke's method; a failed or
+        converged state is returned unchanged (:meth:`iteration` steps on from a solution)."""
+        if state.status in FAILURES or self.at_solution(state):
+            return state
+        return self.iteration(state)
+
+    def iteration(self, state: SSNState) -> SSNState:
+        """One Josephy-Newton step from ``state``, also at a solution."""
         if state.status in FAILURES:
             return state
         game = self.game

@@ -84,7 +84,14 @@ class ProximalResponse(SemismoothNewton):
         self.gauss_seidel = cfg.solver.scheme == "gauss_seidel"
 
     def step(self, state: SSNState) -> SSNState:
-        """One round: every agent's proximal response once."""
+        """One round: every agent's proximal response once; a failed or converged state is returned unchanged
+        (:meth:`iteration` takes a round from a solution)."""
+        if state.status in FAILURES or self.at_solution(state):
+            return state
+        return self.iteration(state)
+
+    def iteration(self, state: SSNState) -> SSNState:
+        """One round from ``state``, also at a solution."""
         if state.status in FAILURES:
             return state
         game = self.game

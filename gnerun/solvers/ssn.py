@@ -300,7 +300,19 @@ class SemismoothNewton:
                                f"this state: {labels}{more}")
 
     def step(self, state: SSNState) -> SSNState:
-        """Exactly one (perturbed) semismooth Newton iteration; a failed state is returned unchanged."""
+        """Exactly one (perturbed) semismooth Newton iteration; a failed or converged state is returned unchanged
+        (a step at a solution keeps it: :meth:`iteration` steps on from there, as polishing does)."""
+        if state.status in FAILURES or self.at_solution(state):
+            return state
+        return self.iteration(state)
+
+    def at_solution(self, state: SSNState) -> bool:
+        """||Phi(z^k)|| <= tol: where ``step`` stops (the test of :meth:`terminate`)."""
+        return state.residual_norm <= self.options.tol
+
+    def iteration(self, state: SSNState) -> SSNState:
+        """One semismooth Newton iteration from ``state``, also at a solution (a failed state is returned
+        unchanged)."""
         if state.status in FAILURES:
             return state
         if self._lq_inline:
