@@ -136,7 +136,7 @@ def solve(case: Case, games: dict) -> dict:
             outcome = certified_solve(game, solver, solver.init(), on_iterate=record)
             state, status, message = outcome.state, str(outcome.status), outcome.message
         else:
-            state = iterate(solver, solver.init(), record)
+            state = iterate(solver, solver.init(), on_iterate=record)
             status, message = str(state.status), state.message
     except Exception as e:  # noqa: BLE001 - an exception is an outcome to compare too
         return {"status": f"error: {type(e).__name__}", "message": str(e).splitlines()[0][:200] if str(e) else "",

@@ -130,7 +130,7 @@ def _trajectory(overrides: dict) -> np.ndarray:
     game = compile_game(cfg)
     solver = make_solver(cfg, game)
     states = []
-    iterate(solver, solver.init(), states.append)
+    iterate(solver, solver.init(), on_iterate=states.append)
     return np.array([s.z for s in states])
 
 

@@ -21,7 +21,7 @@ import numpy as np
 
 from ..game.compile import compile_game
 from ..language.config import Config
-from ..solvers.ssn import SSNState
+from ..solvers.status import SSNState
 
 # mu, times max(1, |a^0|_inf): from 10 to 1e-8 by factors of sqrt(10) (by factors of 10, a level's start can lie a
 # few mu from the next level's kink, past which a full Newton step lands in another branch)
@@ -75,7 +75,7 @@ def smoothing_homotopy(cfg: Config, z0: np.ndarray, x: np.ndarray | None = None,
                 if on_iterate is not None:
                     on_iterate(replace(state, k=offset + state.k))
 
-            state = iterate(solver_, solver_.init(z, x), seen)
+            state = iterate(solver_, solver_.init(z, x), on_iterate=seen)
             k += state.k
             if state.converged:
                 break

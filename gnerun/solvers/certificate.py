@@ -244,7 +244,8 @@ class NewtonResponses:
                    multipliers: np.ndarray | None = None) -> list[tuple[np.ndarray, bool]]:
         """Each start's end point and whether its solve converged; the first start is warm with ``multipliers``
         (the candidate's, in the agent's row order)."""
-        from .ssn import FAILURES, Status
+        from .driver import iterate
+        from .status import Status
 
         problem, solver, order = self._solver(agent)
         game = self.game
@@ -252,16 +253,14 @@ class NewtonResponses:
         xv = game.x0 if x is None else np.asarray(x, dtype=float)
         p = np.concatenate([xv, a[: sl.start], a[sl.stop:], a[sl]])
         ends = []
+        check = self.check  # a stop request raises there, before every step
+        stop = None if check is None else (lambda state: bool(check()))
         for k, s in enumerate(starts):
             lam = np.zeros(problem.m)
             if k == 0 and multipliers is not None and (order >= 0).all():
                 lam = multipliers[order]
-            state = solver.init(np.concatenate([np.asarray(s, dtype=float), lam]), p)
-            while not solver.terminate(state)[0]:
-                if self.check is not None:
-                    self.check()
-                state = solver.step(state)
-            converged = solver.terminate(state)[1] == Status.CONVERGED and state.status not in FAILURES
+            state = iterate(solver, solver.init(np.concatenate([np.asarray(s, dtype=float), lam]), p), stop=stop)
+            converged = state.status == Status.CONVERGED
             ends.append((state.z[: problem.n].copy(), converged))
         return ends
 

@@ -54,7 +54,8 @@ import numpy as np
 from .avi import AffineVI
 from .interior_point import STARTS, InteriorIterate, InteriorPoint
 from .response_round import response_round
-from .ssn import FAILURES, SemismoothNewton, SSNState, Status, _norm
+from .ssn import SemismoothNewton, _norm
+from .status import FAILURES, SSNState, Status
 
 MEMORY = 4  # nonmonotone reference: the largest ||Phi|| of this many last accepted Newton iterates
 WATCHDOG = 4  # Newton steps without a new best ||Phi|| (SUFFICIENT below it) before the interior phase takes over

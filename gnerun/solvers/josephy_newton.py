@@ -26,7 +26,8 @@ from ..errors import InputError
 from ..game.compile import CompiledGame
 from ..language.config import DisturbanceConfig, SolverConfig
 from .lcp import lemke
-from .ssn import FAILURES, SemismoothNewton, SSNState, Status, _noise
+from .ssn import SemismoothNewton, _noise
+from .status import FAILURES, SSNState, Status
 
 
 def check_nash_problem(game: CompiledGame) -> None:

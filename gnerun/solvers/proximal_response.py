@@ -24,8 +24,10 @@ import numpy as np
 from ..errors import InputError
 from ..game.compile import CompiledGame, compile_agent_problem
 from ..language.config import Config, SolverConfig
+from .driver import iterate
 from .hybrid import globalized
-from .ssn import FAILURES, SemismoothNewton, SSNState
+from .ssn import SemismoothNewton
+from .status import FAILURES, SSNState
 
 
 class Agent:
@@ -40,13 +42,7 @@ class Agent:
     def respond(self, x: np.ndarray, others: np.ndarray, own: np.ndarray, multipliers: np.ndarray) -> SSNState:
         """The proximal response to the others' last decisions, from the agent's own last (a_i, lambda_i)."""
         p = np.concatenate([x, others, own])
-        state = self.inner.init(np.concatenate([own, multipliers]), p)
-        for _ in range(self.max_iter):
-            done, _ = self.inner.terminate(state)
-            if done:
-                break
-            state = self.inner.step(state)
-        return self.inner.finish(state)
+        return iterate(self.inner, self.inner.init(np.concatenate([own, multipliers]), p), self.max_iter)
 
 
 def make_agents(cfg: Config, game: CompiledGame) -> list[Agent]:

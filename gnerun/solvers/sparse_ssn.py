@@ -8,7 +8,8 @@ from scipy.sparse import linalg as spla
 from ..game.compile import CompiledGame
 from ..game.sparse import SparseKKT, SparseParts
 from ..language.config import DisturbanceConfig, SolverConfig
-from .ssn import SemismoothNewton, SSNState
+from .ssn import SemismoothNewton
+from .status import SSNState
 
 
 class SparseSemismoothNewton(SemismoothNewton):

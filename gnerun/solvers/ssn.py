@@ -35,7 +35,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
-from enum import StrEnum
 
 import numpy as np
 from scipy.linalg import lapack
@@ -43,70 +42,14 @@ from scipy.linalg import lapack
 from ..game.compile import CompiledGame, KKTParts
 from ..language.config import DisturbanceConfig, SolverConfig
 from .line_search import backtrack
+from .status import FAILURES, SSNState, Status
+
+__all__ = ["FAILURES", "SSNState", "SemismoothNewton", "Status", "describe_row", "levenberg_marquardt"]
 
 _FB_TIE = 1.0 - 1.0 / math.sqrt(2.0)
 DUAL_FROM = 32  # LQ games with at least this many decisions solve the Schur complement (below, its set-up costs more)
 DUAL_MIN_RCOND = 1e-8  # LQ games: P = dL/da better conditioned than this is eliminated (the Schur complement)
 MAP_AFTER = 3  # LQ games: an active set's map G_A is built on its third use (one triangular solve per use before)
-
-
-class Status(StrEnum):
-    RUNNING = "running"
-    CONVERGED = "converged"
-    MAX_ITER = "max_iter"
-    SINGULAR_JACOBIAN = "singular_jacobian"
-    DIVERGED = "diverged"
-    NAN = "nan"
-    SUBPROBLEM_FAILED = "subproblem_failed"  # a Josephy-Newton step whose LCP has no solution found
-    LINE_SEARCH_FAILED = "line_search_failed"  # no step length along the search direction decreases the merit
-    INFEASIBLE_STAGE_CONSTRAINT = "infeasible_stage_constraint"  # a row no decision reaches is violated
-    NOT_AN_EQUILIBRIUM = "not_an_equilibrium"  # a KKT point at which an agent can improve alone (certificate)
-    STALLED = "stalled"  # the globalized method made no progress from any of its starting points
-    # what a solve's certificate concludes (gnerun.runs.solving.certified_solve), never a step's status
-    KKT_POINT = "kkt_point"  # a KKT point whose best responses were not (or could not be) checked: not certified
-    UNBOUNDED_PLAYER = "unbounded_player"  # a player has no best response: its cost keeps decreasing along a ray
-    INFEASIBLE = "infeasible"  # the game's constraints cannot all hold at once (phase 1)
-
-
-FAILURES = frozenset({Status.SINGULAR_JACOBIAN, Status.DIVERGED, Status.NAN, Status.SUBPROBLEM_FAILED,
-                      Status.LINE_SEARCH_FAILED, Status.INFEASIBLE_STAGE_CONSTRAINT, Status.STALLED})
-
-
-@dataclass(slots=True)
-class SSNState:
-    """The iterate z^k and everything one step needs, evaluated once at z^k."""
-
-    z: np.ndarray
-    x: np.ndarray
-    k: int
-    phi: np.ndarray  # Phi(z^k)
-    residual_norm: float  # ||Phi(z^k)||_2
-    parts: KKTParts  # L, c and derivatives at z^k
-    active: np.ndarray  # rows whose g-branch is chosen at z^k (min map: -g_j < lambda_j - tie_tol)
-    z_prev: np.ndarray | None  # z^{k-1} (None at k = 0)
-    active_prev: np.ndarray | None  # the g-branch rows at z^{k-1}
-    status: Status
-    message: str
-    rng: np.random.Generator | None
-    rcond: float = math.nan  # reciprocal condition number of the last JPhi factorised
-    search: object | None = None  # what a globalization keeps between steps (gnerun.solvers.hybrid)
-
-    @property
-    def converged(self) -> bool:
-        return self.status == Status.CONVERGED
-
-    @property
-    def step_norm(self) -> float:
-        """||z^k - z^{k-1}||_2 (nan at k = 0); computed when asked, not in the solver loop."""
-        if self.z_prev is None:
-            return math.nan
-        d = self.z - self.z_prev
-        return math.sqrt(d @ d)
-
-    @property
-    def active_set_changes(self) -> int:
-        """Rows whose branch changed from z^{k-1} to z^k."""
-        return 0 if self.active_prev is None else int(np.count_nonzero(self.active != self.active_prev))
 
 
 @dataclass(slots=True)
