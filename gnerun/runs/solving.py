@@ -18,7 +18,7 @@ from ..game.compile import CompiledGame, compile_game
 from ..language.config import Config, sparse_obstacles
 from ..log.mcap_log import json_ready
 from ..solvers.driver import iterate
-from ..solvers.hybrid import globalized
+from ..solvers.globalization import FALLBACK, globalized, resolve
 from ..solvers.ssn import SemismoothNewton
 from ..solvers.status import SSNState, Status
 from ..threads import single_threaded_blas
@@ -108,17 +108,17 @@ def reference_solution(game: CompiledGame, cfg: Config, z0: np.ndarray, x: np.nd
     last: SSNState | None = None
     # the exact solution is the centralised one: a distributed run is measured against SSN's
     first = cfg.solver.model_copy(update={"kind": "ssn"}) if cfg.solver.kind == "distributed" else cfg.solver
-    attempts = [first] + ([first.model_copy(update={"kind": "ssn", "globalization": "hybrid"})]
-                          if first.kind != "ssn" or first.method != "hybrid" else [])
+    attempts = [first] + ([first.model_copy(update={"kind": "ssn", "globalization": FALLBACK})]
+                          if first.kind != "ssn" or resolve(first) != FALLBACK else [])
     for options in attempts:
         opts = options.model_copy(update={"max_iter": max(options.max_iter, 100)})
         solver = make_solver(cfg.model_copy(update={"solver": opts}), game, disturbed=False)
         state = iterate(solver, solver.init(z0, x), on_iterate=check)
         last = state
         if state.converged:
-            newton = getattr(solver, "newton", solver)  # polishing takes plain Newton steps, on from a solution
+            polisher = getattr(solver, "polisher", solver)  # its iterations, on from a solution
             for _ in range(polish):
-                nxt = newton.iteration(state)
+                nxt = polisher.iteration(state)
                 if nxt.status != Status.RUNNING or not nxt.residual_norm < state.residual_norm:
                     break
                 state = nxt
@@ -270,7 +270,7 @@ def _smoothable(cfg: Config, game: CompiledGame, outcome: Certified) -> bool:
 
     failed = Status(outcome.status) in FAILURES or outcome.status == Status.MAX_ITER
     return (failed and outcome.status not in (Status.INFEASIBLE, Status.INFEASIBLE_STAGE_CONSTRAINT)
-            and game.piecewise and cfg.solver.kind == "ssn" and cfg.solver.method == "hybrid" and cfg.run.certificate)
+            and game.piecewise and cfg.solver.kind == "ssn" and resolve(cfg.solver) == "hybrid" and cfg.run.certificate)
 
 
 def _smoothed(cfg: Config, game: CompiledGame, solver, outcome: Certified, z0: np.ndarray, x: np.ndarray | None,

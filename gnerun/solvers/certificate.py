@@ -222,7 +222,7 @@ class NewtonResponses:
         if agent not in self._solvers:
             from ..game.compile import compile_agent_problem
             from ..language.config import SolverConfig
-            from .hybrid import globalized
+            from .globalization import globalized
             from .ssn import SemismoothNewton
 
             problem = compile_agent_problem(self.cfg, agent, 0.0)

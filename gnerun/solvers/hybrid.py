@@ -53,8 +53,9 @@ import numpy as np
 
 from .avi import AffineVI
 from .interior_point import STARTS, InteriorIterate, InteriorPoint
+from .linalg import norm
 from .response_round import response_round
-from .ssn import SemismoothNewton, _norm
+from .ssn import SemismoothNewton
 from .status import FAILURES, SSNState, Status
 
 MEMORY = 4  # nonmonotone reference: the largest ||Phi|| of this many last accepted Newton iterates
@@ -70,7 +71,7 @@ FLAT = 1e-2  # a Levenberg-Marquardt step that changes ||Phi|| by less than this
 PIVOTS = 8  # LQ games: Lemke's method from this many covering vectors after the interior phase's restarts
 
 
-@dataclass(slots=True, frozen=True)
+@dataclass(slots=True, frozen=True, kw_only=True)
 class Memory:
     """What the method keeps between steps (in ``SSNState.search``)."""
 
@@ -107,6 +108,14 @@ class HybridNewton:
         # games, which pivot instead; whether the game is LQ is asked only then)
         self.answers = handover and len(self.game.agent_names) > 1
 
+    @property
+    def polisher(self) -> SemismoothNewton:
+        """The method whose iterations polish a solution (the reference solution z*): the plain Newton steps."""
+        return self.newton
+
+    def at_solution(self, state: SSNState) -> bool:
+        return self.newton.at_solution(state)
+
     # the step-wise interface (STYLE.md) ----------------------------------------------------
     def init(self, z0: np.ndarray | None = None, x: np.ndarray | None = None,
              rng: np.random.Generator | None = None) -> SSNState:
@@ -115,7 +124,8 @@ class HybridNewton:
             return state
         merit = state.residual_norm
         threshold = self._threshold(merit)
-        memory = Memory("newton", (merit,), merit, 0, None, threshold, state.z, threshold, crash=self.avi is not None)
+        memory = Memory(phase="newton", merits=(merit,), best=merit, stalls=0, interior=None, handover=threshold,
+                        origin=state.z, handover0=threshold, crash=self.avi is not None)
         state.search = memory  # a new state, held by nothing else yet
         if not self.handover:  # the interior phase alone: its start point is z^0
             return self._start_interior(state, 0, k=0)
@@ -179,8 +189,9 @@ class HybridNewton:
         merit = candidate.residual_norm
         if candidate.status != Status.RUNNING or not merit < state.residual_norm:
             return None
-        candidate.search = Memory("newton", (*memory.merits[-MEMORY + 1:], merit), merit, 0, None, memory.handover,
-                                  memory.origin, memory.handover0)
+        candidate.search = Memory(phase="newton", merits=(*memory.merits[-MEMORY + 1:], merit), best=merit, stalls=0,
+                                  interior=None, handover=memory.handover, origin=memory.origin,
+                                  handover0=memory.handover0)
         return candidate
 
     def _newton_step(self, state: SSNState, memory: Memory) -> SSNState:
@@ -233,7 +244,7 @@ class HybridNewton:
         if z is None:
             return None
         phi, _ = newton.phi(*newton.kkt_residual(z, state.x), z)
-        if not _norm(phi) <= HANDOVER_DECREASE * state.residual_norm:
+        if not norm(phi) <= HANDOVER_DECREASE * state.residual_norm:
             return None
         candidate = newton.advance(state, z, rcond=rcond)
         return candidate if candidate.status == Status.RUNNING else None
@@ -307,7 +318,7 @@ class HybridNewton:
         is the next iterate (one iteration). None if every attempt ends on a ray."""
         from .josephy_newton import kkt_lcp_point
 
-        parts = self.newton._evaluate(memory.origin, state.x)[0]
+        parts = self.newton.evaluate(memory.origin, state.x)[0]
         rng = np.random.default_rng(0)
         for attempt in range(memory.attempt - RESTARTS, PIVOTS):
             d = None if attempt == 0 else rng.uniform(0.1, 10.0, size=state.z.size * 4)
@@ -323,18 +334,9 @@ class HybridNewton:
         """The iterate after ``state`` (or ``state`` moved to iteration ``k``) at z, evaluated with its
         derivatives for the next step."""
         newton = self.newton
-        parts, phi, active = newton._evaluate(z, state.x)
-        new = SSNState(z=z, x=state.x, k=state.k + 1 if k is None else k, phi=phi, residual_norm=_norm(phi),
+        parts, phi, active = newton.evaluate(z, state.x)
+        new = SSNState(z=z, x=state.x, k=state.k + 1 if k is None else k, phi=phi, residual_norm=norm(phi),
                        parts=parts, active=active, z_prev=state.z if k is None else state.z_prev,
                        active_prev=state.active if k is None else state.active_prev, status=Status.RUNNING,
                        message="", rng=state.rng, rcond=rcond, search=memory)
-        return newton._checked(new)
-
-
-def globalized(newton: SemismoothNewton) -> SemismoothNewton | HybridNewton:
-    """``newton`` inside the globalization its options ask for (``hybrid``, ``interior_point``), or as it is
-    (``none``, ``line_search``: the semismooth Newton class takes those steps itself)."""
-    method = newton.options.method
-    if method in ("hybrid", "interior_point"):
-        return HybridNewton(newton, handover=method == "hybrid")
-    return newton
+        return newton.checked(new)

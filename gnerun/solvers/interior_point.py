@@ -58,6 +58,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import lapack
 
+from .linalg import factor
+
 BOUNDARY = 0.995  # a step goes at most this fraction of the way to the boundary lambda_I = 0 or w = 0
 SHRINK = 0.2  # eps shrinks by this factor ...
 KAPPA = 100.0  # ... once every residual of H_eps is below KAPPA eps
@@ -273,7 +275,7 @@ class DenseBarrier:
         def solve(delta: float):
             if delta:
                 M[idx, idx] = diag + delta
-            lu, piv, info, rcond = _factor(M)
+            lu, piv, info, rcond = factor(M)
             if info != 0 or not rcond > 0.0:
                 return None
             sol, _ = lapack.dgetrs(lu, piv, rhs)
@@ -428,12 +430,6 @@ class _Gather:
         out = np.zeros(self.shape)
         out[self.indices, self.col_of] = data[self.positions]
         return out
-
-
-def _factor(M: np.ndarray):
-    from .ssn import _factor as factor
-
-    return factor(M)
 
 
 def convexify(S: np.ndarray, blocks: list[slice]) -> None:

@@ -26,7 +26,8 @@ from ..errors import InputError
 from ..game.compile import CompiledGame
 from ..language.config import DisturbanceConfig, SolverConfig
 from .lcp import lemke
-from .ssn import SemismoothNewton, _noise
+from .linalg import noise
+from .ssn import SemismoothNewton
 from .status import FAILURES, SSNState, Status
 
 
@@ -156,8 +157,8 @@ class JosephyNewton(SemismoothNewton):
         F, H = game.pseudogradient(a, state.x)
         d = self.disturbance
         if d.kind == "pseudogradient" and d.scale > 0:
-            F = F + d.scale * _noise(state.rng, F.shape, d.distribution)
-            H = H + d.scale * _noise(state.rng, H.shape, d.distribution)
+            F = F + d.scale * noise(state.rng, F.shape, d.distribution)
+            H = H + d.scale * noise(state.rng, H.shape, d.distribution)
         if not (np.all(np.isfinite(F)) and np.all(np.isfinite(H))):
             return replace(state, status=Status.NAN, message=f"F or H is not finite at a^{state.k}")
         G = state.parts.dc_da

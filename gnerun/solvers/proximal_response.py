@@ -25,7 +25,7 @@ from ..errors import InputError
 from ..game.compile import CompiledGame, compile_agent_problem
 from ..language.config import Config, SolverConfig
 from .driver import iterate
-from .hybrid import globalized
+from .globalization import globalized
 from .ssn import SemismoothNewton
 from .status import FAILURES, SSNState
 

@@ -31,7 +31,7 @@ class SparseSemismoothNewton(SemismoothNewton):
         self._J = system.matrix(system.evaluate(game.z_start(), game.x0).J) if system.affine else None
         self._lus: dict[bytes, tuple[spla.SuperLU | None, float]] = {}
 
-    def _evaluate(self, z: np.ndarray, x: np.ndarray) -> tuple[SparseParts, np.ndarray, np.ndarray]:
+    def evaluate(self, z: np.ndarray, x: np.ndarray) -> tuple[SparseParts, np.ndarray, np.ndarray]:
         parts = self.system.evaluate(z, x)
         return parts, *self.residual(parts, z)
 

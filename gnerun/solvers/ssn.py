@@ -22,9 +22,10 @@ Constraint rows that depend on no decision variable (a condition on the plant st
 position one step after an input that drives its acceleration) are not Newton rows: their multipliers are
 held at zero, and a violated one ends the solve as ``infeasible_stage_constraint``.
 
-This class is the paper's local method (``solver.globalization: none``), optionally with Armijo
-backtracking on 1/2||Phi||^2 along its direction (``line_search``). The default, globalized method
-(:mod:`gnerun.solvers.hybrid`) takes these steps where they work and an interior-point phase elsewhere.
+This class is the paper's local method (``solver.globalization: none``); the globalizations of
+:mod:`gnerun.solvers.globalization` wrap it: Armijo backtracking along its direction (``line_search``), and the
+default, globalized method (:mod:`gnerun.solvers.hybrid`), which takes these steps where they work and an
+interior-point phase elsewhere.
 
 Shape (see STYLE.md): ``init(z0, x) -> state``, ``step(state) -> state`` (exactly one iteration,
 nothing else), ``terminate(state) -> (done, status)``. Failure is a status, never an exception:
@@ -41,7 +42,7 @@ from scipy.linalg import lapack
 
 from ..game.compile import CompiledGame, KKTParts
 from ..language.config import DisturbanceConfig, SolverConfig
-from .line_search import backtrack
+from .linalg import factor, levenberg_marquardt, noise, norm
 from .status import FAILURES, SSNState, Status
 
 __all__ = ["FAILURES", "SSNState", "SemismoothNewton", "Status", "describe_row", "levenberg_marquardt"]
@@ -103,7 +104,6 @@ class SemismoothNewton:
         self._eq = game.equality_mask
         self._ineq = ~self._eq
         self._fb = solver.complementarity == "fischer_burmeister"
-        self._line_search = solver.globalization == "line_search"
         d = self.disturbance
         # The min map's multiplier rows say lambda_j^+ = 0: solve only for a and the g-branch multipliers
         # (same step, smaller system). Noise on all of JPhi or on the right-hand side needs the full system.
@@ -118,12 +118,12 @@ class SemismoothNewton:
         # point from any z with that active set: its LU factors (or the reason there are none) are kept per
         # active set, so a step is one triangular solve.
         self._lq = self.condensed and self.reduced and game.affine
-        self._lq_inline = self._lq and not self._eq_rows.size and not self._line_search and not self._fixed_rows.size
+        self._lq_inline = self._lq and not self._eq_rows.size and not self._fixed_rows.size
         self._tie_tol = solver.tie_tol
         self._maps: dict[bytes, _ActiveSet] = {}  # LQ games: the reduced matrix's LU factors per active set
         self._dual_cache: _Dual | None | bool = False  # LQ games: the Schur complement's data (False: not yet built)
         if self._lq:
-            cache = game._affine_cache
+            cache = game.affine_cache
             self._W, self._dL, self._dc = cache["W"], cache["dL"], cache["dc"]
 
     # ------------------------------------------------------------------------------------
@@ -154,7 +154,7 @@ class SemismoothNewton:
             active &= ~self._fixed
         return phi, active
 
-    def _evaluate(self, z: np.ndarray, x: np.ndarray) -> tuple[KKTParts, np.ndarray, np.ndarray]:
+    def evaluate(self, z: np.ndarray, x: np.ndarray) -> tuple[KKTParts, np.ndarray, np.ndarray]:
         """The parts, Phi and the g-branch rows at z; for LQ games with the min map, in a few products."""
         if not (self._lq and self._eq_rows.size == 0 and self._fixed_rows.size == 0):
             parts = self.game.kkt_parts(z, x)
@@ -220,8 +220,8 @@ class SemismoothNewton:
             rng = np.random.default_rng(self.disturbance.seed)
         if self._fixed_rows.size:
             z[game.n + self._fixed_rows] = 0.0
-        parts, phi, active = self._evaluate(z, xv)
-        state = SSNState(z=z, x=xv, k=0, phi=phi, residual_norm=_norm(phi), parts=parts, active=active, z_prev=None,
+        parts, phi, active = self.evaluate(z, xv)
+        state = SSNState(z=z, x=xv, k=0, phi=phi, residual_norm=norm(phi), parts=parts, active=active, z_prev=None,
                          active_prev=None, status=Status.RUNNING, message="", rng=rng)
         return self._check_stage_rows(self._check_finite(state))
 
@@ -262,9 +262,7 @@ class SemismoothNewton:
             return self._lq_step(state)
         z_new, rcond = self.newton_point(state)
         if z_new is None:
-            return self._singular(state, rcond)
-        if self._line_search:
-            return self._searched(state, z_new, rcond)
+            return self.singular(state, rcond)
         return self.advance(state, z_new, rcond=rcond)
 
     def newton_point(self, state: SSNState) -> tuple[np.ndarray | None, float]:
@@ -276,11 +274,11 @@ class SemismoothNewton:
         rhs = -state.phi
         d = self.disturbance
         if d.kind == "jacobian_noise" and d.scale > 0:
-            J = J + d.scale * _noise(state.rng, J.shape, d.distribution)
+            J = J + d.scale * noise(state.rng, J.shape, d.distribution)
         elif d.kind == "residual" and d.scale > 0:
-            w = _noise(state.rng, rhs.shape, d.distribution)
-            rhs = rhs + d.scale * w / max(_norm(w), 1e-300)
-        lu, piv, info, rcond = _factor(J)
+            w = noise(state.rng, rhs.shape, d.distribution)
+            rhs = rhs + d.scale * w / max(norm(w), 1e-300)
+        lu, piv, info, rcond = factor(J)
         if info != 0 or not rcond >= self.options.min_rcond:
             return None, rcond
         dz, info = lapack.dgetrs(lu, piv, rhs)
@@ -319,29 +317,8 @@ class SemismoothNewton:
         dz = levenberg_marquardt(self.jacobian(parts, z, state.active), -state.phi, mu)
         return None if dz is None else z + dz
 
-    def _searched(self, state: SSNState, z_new: np.ndarray, rcond: float) -> SSNState:
-        """Armijo backtracking on 1/2||Phi||^2 from z^k towards ``z_new``, with the slope of the merit along the
-        direction actually taken (JPhi dz differs from -Phi under perturbations)."""
-        dz = z_new - state.z
-        if self.reduced:
-            slope = -state.residual_norm**2  # the exact min-map Newton step: JPhi dz = -Phi
-        else:
-            slope = float(state.phi @ (self.jacobian(state.parts, state.z, state.active) @ dz))
-
-        def trial(t: float) -> tuple[float, np.ndarray]:
-            z = state.z + t * dz
-            phi, _ = self.phi(*self.kkt_residual(z, state.x), z)
-            return 0.5 * float(phi @ phi), z
-
-        found = backtrack(0.5 * state.residual_norm**2, slope, trial)
-        if found is None:
-            return replace(state, status=Status.LINE_SEARCH_FAILED, rcond=rcond,
-                           message=f"no step length along the Newton direction from z^{state.k} decreases ||Phi|| = "
-                                   f"{state.residual_norm:.2e} (directional derivative {slope:.2e}); the step was not "
-                                   "taken (the default solver.globalization: hybrid leaves such points)")
-        return self.advance(state, found[1], rcond=rcond)
-
-    def _singular(self, state: SSNState, rcond: float) -> SSNState:
+    def singular(self, state: SSNState, rcond: float) -> SSNState:
+        """``state`` ended as singular_jacobian (the step was not taken), with the reason."""
         opts = self.options
         msg = (f"JPhi(z^{state.k}) is singular or ill-conditioned (reciprocal condition number "
                f"{rcond:.1e} < min_rcond {opts.min_rcond:.0e}); the step was not taken")
@@ -369,7 +346,7 @@ class SemismoothNewton:
         if self._lq:
             return self._lq_point(state.active, state.x)
         A = np.flatnonzero(state.active | self._eq) if self._eq_rows.size else np.flatnonzero(state.active)
-        lu, piv, info, rcond = _factor(self._reduced_matrix(parts, A))
+        lu, piv, info, rcond = factor(self._reduced_matrix(parts, A))
         if info != 0 or not rcond >= opts.min_rcond:
             return None, rcond
         lam = z[n:]
@@ -387,7 +364,7 @@ class SemismoothNewton:
         x = state.x
         z, rcond = self._lq_point(state.active, x)
         if z is None:
-            return self._singular(state, rcond)
+            return self.singular(state, rcond)
         w0 = self.game.offsets(x)
         n = self.game.n
         v = self._W @ z
@@ -402,7 +379,7 @@ class SemismoothNewton:
                        active_prev=state.active, status=Status.RUNNING, message="", rng=state.rng, rcond=rcond)
         limit = self.options.divergence_limit
         if not math.isfinite(new.residual_norm) or z @ z > limit * limit:  # rare: the general checks decide
-            return self._checked(new)
+            return self.checked(new)
         return new
 
     def _reduced_matrix(self, parts: KKTParts, A: np.ndarray) -> np.ndarray:
@@ -428,14 +405,14 @@ class SemismoothNewton:
         if n < DUAL_FROM:
             return None
         P = np.array(self._dL[:, :n], order="F")
-        lu, piv, info, rcond = _factor(P)
+        lu, piv, info, rcond = factor(P)
         if info != 0 or not rcond >= DUAL_MIN_RCOND:
             return None
         # P^{-1} E from P^{-1}: a column of E with one nonzero (a bound, a constraint on one decision) is a
         # scaled column of P^{-1}; only the others cost a product
         Pinv, _ = lapack.dgetri(lu, piv)
         E = self._dL[:, n:]
-        cache = self.game._affine_cache
+        cache = self.game.affine_cache
         if "single" not in cache:  # the structure of the game's constant matrices: found once per game
             C = np.ascontiguousarray(self._dc)
             cache["single"] = (_single_nonzeros(E.T), C, _single_nonzeros(C))
@@ -469,9 +446,9 @@ class SemismoothNewton:
             # factorise); the Schur complement is kept for the Levenberg-Marquardt step
             lu, piv, info, rcond = None, np.zeros(0, dtype=np.int32), 0, 0.0
         elif dual is not None:
-            lu, piv, info, rcond = _factor(S)
+            lu, piv, info, rcond = factor(S)
         else:
-            lu, piv, info, rcond = _factor(self._reduced_matrix(KKTParts(None, None, self._dL, self._dc), A))
+            lu, piv, info, rcond = factor(self._reduced_matrix(KKTParts(None, None, self._dL, self._dc), A))
         ok = info == 0 and rcond >= self.options.min_rcond
         if len(self._maps) >= 256:
             self._maps.clear()
@@ -532,13 +509,13 @@ class SemismoothNewton:
     def advance(self, state: SSNState, z: np.ndarray, *, rcond: float = math.nan) -> SSNState:
         """The iterate after ``state``: z evaluated once (Phi, the parts for the next step), checked for
         NaN and divergence. Every method's step ends here."""
-        parts, phi, active = self._evaluate(z, state.x)
-        new = SSNState(z=z, x=state.x, k=state.k + 1, phi=phi, residual_norm=_norm(phi), parts=parts, active=active,
+        parts, phi, active = self.evaluate(z, state.x)
+        new = SSNState(z=z, x=state.x, k=state.k + 1, phi=phi, residual_norm=norm(phi), parts=parts, active=active,
                        z_prev=state.z, active_prev=state.active, status=Status.RUNNING, message="", rng=state.rng,
                        rcond=rcond)
-        return self._checked(new)
+        return self.checked(new)
 
-    def _checked(self, new: SSNState) -> SSNState:
+    def checked(self, new: SSNState) -> SSNState:
         """``new`` with the NaN and divergence checks applied."""
         z = new.z
         new = self._check_finite(new)
@@ -602,35 +579,4 @@ def describe_row(game: CompiledGame, row: int) -> str:
     return f"the constraint of {owner}: {info.label}"
 
 
-def _factor(M: np.ndarray) -> tuple[np.ndarray, np.ndarray, int, float]:
-    """LU factors of M, LAPACK's info, and the reciprocal 1-norm condition number (0 when singular)."""
-    if not M.size:
-        return M, np.zeros(0, dtype=np.int32), 0, 1.0
-    lu, piv, info = lapack.dgetrf(M)
-    rcond = 0.0
-    if info == 0:
-        rcond, _ = lapack.dgecon(lu, float(np.abs(M).sum(axis=0).max()), norm="1")
-    return lu, piv, info, float(rcond)
-
-
-def levenberg_marquardt(M: np.ndarray, r: np.ndarray, mu: float) -> np.ndarray | None:
-    """d with (M'M + mu I) d = M'r (the minimiser of ||M d - r||^2 + mu ||d||^2), or None."""
-    if not M.shape[1]:
-        return np.zeros(0)
-    N = M.T @ M
-    N.flat[:: N.shape[0] + 1] += mu
-    chol, info = lapack.dpotrf(N, lower=0, clean=0, overwrite_a=1)
-    if info != 0:
-        return None
-    d, info = lapack.dpotrs(chol, M.T @ r, lower=0)
-    return d if info == 0 and np.all(np.isfinite(d)) else None
-
-
-def _norm(v: np.ndarray) -> float:
-    return math.sqrt(v @ v)  # nan if v has a nan, inf if it overflows; 0 for an empty v
-
-
-def _noise(rng: np.random.Generator, shape: tuple[int, ...], distribution: str) -> np.ndarray:
-    if distribution == "uniform":
-        return rng.uniform(-1.0, 1.0, size=shape)
-    return rng.standard_normal(size=shape)
+_factor, _norm, _noise = factor, norm, noise  # the names of earlier versions
