@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 import numpy as np
-from scipy.sparse import linalg as spla
 
 from ..game.compile import CompiledGame
 from ..game.sparse import SparseKKT, SparseParts
 from ..language.config import DisturbanceConfig, SolverConfig
+from .reduced import FactorCache, assemble
 from .ssn import SemismoothNewton
 from .status import SSNState
 
@@ -29,7 +29,7 @@ class SparseSemismoothNewton(SemismoothNewton):
             raise ValueError("the sparse formulation takes min-map steps without noise on JPhi or the residual")
         self.system = system
         self._J = system.matrix(system.evaluate(game.z_start(), game.x0).J) if system.affine else None
-        self._lus: dict[bytes, tuple[spla.SuperLU | None, float]] = {}
+        self._lus = FactorCache(64)  # LQ games: (SuperLU factors or None, rcond) per active set
 
     def evaluate(self, z: np.ndarray, x: np.ndarray) -> tuple[SparseParts, np.ndarray, np.ndarray]:
         parts = self.system.evaluate(z, x)
@@ -40,16 +40,14 @@ class SparseSemismoothNewton(SemismoothNewton):
 
     def _reduced_point(self, state: SSNState) -> tuple[np.ndarray | None, float]:
         system, parts, z = self.system, state.parts, state.z
-        A = np.flatnonzero(state.active | self._eq) if self._eq_rows.size else np.flatnonzero(state.active)
+        A = self.active_rows(state.active)
         keep = system.kept(A)
         if self._J is not None:  # LQ: a constant matrix, one factorisation per active set
             J = self._J
             key = A.tobytes()
             entry = self._lus.get(key)
             if entry is None:
-                if len(self._lus) >= 64:
-                    self._lus.clear()
-                entry = self._lus[key] = system.orderings["newton"].factor(J[keep][:, keep].tocsc())
+                entry = self._lus.keep(key, system.orderings["newton"].factor(J[keep][:, keep].tocsc()))
         else:
             J = system.matrix(parts.J)
             entry = system.orderings["newton"].factor(J[keep][:, keep].tocsc())
@@ -76,7 +74,7 @@ class SparseSemismoothNewton(SemismoothNewton):
 
         system, parts, z = self.system, state.parts, state.z
         n, m = self.game.n, self.game.m
-        A = np.flatnonzero(state.active | self._eq) if self._eq_rows.size else np.flatnonzero(state.active)
+        A = self.active_rows(state.active)
         keep = system.kept(A)
         J = system.matrix(parts.J)
         lam = z[n:]
@@ -95,7 +93,4 @@ class SparseSemismoothNewton(SemismoothNewton):
         dy = lu.solve(np.concatenate([np.zeros(size), r[keep]]))[:size]
         if not np.all(np.isfinite(dy)):
             return None
-        z_new = np.zeros_like(z)
-        z_new[:n] = z[:n] + dy[:n]
-        z_new[n + A] = lam[A] + dy[size - A.size:]
-        return z_new
+        return assemble(z.size, z[:n] + dy[:n], A, lam[A] + dy[size - A.size:])

@@ -35,7 +35,7 @@ a singular or ill-conditioned JPhi (the step is not taken), a non-finite Phi, di
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import replace
 
 import numpy as np
 from scipy.linalg import lapack
@@ -43,55 +43,13 @@ from scipy.linalg import lapack
 from ..game.compile import CompiledGame, KKTParts
 from ..language.config import DisturbanceConfig, SolverConfig
 from .linalg import factor, levenberg_marquardt, noise, norm
+from .lq_path import LQPath
+from .reduced import active_rows, assemble, reduced_matrix
 from .status import FAILURES, SSNState, Status
 
 __all__ = ["FAILURES", "SSNState", "SemismoothNewton", "Status", "describe_row", "levenberg_marquardt"]
 
 _FB_TIE = 1.0 - 1.0 / math.sqrt(2.0)
-DUAL_FROM = 32  # LQ games with at least this many decisions solve the Schur complement (below, its set-up costs more)
-DUAL_MIN_RCOND = 1e-8  # LQ games: P = dL/da better conditioned than this is eliminated (the Schur complement)
-MAP_AFTER = 3  # LQ games: an active set's map G_A is built on its third use (one triangular solve per use before)
-
-
-@dataclass(slots=True)
-class _ActiveSet:
-    """LQ games: what is kept per active set A: the reduced matrix's LU factors (None when it is singular), the
-    rows A, the reciprocal condition number, how often the set was used, and its map G_A once built."""
-
-    lu: np.ndarray | None
-    piv: np.ndarray
-    A: np.ndarray
-    rcond: float
-    uses: int = 0
-    G: np.ndarray | None = None
-    S: np.ndarray | None = None  # the Schur complement S_AA (when P is invertible: see SemismoothNewton._dual)
-
-
-@dataclass(slots=True, frozen=True)
-class _Dual:
-    """LQ games whose pseudo-gradient Jacobian P = dL/da is invertible: L = P a + E lambda + l0, c = C a + c0,
-    so a = -P^{-1}(E lambda + l0) and the reduced system of an active set A is its Schur complement
-    S_AA lambda_A = c0_A - C_A P^{-1} l0 with S_AA = C_A P^{-1} E_A, |A| x |A| instead of (n + |A|)^2: the same
-    step, a smaller matrix. ``PinvE`` = P^{-1} E, computed once per solver."""
-
-    lu: np.ndarray
-    piv: np.ndarray
-    PinvE: np.ndarray
-    C: np.ndarray  # dc/da
-    single: np.ndarray  # rows of C with one nonzero ...
-    where: np.ndarray  # ... its column ...
-    coef: np.ndarray  # ... and its value
-
-
-def _single_nonzeros(M: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Which rows of M have exactly one nonzero, where it is and its value (0 for the other rows)."""
-    nonzero = M != 0.0
-    single = np.count_nonzero(nonzero, axis=1) == 1
-    where = nonzero.argmax(axis=1)
-    coef = np.where(single, M[np.arange(M.shape[0]), where], 0.0)
-    return single, where, coef
-
-
 class SemismoothNewton:
     """The semismooth Newton method for a compiled game (see the module docstring)."""
 
@@ -114,17 +72,11 @@ class SemismoothNewton:
         self._fixed_rows = np.flatnonzero(self._fixed)
         self._z_start = game.z_start()
         self._noisy = self.disturbance.kind in ("jacobian_noise", "residual")
-        # LQ games: the reduced matrix depends on the active set only, and the step lands on the same
-        # point from any z with that active set: its LU factors (or the reason there are none) are kept per
-        # active set, so a step is one triangular solve.
+        # LQ games: a step from what is kept per active set (gnerun.solvers.lq_path)
         self._lq = self.condensed and self.reduced and game.affine
         self._lq_inline = self._lq and not self._eq_rows.size and not self._fixed_rows.size
         self._tie_tol = solver.tie_tol
-        self._maps: dict[bytes, _ActiveSet] = {}  # LQ games: the reduced matrix's LU factors per active set
-        self._dual_cache: _Dual | None | bool = False  # LQ games: the Schur complement's data (False: not yet built)
-        if self._lq:
-            cache = game.affine_cache
-            self._W, self._dL, self._dc = cache["W"], cache["dL"], cache["dc"]
+        self.lq = LQPath(game, self._eq, solver.min_rcond) if self._lq else None
 
     # ------------------------------------------------------------------------------------
     def residual(self, parts: KKTParts, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -160,14 +112,14 @@ class SemismoothNewton:
             parts = self.game.kkt_parts(z, x)
             return parts, *self.residual(parts, z)
         n = self.game.n
-        v = self._W @ z
+        v = self.lq.W @ z
         v += self.game.offsets(x)
         phi = v.copy()
         a = np.negative(v[n:], out=phi[n:])  # -c, in place in Phi's buffer
         lam = z[n:]
         active = a < lam - self._tie_tol
         np.minimum(a, lam, out=a)
-        return KKTParts(v[:n], v[n:], self._dL, self._dc), phi, active
+        return KKTParts(v[:n], v[n:], self.lq.dL, self.lq.dc), phi, active
 
     def kkt_residual(self, z: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """L(z) and c(a) alone, without derivatives (what a line search evaluates)."""
@@ -291,18 +243,11 @@ class SemismoothNewton:
         an error bound). Unperturbed; ``None`` if even the regularised system cannot be solved."""
         game, parts, z = self.game, state.parts, state.z
         n = game.n
-        if self._lq and self._dual is not None:
-            # in the multipliers alone (a = a(lambda) keeps L = 0):
-            # min ||c_A(lambda)||^2 + mu ||lambda_A - lambda_A^k||^2
-            entry = self._active_set(state.active)
-            A = entry.A
-            y, rhs = self._dual_rhs(A, game.offsets(state.x))
-            lam_A = z[n + A]
-            d = levenberg_marquardt(entry.S, rhs - entry.S @ lam_A, mu)
-            return None if d is None else self._dual_point(A, lam_A + d, y)
+        if self._lq and self.lq.dual is not None:
+            return self.lq.regularized(state.active, z, state.x, mu)
         if self.reduced:
-            A = np.flatnonzero(state.active | self._eq) if self._eq_rows.size else np.flatnonzero(state.active)
-            M = self._reduced_matrix(parts, A)
+            A = self.active_rows(state.active)
+            M = reduced_matrix(parts.dL_dz, parts.dc_da, A)
             lam = z[n:]
             rhs = np.concatenate([parts.dL_dz[:, n:] @ lam - parts.L, -parts.c[A]])
             y0 = np.concatenate([np.zeros(n), lam[A]])
@@ -310,10 +255,7 @@ class SemismoothNewton:
             dy = levenberg_marquardt(M, r, mu)
             if dy is None:
                 return None
-            z_new = np.zeros_like(z)
-            z_new[:n] = z[:n] + dy[:n]
-            z_new[n + A] = lam[A] + dy[n:]
-            return z_new
+            return assemble(z.size, z[:n] + dy[:n], A, lam[A] + dy[n:])
         dz = levenberg_marquardt(self.jacobian(parts, z, state.active), -state.phi, mu)
         return None if dz is None else z + dz
 
@@ -344,30 +286,27 @@ class SemismoothNewton:
         n = game.n
         parts, z = state.parts, state.z
         if self._lq:
-            return self._lq_point(state.active, state.x)
-        A = np.flatnonzero(state.active | self._eq) if self._eq_rows.size else np.flatnonzero(state.active)
-        lu, piv, info, rcond = factor(self._reduced_matrix(parts, A))
+            return self.lq.point(state.active, state.x)
+        A = self.active_rows(state.active)
+        lu, piv, info, rcond = factor(reduced_matrix(parts.dL_dz, parts.dc_da, A))
         if info != 0 or not rcond >= opts.min_rcond:
             return None, rcond
         lam = z[n:]
         rhs = np.concatenate([parts.dL_dz[:, n:] @ lam - parts.L, -parts.c[A]])
         sol, _ = lapack.dgetrs(lu, piv, rhs)
-        z_new = np.zeros_like(z)
-        z_new[:n] = z[:n] + sol[:n]
-        z_new[n + A] = sol[n:]
-        return z_new, float(rcond)
+        return assemble(z.size, z[:n] + sol[:n], A, sol[n:]), float(rcond)
 
     def _lq_step(self, state: SSNState) -> SSNState:
         """:meth:`_reduced_point` then :meth:`advance` for an LQ game without equalities or line search, in one
         function: the same operations (z^+ from the kept factors of the active set, then
         Phi(z^+) = [L; min(-c, lambda)] with [L; c] = W z^+ + w0), without the calls between them."""
         x = state.x
-        z, rcond = self._lq_point(state.active, x)
+        z, rcond = self.lq.point(state.active, x)
         if z is None:
             return self.singular(state, rcond)
         w0 = self.game.offsets(x)
         n = self.game.n
-        v = self._W @ z
+        v = self.lq.W @ z
         v += w0
         phi = v.copy()
         a = np.negative(v[n:], out=phi[n:])
@@ -375,136 +314,16 @@ class SemismoothNewton:
         active = a < lam - self._tie_tol
         np.minimum(a, lam, out=a)
         new = SSNState(z=z, x=x, k=state.k + 1, phi=phi, residual_norm=math.sqrt(phi @ phi),
-                       parts=KKTParts(v[:n], v[n:], self._dL, self._dc), active=active, z_prev=state.z,
+                       parts=KKTParts(v[:n], v[n:], self.lq.dL, self.lq.dc), active=active, z_prev=state.z,
                        active_prev=state.active, status=Status.RUNNING, message="", rng=state.rng, rcond=rcond)
         limit = self.options.divergence_limit
         if not math.isfinite(new.residual_norm) or z @ z > limit * limit:  # rare: the general checks decide
             return self.checked(new)
         return new
 
-    def _reduced_matrix(self, parts: KKTParts, A: np.ndarray) -> np.ndarray:
-        n, k = self.game.n, A.size
-        M = np.zeros((n + k, n + k))
-        M[:n, :n] = parts.dL_dz[:, :n]
-        M[:n, n:] = parts.dL_dz[:, n + A]
-        M[n:, :n] = parts.dc_da[A]
-        return M
-
-    @property
-    def _dual(self) -> _Dual | None:
-        """P's LU factors and P^{-1} E for an LQ game (built on first use), or None when P is singular or
-        ill-conditioned, or the game has fewer than ``DUAL_FROM`` decisions (then the reduced system itself is
-        factorised). Measured on fresh solves: 0.8-0.95 times as fast at n = 2-20 (FK library, the LQ family at
-        T = 5), 1.1-1.4 times as fast from n = 33 (the LQ family at T = 10 and 20)."""
-        if self._dual_cache is False:
-            self._dual_cache = self._build_dual()
-        return self._dual_cache
-
-    def _build_dual(self) -> _Dual | None:
-        n = self.game.n
-        if n < DUAL_FROM:
-            return None
-        P = np.array(self._dL[:, :n], order="F")
-        lu, piv, info, rcond = factor(P)
-        if info != 0 or not rcond >= DUAL_MIN_RCOND:
-            return None
-        # P^{-1} E from P^{-1}: a column of E with one nonzero (a bound, a constraint on one decision) is a
-        # scaled column of P^{-1}; only the others cost a product
-        Pinv, _ = lapack.dgetri(lu, piv)
-        E = self._dL[:, n:]
-        cache = self.game.affine_cache
-        if "single" not in cache:  # the structure of the game's constant matrices: found once per game
-            C = np.ascontiguousarray(self._dc)
-            cache["single"] = (_single_nonzeros(E.T), C, _single_nonzeros(C))
-        (single, where, coef), C, rows = cache["single"]
-        PinvE = np.empty(E.shape)
-        PinvE[:, single] = Pinv[:, where[single]] * coef[single]
-        general = ~single
-        PinvE[:, general] = Pinv @ E[:, general]
-        return _Dual(lu, piv, PinvE, C, *rows)
-
-    def _active_set(self, active: np.ndarray) -> _ActiveSet:
-        """What is kept for the active set ``active`` (built on its first use)."""
-        key = active.tobytes()
-        entry = self._maps.get(key)
-        if entry is not None:
-            return entry
-        A = np.flatnonzero(active | self._eq)
-        dual = self._dual
-        S = None
-        if dual is not None:
-            # S_AA = C_A P^{-1} E_A; a row of C_A with one nonzero (a bound) picks a scaled row of P^{-1} E_A
-            PA = dual.PinvE[:, A]
-            single = dual.single[A]
-            S = np.empty((A.size, A.size), order="F")  # LAPACK's order: factorised without a copy
-            S[single] = PA[dual.where[A[single]]] * dual.coef[A[single], None]
-            general = ~single
-            if general.any():
-                S[general] = dual.C[A[general]] @ PA
-        if A.size > self.game.n:
-            # more active rows than decisions: their gradients are dependent, the system singular (nothing to
-            # factorise); the Schur complement is kept for the Levenberg-Marquardt step
-            lu, piv, info, rcond = None, np.zeros(0, dtype=np.int32), 0, 0.0
-        elif dual is not None:
-            lu, piv, info, rcond = factor(S)
-        else:
-            lu, piv, info, rcond = factor(self._reduced_matrix(KKTParts(None, None, self._dL, self._dc), A))
-        ok = info == 0 and rcond >= self.options.min_rcond
-        if len(self._maps) >= 256:
-            self._maps.clear()
-        entry = self._maps[key] = _ActiveSet(lu if ok else None, piv, A, float(rcond), S=S)
-        return entry
-
-    def _dual_rhs(self, A: np.ndarray, w0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """y = P^{-1} l0 and the Schur system's right-hand side c0_A - C_A y for the offsets w0 = [l0; c0] (a
-        vector, or one per column)."""
-        dual, n = self._dual, self.game.n
-        y, _ = lapack.dgetrs(dual.lu, dual.piv, w0[:n])
-        return y, w0[n + A] - dual.C[A] @ y
-
-    def _dual_point(self, A: np.ndarray, lam_A: np.ndarray, y: np.ndarray) -> np.ndarray:
-        """z = (a, lambda) with lambda_A = ``lam_A``, the other multipliers zero and a = -y - P^{-1} E_A lambda_A
-        (y = P^{-1} l0); columnwise for 2-D arguments."""
-        n = self.game.n
-        z = np.zeros((self.game.size,) + lam_A.shape[1:])
-        a = z[:n]
-        np.negative(y, out=a)
-        a -= self._dual.PinvE[:, A] @ lam_A
-        z[n + A] = lam_A
-        return z
-
-    def _lq_point(self, active: np.ndarray, x: np.ndarray) -> tuple[np.ndarray | None, float]:
-        """z^+ for an LQ game from any z with active set ``active`` (g-branch rows and equalities): the reduced
-        system M [a; lambda_A] = -[L(0); c_A(0)], whose factors are kept per active set (M depends on the active
-        set only), solved for w0(x); from the set's ``MAP_AFTER``-th use on, the map G_A with z^+ = G_A w0 for every
-        x (built once from the factors). Where P is invertible, the system solved is M's Schur complement
-        (:class:`_Dual`). ``None`` when M is singular."""
-        entry = self._active_set(active)
-        if entry.lu is None:
-            return None, entry.rcond
-        w0 = self.game.offsets(x)
-        if entry.G is not None:
-            return entry.G @ w0, entry.rcond
-        entry.uses += 1
-        if entry.uses >= MAP_AFTER:
-            # an active set that comes back (a closed loop, repeated solves): the map z^+ = G_A w0, one product per step
-            entry.G = self._lq_solve(entry, np.eye(self.game.size))
-            return entry.G @ w0, entry.rcond
-        return self._lq_solve(entry, w0), entry.rcond
-
-    def _lq_solve(self, entry: _ActiveSet, w0: np.ndarray) -> np.ndarray:
-        """z^+ for the offsets w0 = [l0; c0] (a vector, or one per column) by the kept factors of ``entry``."""
-        n, A = self.game.n, entry.A
-        if self._dual is not None:
-            y, rhs = self._dual_rhs(A, w0)
-            lam_A = lapack.dgetrs(entry.lu, entry.piv, rhs)[0] if A.size else rhs
-            return self._dual_point(A, lam_A, y)
-        rhs = np.concatenate([-w0[:n], -w0[n + A]])
-        sol, _ = lapack.dgetrs(entry.lu, entry.piv, rhs)
-        z = np.zeros((self.game.size,) + w0.shape[1:])
-        z[:n] = sol[:n]
-        z[n + A] = sol[n:]
-        return z
+    def active_rows(self, active: np.ndarray) -> np.ndarray:
+        """The rows A of the reduced system at a state whose g-branch rows are ``active`` (and the equalities)."""
+        return active_rows(active, self._eq, bool(self._eq_rows.size))
 
     def advance(self, state: SSNState, z: np.ndarray, *, rcond: float = math.nan) -> SSNState:
         """The iterate after ``state``: z evaluated once (Phi, the parts for the next step), checked for
