@@ -17,7 +17,7 @@ from ..game.building import no_check, polled
 from ..game.compile import CompiledGame, compile_game
 from ..language.config import Config, sparse_obstacles
 from ..log.mcap_log import json_ready
-from ..solvers.driver import iterate
+from ..solvers.driver import Solver, iterate
 from ..solvers.globalization import FALLBACK, globalized, resolve
 from ..solvers.ssn import SemismoothNewton
 from ..solvers.status import SSNState, Status
@@ -26,7 +26,7 @@ from .interrupt import Interrupt, Stopped
 from .rundir import RunDirectory, ended_by, recording
 
 
-def make_solver(cfg: Config, game: CompiledGame, *, disturbed: bool = True) -> SemismoothNewton:
+def make_solver(cfg: Config, game: CompiledGame, *, disturbed: bool = True) -> Solver:
     """The solver the config asks for (``solver.kind``, ``solver.globalization``), with its disturbance model
     (unless not ``disturbed``). Asks for one BLAS thread (:mod:`gnerun.threads`)."""
     single_threaded_blas()
@@ -144,7 +144,7 @@ class Certified:
     diagnosis: dict = field(default_factory=dict)  # a failed solve's phase 1 (``infeasibility``), when run
 
 
-def certified_solve(game: CompiledGame, solver: SemismoothNewton, state: SSNState, x: np.ndarray | None = None,
+def certified_solve(game: CompiledGame, solver: Solver, state: SSNState, x: np.ndarray | None = None,
                     on_iterate: Callable[[SSNState], None] | None = None,
                     note: Callable[[str], None] | None = None, restarts: int | None = None,
                     best_responses: bool = True, responses=None,
@@ -463,7 +463,7 @@ def failed_solve_summary(exc: BaseException, game: CompiledGame, seen: list[SSNS
     })
 
 
-def _solve(cfg: Config, game: CompiledGame, solver: SemismoothNewton, run: RunDirectory | None,
+def _solve(cfg: Config, game: CompiledGame, solver: Solver, run: RunDirectory | None,
            compile_time: float, on_iterate: Callable[[SSNState, float | None], None] | None,
            interrupt: Interrupt, on_stage: Callable[[str], None] | None = None) -> SolveResult:
     started = time.perf_counter()
