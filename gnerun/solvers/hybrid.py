@@ -136,8 +136,7 @@ class HybridNewton:
         """``init`` for a start near an equilibrium (a KKT point at which some agents moved to their best
         responses, as :func:`~gnerun.runs.solving.certified_solve` restarts): the interior phase at once, with
         the small barrier of a warm start (``interior_point.WARM``); a Newton step from there, with its zero
-        multipliers, is rarely accepted. Measured on the 50 of 100 random ALGAMES merges whose first KKT point
-        was not an equilibrium: a fifth fewer iterations than ``init``, every restart certified."""
+        multipliers, is rarely accepted (measured: benchmarks/results/solver-design.md)."""
         state = self.init(z0, x, rng)
         if state.status in FAILURES or not self.handover:
             return state

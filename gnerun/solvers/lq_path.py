@@ -83,8 +83,7 @@ class LQPath:
     def dual(self) -> _Dual | None:
         """P's LU factors and P^{-1} E for an LQ game (built on first use), or None when P is singular or
         ill-conditioned, or the game has fewer than ``DUAL_FROM`` decisions (then the reduced system itself is
-        factorised). Measured on fresh solves: 0.8-0.95 times as fast at n = 2-20 (FK library, the LQ family at
-        T = 5), 1.1-1.4 times as fast from n = 33 (the LQ family at T = 10 and 20)."""
+        factorised; ``DUAL_FROM``: measured, benchmarks/results/solver-design.md)."""
         if self._dual_cache is False:
             self._dual_cache = self._build_dual()
         return self._dual_cache
