@@ -33,7 +33,7 @@ from ..language.config import DisturbanceConfig, SolverConfig
 from .kkt import KKTSystem, describe_row
 from .linalg import factor, levenberg_marquardt, noise, norm
 from .lq_path import LQPath
-from .reduced import active_rows, assemble, reduced_matrix
+from .reduced import DenseReduced, SparseReduced, active_rows
 from .status import FAILURES, SSNState, Status
 
 __all__ = ["FAILURES", "SSNState", "SemismoothNewton", "Status", "describe_row", "levenberg_marquardt"]
@@ -53,6 +53,7 @@ class SemismoothNewton(KKTSystem):
         self._lq = self.condensed and self.reduced and game.affine
         self._lq_inline = self._lq and not self._eq_rows.size and not self._fixed_rows.size
         self.lq = LQPath(game, self._eq, solver.min_rcond) if self._lq else None
+        self.reduced_system: DenseReduced | SparseReduced = DenseReduced(game.n, solver.min_rcond)
 
     def step(self, state: SSNState) -> SSNState:
         """Exactly one (perturbed) semismooth Newton iteration; a failed or converged state is returned unchanged
@@ -97,21 +98,11 @@ class SemismoothNewton(KKTSystem):
         reduced system for the min map (the inactive multipliers still go to zero). Where JPhi is singular, as on
         a continuum of solutions, this step exists and, with mu ~ ||Phi||, converges to a point of the set (under
         an error bound). Unperturbed; ``None`` if even the regularised system cannot be solved."""
-        game, parts, z = self.game, state.parts, state.z
-        n = game.n
+        parts, z = state.parts, state.z
         if self._lq and self.lq.dual is not None:
             return self.lq.regularized(state.active, z, state.x, mu)
         if self.reduced:
-            A = self.active_rows(state.active)
-            M = reduced_matrix(parts.dL_dz, parts.dc_da, A)
-            lam = z[n:]
-            rhs = np.concatenate([parts.dL_dz[:, n:] @ lam - parts.L, -parts.c[A]])
-            y0 = np.concatenate([np.zeros(n), lam[A]])
-            r = rhs - M @ y0
-            dy = levenberg_marquardt(M, r, mu)
-            if dy is None:
-                return None
-            return assemble(z.size, z[:n] + dy[:n], A, lam[A] + dy[n:])
+            return self.reduced_system.regularized(state, self.active_rows(state.active), mu)
         dz = levenberg_marquardt(self.jacobian(parts, z, state.active), -state.phi, mu)
         return None if dz is None else z + dz
 
@@ -130,27 +121,11 @@ class SemismoothNewton(KKTSystem):
         return replace(state, status=Status.SINGULAR_JACOBIAN, message=msg, rcond=float(rcond))
 
     def _reduced_point(self, state: SSNState) -> tuple[np.ndarray | None, float]:
-        """The min-map Newton step through the reduced system. With A the g-branch rows (and equalities),
-        the multiplier rows give lambda_I^+ = 0 and the rest is
-
-            [ dL/da     dL/dlambda_A ] [ da          ]   [ -L(z) + dL/dlambda lambda ]
-            [ dc_A/da   0            ] [ lambda_A^+  ] = [ -c_A(a)                   ]
-
-        (a row -dc_j/da da = c_j of JPhi, negated). Its reciprocal condition number is the one checked.
-        """
-        game, opts = self.game, self.options
-        n = game.n
-        parts, z = state.parts, state.z
+        """The min-map Newton step through the reduced system (:mod:`gnerun.solvers.reduced`), for LQ games from
+        what is kept per active set."""
         if self._lq:
             return self.lq.point(state.active, state.x)
-        A = self.active_rows(state.active)
-        lu, piv, info, rcond = factor(reduced_matrix(parts.dL_dz, parts.dc_da, A))
-        if info != 0 or not rcond >= opts.min_rcond:
-            return None, rcond
-        lam = z[n:]
-        rhs = np.concatenate([parts.dL_dz[:, n:] @ lam - parts.L, -parts.c[A]])
-        sol, _ = lapack.dgetrs(lu, piv, rhs)
-        return assemble(z.size, z[:n] + sol[:n], A, sol[n:]), float(rcond)
+        return self.reduced_system.point(state, self.active_rows(state.active))
 
     def _lq_step(self, state: SSNState) -> SSNState:
         """:meth:`_reduced_point` then :meth:`advance` for an LQ game without equalities or line search, in one
