@@ -405,7 +405,11 @@ class PlayerCheck:
 
 def check_player(game: CompiledGame, agent: int, z: np.ndarray, x: np.ndarray | None = None,
                  responses: NewtonResponses | None = None) -> PlayerCheck:
-    """Agent ``agent``'s best response to the others at z, as the module docstring describes."""
+    """Agent ``agent``'s best response to the others at z, as the module docstring describes.
+
+    One function of about 100 lines (the reason): its stages (design points, the box search, local solves, rays)
+    share the best value and decision found so far, and each stage's starts depend on what the earlier ones found.
+    """
     n = game.n
     a = np.asarray(z[:n], dtype=float)
     sl = game.agent_slices[agent]
