@@ -217,7 +217,7 @@ class HybridNewton:
         it = memory.interior
         memory = replace(memory, phase="interior", best=math.inf, stalls=0,
                          handover=0.1 * min(memory.handover, state.residual_norm))
-        return self._interior_step(self._state_at(state, it.z, memory, k=state.k), memory)
+        return self._interior_step(self.newton.advance(state, it.z, search=memory, k=state.k), memory)
 
     def _start_interior(self, state: SSNState, attempt: int, *, k: int | None = None,
                         warm: bool = False) -> SSNState:
@@ -228,7 +228,7 @@ class HybridNewton:
         z, w, eps = self.interior.start(memory.origin, state.x, attempt, warm)
         memory = replace(memory, phase="interior", best=math.inf, stalls=0, attempt=attempt,
                          handover=memory.handover0, crash=False)
-        start = self._state_at(state, z, memory, k=state.k if k is None else k)
+        start = self.newton.advance(state, z, search=memory, k=state.k if k is None else k)
         memory = replace(memory, interior=self.interior.measure(z, w, start.parts.L, start.parts.c, eps))
         start = replace(start, search=memory)
         return start if k is not None else self._interior_step(start, memory)
@@ -260,7 +260,7 @@ class HybridNewton:
         if proposal[0] is None:
             return self._restart(state, memory, Status.SINGULAR_JACOBIAN, proposal[1])
         z, w, t, rcond = proposal
-        new = self._state_at(state, z, memory, rcond=rcond)
+        new = self.newton.advance(state, z, search=memory, rcond=rcond)
         if new.status in FAILURES:  # NaN or divergence: restart if a start is left
             return self._restart(state, memory, new.status, new.message)
         it = self.interior.measure(z, w, new.parts.L, new.parts.c, memory.interior.eps, t)
@@ -325,17 +325,5 @@ class HybridNewton:
             if z is not None:
                 memory = replace(memory, phase="newton", merits=(state.residual_norm,), best=state.residual_norm,
                                  stalls=0, interior=None, attempt=RESTARTS + PIVOTS)
-                return self._state_at(state, z, memory)
+                return self.newton.advance(state, z, search=memory)
         return None
-
-    def _state_at(self, state: SSNState, z: np.ndarray, memory: Memory, *, k: int | None = None,
-                  rcond: float = math.nan) -> SSNState:
-        """The iterate after ``state`` (or ``state`` moved to iteration ``k``) at z, evaluated with its
-        derivatives for the next step."""
-        newton = self.newton
-        parts, phi, active = newton.evaluate(z, state.x)
-        new = SSNState(z=z, x=state.x, k=state.k + 1 if k is None else k, phi=phi, residual_norm=norm(phi),
-                       parts=parts, active=active, z_prev=state.z if k is None else state.z_prev,
-                       active_prev=state.active if k is None else state.active_prev, status=Status.RUNNING,
-                       message="", rng=state.rng, rcond=rcond, search=memory)
-        return newton.checked(new)

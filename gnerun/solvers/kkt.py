@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -31,6 +32,9 @@ from ..game.compile import CompiledGame, KKTParts
 from ..language.config import DisturbanceConfig, SolverConfig
 from .linalg import norm
 from .status import FAILURES, SSNState, Status
+
+if TYPE_CHECKING:
+    from .hybrid import Memory
 
 _FB_TIE = 1.0 - 1.0 / math.sqrt(2.0)
 
@@ -184,13 +188,18 @@ class KKTSystem:
         """||Phi(z^k)|| <= tol: where ``step`` stops (the test of :meth:`terminate`)."""
         return state.residual_norm <= self.options.tol
 
-    def advance(self, state: SSNState, z: np.ndarray, *, rcond: float = math.nan) -> SSNState:
-        """The iterate after ``state``: z evaluated once (Phi, the parts for the next step), checked for
-        NaN and divergence. Every method's step ends here."""
+    def advance(self, state: SSNState, z: np.ndarray, *, rcond: float = math.nan, search: Memory | None = None,
+                k: int | None = None) -> SSNState:
+        """The iterate after ``state``: z evaluated once (Phi, the parts for the next step), checked for NaN and
+        divergence, carrying the globalization's ``search`` memory. With ``k``, z takes ``state``'s place as iterate
+        k instead (a new start of the globalized method: the iterate before it stays ``state``'s). Every method's
+        step ends here."""
         parts, phi, active = self.evaluate(z, state.x)
-        new = SSNState(z=z, x=state.x, k=state.k + 1, phi=phi, residual_norm=norm(phi), parts=parts, active=active,
-                       z_prev=state.z, active_prev=state.active, status=Status.RUNNING, message="", rng=state.rng,
-                       rcond=rcond)
+        moved = k is not None
+        new = SSNState(z=z, x=state.x, k=k if moved else state.k + 1, phi=phi, residual_norm=norm(phi), parts=parts,
+                       active=active, z_prev=state.z_prev if moved else state.z,
+                       active_prev=state.active_prev if moved else state.active, status=Status.RUNNING, message="",
+                       rng=state.rng, rcond=rcond, search=search)
         return self.checked(new)
 
     def checked(self, new: SSNState) -> SSNState:
