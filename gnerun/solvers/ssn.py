@@ -155,7 +155,3 @@ class SemismoothNewton(KKTSystem):
     def active_rows(self, active: np.ndarray) -> np.ndarray:
         """The rows A of the reduced system at a state whose g-branch rows are ``active`` (and the equalities)."""
         return active_rows(active, self._eq, bool(self._eq_rows.size))
-
-
-
-_factor, _norm, _noise = factor, norm, noise  # the names of earlier versions
