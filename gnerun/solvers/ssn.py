@@ -15,9 +15,10 @@ This class is the paper's local method (``solver.globalization: none``); the glo
 default, globalized method (:mod:`gnerun.solvers.hybrid`), which takes these steps where they work and an
 interior-point phase elsewhere.
 
-Shape (see STYLE.md): ``init(z0, x) -> state``, ``step(state) -> state`` (exactly one iteration,
-nothing else), ``terminate(state) -> (done, status)``. Failure is a status, never an exception:
-a singular or ill-conditioned JPhi (the step is not taken), a non-finite Phi, divergence.
+Shape (see STYLE.md; the loop is :func:`gnerun.solvers.driver.iterate`): ``init(z0, x) -> state``,
+``step(state) -> state`` (exactly one iteration, nothing else; at a solution the state as it is),
+``terminate(state) -> (done, status)``. Failure is a status, never an exception: a singular or ill-conditioned JPhi
+(the step is not taken), a non-finite Phi, divergence.
 """
 
 from __future__ import annotations
