@@ -53,6 +53,7 @@ import numpy as np
 
 from .avi import AffineVI
 from .interior_point import STARTS, InteriorIterate, InteriorPoint
+from .josephy_newton import kkt_lcp_point
 from .linalg import norm
 from .response_round import response_round
 from .ssn import SemismoothNewton
@@ -315,8 +316,6 @@ class HybridNewton:
         """LQ games: the KKT system is a linear complementarity problem; solve it by Lemke's method from z^0 with
         the covering vectors of the remaining attempts (all ones, then seeded random ones), the first solution
         is the next iterate (one iteration). None if every attempt ends on a ray."""
-        from .josephy_newton import kkt_lcp_point
-
         parts = self.newton.evaluate(memory.origin, state.x)[0]
         rng = np.random.default_rng(0)
         for attempt in range(memory.attempt - RESTARTS, PIVOTS):

@@ -26,6 +26,7 @@ from ..game.compile import CompiledGame, compile_agent_problem
 from ..language.config import Config, SolverConfig
 from .driver import Solver, iterate
 from .globalization import globalized
+from .josephy_newton import JosephyNewton
 from .kkt import KKTSystem
 from .ssn import SemismoothNewton
 from .status import FAILURES, SSNState, Status
@@ -55,8 +56,6 @@ def make_agents(cfg: Config, game: CompiledGame) -> list[Agent]:
     for i, name in enumerate(game.agent_names):
         problem = compile_agent_problem(cfg, i, opts.tau)
         if opts.inner == "jn":
-            from .josephy_newton import JosephyNewton
-
             inner: Solver = JosephyNewton(problem, inner_opts)
         else:
             inner = globalized(SemismoothNewton(problem, inner_opts))
