@@ -1,7 +1,8 @@
 """`python -m benchmarks`: gnerun's speed against baselines run in the same process.
 
 (`python -m benchmarks robustness` runs the robustness suite instead: benchmarks/robustness.py; `python -m benchmarks
-certificate` what the certificate costs next to the solve: benchmarks/certificate.py.)
+certificate` what the certificate costs next to the solve: benchmarks/certificate.py; `python -m benchmarks identical
+record|compare OUT.npz` whether a change left every iterate and status as it was: benchmarks/identical.py.)
 
 Prints a markdown table and writes JSON to benchmarks/results/. Every number is a median over repeats;
 every ratio is baseline time / gnerun time, both measured here, in this run.
@@ -44,7 +45,8 @@ from gnerun.language.config import load_config  # noqa: E402
 from gnerun.log.mcap_log import RunLog  # noqa: E402
 from gnerun.log.messages import MpcError, MpcIterate, MpcState  # noqa: E402
 from gnerun.runs.solving import formulation, make_solver  # noqa: E402
-from gnerun.solvers.ssn import FAILURES, Status  # noqa: E402
+from gnerun.solvers.driver import iterate  # noqa: E402
+from gnerun.solvers.status import Status  # noqa: E402
 
 from . import peers  # noqa: E402
 from .family import family_config  # noqa: E402
@@ -78,10 +80,7 @@ def gnerun_solve(cfg, game: CompiledGame):
     solver = make_solver(cfg, game)
 
     def run():
-        state = solver.init()
-        while not solver.terminate(state)[0]:
-            state = solver.step(state)
-        return state
+        return iterate(solver, solver.init())
 
     return solver, run
 
@@ -99,9 +98,8 @@ def step_time(cfg, game: CompiledGame, repeats: int) -> float:
     """Median time of one `solver.step` (one iteration: the Newton step and Phi at the new iterate), over
     the iterates of a solve from the config's start."""
     solver, _ = gnerun_solve(cfg, game)
-    states = [solver.init()]
-    while not solver.terminate(states[-1])[0]:
-        states.append(solver.step(states[-1]))
+    states: list = []
+    iterate(solver, solver.init(), on_iterate=states.append)
     return statistics.mean(_median_time(lambda s=s: solver.step(s), repeats) for s in states[:-1])
 
 
@@ -111,9 +109,7 @@ def cold_per_iteration(cfg, game: CompiledGame, repeats: int) -> float:
     for _ in range(repeats):
         solver = make_solver(cfg, game)
         t0 = time.perf_counter()
-        state = solver.init()
-        while not solver.terminate(state)[0]:
-            state = solver.step(state)
+        state = iterate(solver, solver.init())
         samples.append((time.perf_counter() - t0) / max(state.k, 1))
     return statistics.median(samples)
 
@@ -189,13 +185,9 @@ def closed_loop_step(cfg, game: CompiledGame, K: int, steps: int, log: RunLog | 
         z_warm = game.z_start()
         for t in range(steps):
             t0 = time.perf_counter()
-            state = solver.init(z_warm, x)
-            trace = [(0, state.residual_norm)]
-            for _ in range(K):
-                if solver.terminate(state)[1] in FAILURES | {Status.CONVERGED}:
-                    break
-                state = solver.step(state)
-                trace.append((state.k, state.residual_norm))
+            trace = []
+            state = iterate(solver, solver.init(z_warm, x), K, finish=False,
+                            on_iterate=lambda s, trace=trace: trace.append((s.k, s.residual_norm)))
             z = state.z
             u = game.first_inputs(z[: game.n])
             if log is not None:
@@ -253,12 +245,10 @@ def paired_fresh_solves(cfgs: list, game: CompiledGame, repeats: int) -> list[tu
         for i, cfg in enumerate(cfgs):
             solver = make_solver(cfg, game)
             t0 = time.perf_counter()
-            state = solver.init()
-            while not solver.terminate(state)[0]:
-                state = solver.step(state)
+            state = iterate(solver, solver.init())
             if r:  # the first round warms up
                 samples[i].append(time.perf_counter() - t0)
-            states[i] = solver.finish(state)
+            states[i] = state
     return [(statistics.median(ts), st) for ts, st in zip(samples, states, strict=True)]
 
 
@@ -317,9 +307,7 @@ def robust_rows(row, reps: int, quick: bool) -> None:
         for p in problems:
             x0 = np.asarray(load_config(text=p.config_yaml).game.x0)
             t0 = time.perf_counter()
-            state = solver.init(None, x0)
-            while not solver.terminate(state)[0]:
-                state = solver.step(state)
+            state = iterate(solver, solver.init(None, x0))
             per.append((time.perf_counter() - t0) / max(state.k, 1))
             its.append(state.k)
         row(f"{label} ({game.size} unknowns, {formulation(cfg, game)}): one iteration", statistics.median(per),
@@ -342,10 +330,8 @@ def merge_compile_rows(row, cars: tuple[int, ...]) -> None:
         solver = make_solver(cfg, game)
         state = solver.step(solver.init())
         t2 = time.perf_counter()
-        while not solver.terminate(state)[0]:
-            state = solver.step(state)
+        state = iterate(solver, state)
         t3 = time.perf_counter()
-        state = solver.finish(state)
         row(f"ALGAMES merge, N = {N} cars ({game.size} unknowns, {formulation(cfg, game)}): load, compile and first "
             "step", t2 - t0, target="<= 3 s" if N == 8 else "", met=(t2 - t0 <= 3.0) if N == 8 else None,
             note=f"load and expand {us(t1 - t0)}, {us((t2 - t1) / N)} per car; then the solve: {state.k} iterations, "
@@ -571,4 +557,8 @@ if __name__ == "__main__":
         from .certificate import main as certificate_cost
 
         sys.exit(certificate_cost(sys.argv[2:]))
+    if sys.argv[1:2] == ["identical"]:
+        from .identical import main as identical
+
+        sys.exit(identical(sys.argv[2:]))
     sys.exit(main())

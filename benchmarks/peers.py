@@ -175,16 +175,14 @@ def gnerun_solution(T: int, repeats: int) -> tuple[np.ndarray, float, str]:
     """(inputs z, median time of the solve loop, a note) of gnerun's SSN; the game is compiled and the solver built
     once, outside the timing; the first solve (a fresh solver) is not in the median."""
     import gnerun
+    from gnerun.solvers.driver import iterate
 
     cfg = gnerun.load_config(CONFIG, {"solver.kind": "ssn", "game.horizon": T})
     game = gnerun.compile_game(cfg)
     solver = gnerun.make_solver(cfg, game)
 
     def run() -> Any:
-        state = solver.init()
-        while not solver.terminate(state)[0]:
-            state = solver.step(state)
-        return state
+        return iterate(solver, solver.init())
 
     t0 = time.perf_counter()
     run()

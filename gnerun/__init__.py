@@ -18,7 +18,8 @@ _API = {
     "ClosedLoopResult": "gnerun.runs.closed_loop",
     "StepReport": "gnerun.runs.closed_loop",
     "SemismoothNewton": "gnerun.solvers.ssn",
-    "Status": "gnerun.solvers.ssn",
+    "Status": "gnerun.solvers.status",
+    "iterate": "gnerun.solvers.driver",
     "ConfigError": "gnerun.errors",
     "InputError": "gnerun.errors",
 }

@@ -20,7 +20,7 @@ from .conftest import CONFIGS
 def _interior(newton, z: np.ndarray, w: np.ndarray, eps: float, x=None):
     ip = InteriorPoint(newton)
     xv = newton.game.x0 if x is None else x
-    parts = newton._evaluate(z, xv)[0]
+    parts = newton.evaluate(z, xv)[0]
     it = ip.measure(z, w, parts.L, parts.c, eps)
     return ip, it, parts
 

@@ -85,7 +85,7 @@ def test_perturbed_jn_error_grows_linearly_with_the_disturbance() -> None:
         game = compile_game(cfg)
         solver = make_solver(cfg, game)
         states = []
-        iterate(solver, solver.init(ref.z), states.append)
+        iterate(solver, solver.init(ref.z), on_iterate=states.append)
         errors = [np.linalg.norm(st.z[: game.n] - ref.a) for st in states[10:]]
         levels.append(float(np.mean(errors)))
     slope = np.polyfit(np.log10(scales), np.log10(levels), 1)[0]

@@ -101,16 +101,16 @@ def test_the_schur_complement_step_equals_the_reduced_system_step(equilibrium: s
     cfg, game = _lq_family(10, equilibrium)
     schur = make_solver(cfg, game)
     plain = make_solver(cfg, game)
-    plain._dual_cache = None  # the reduced system itself
-    assert schur._dual is not None and plain._dual is None
+    plain.lq._dual_cache = None  # the reduced system itself
+    assert schur.lq.dual is not None and plain.lq.dual is None
     rng = np.random.default_rng(1)
     actives = [schur.init().active]
     for _ in range(40):
         actives.append(rng.random(game.m) < 0.15)
     checked = 0
     for active in actives:
-        got, rcond = schur._lq_point(active, game.x0)
-        ref, _ = plain._lq_point(active, game.x0)
+        got, rcond = schur.lq.point(active, game.x0)
+        ref, _ = plain.lq.point(active, game.x0)
         if ref is None:
             assert got is None
             continue
@@ -125,7 +125,7 @@ def test_more_active_rows_than_decisions_is_singular_without_a_factorisation() -
     solver = make_solver(cfg, game)
     active = np.zeros(game.m, dtype=bool)
     active[: game.n + 1] = True
-    z, rcond = solver._lq_point(active, game.x0)
+    z, rcond = solver.lq.point(active, game.x0)
     assert z is None and rcond == 0.0
     state = solver.init()
     state.active = active
@@ -150,7 +150,7 @@ def test_the_levenberg_marquardt_step_of_an_lq_game_minimises_its_objective() ->
     assert np.abs(L).max() < 1e-9
     assert np.all(np.delete(z[n:], A) == 0.0)
 
-    dL = game._affine_cache["dL"]
+    dL = game.affine_cache["dL"]
 
     def decisions(lam_A: np.ndarray) -> np.ndarray:
         lam = np.zeros(game.m)

@@ -32,7 +32,9 @@ def _pair(name: str, overrides: dict):
                        game)
     sparse = make_solver(base.model_copy(update={"solver": base.solver.model_copy(update={"formulation": "sparse"})}),
                          game)
-    assert type(cond) is SemismoothNewton and isinstance(sparse, SparseSemismoothNewton)
+    # (the line search wraps the Newton method of each formulation: gnerun.solvers.globalization)
+    assert type(getattr(cond, "newton", cond)) is SemismoothNewton
+    assert isinstance(getattr(sparse, "newton", sparse), SparseSemismoothNewton)
     return game, cond, sparse
 
 

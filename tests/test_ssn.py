@@ -130,7 +130,7 @@ def _trajectory(overrides: dict) -> np.ndarray:
     game = compile_game(cfg)
     solver = make_solver(cfg, game)
     states = []
-    iterate(solver, solver.init(), states.append)
+    iterate(solver, solver.init(), on_iterate=states.append)
     return np.array([s.z for s in states])
 
 
@@ -184,10 +184,11 @@ def test_step_is_exactly_one_iteration_and_a_solution_is_a_fixed_point() -> None
     game = compile_game(cfg)
     solver = make_solver(cfg, game)
     state = solver.init()
-    for k in range(1, 6):
+    for k in range(1, 4):  # converged in 3 iterations
         state = solver.step(state)
         assert state.k == k
     assert solver.terminate(state) == (True, Status.CONVERGED)
+    assert solver.step(state) is state  # a step at a solution keeps it (no new iterate)
     warm = solver.init(state.z)
     assert warm.k == 0 and solver.terminate(warm)[1] == Status.CONVERGED
     again = solver.step(warm)

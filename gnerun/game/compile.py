@@ -251,6 +251,17 @@ class CompiledGame:
         """L affine in z and c affine in a, with constant derivatives (LQ games)."""
         return self._derivatives["affine"]
 
+    @property
+    def offset_map(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """(Wx, w00) with [L(0; x); c(0; x)] = Wx x + w00 for an LQ game affine in the state x too, else None."""
+        return self._offset_map
+
+    @property
+    def affine_cache(self) -> dict:
+        """An LQ game's constant matrices (``W``, ``dL``, ``dc``: [L; c] = W z + w0(x)), and what solvers derive from
+        them once per game, kept with them (empty for other games)."""
+        return self._affine_cache
+
     @functools.cached_property
     def _affine_cache(self) -> dict:
         if not self.affine:

@@ -21,7 +21,8 @@ import numpy as np
 
 from ..game.compile import compile_game
 from ..language.config import Config
-from ..solvers.ssn import SSNState
+from ..solvers.driver import iterate
+from ..solvers.status import SSNState
 
 # mu, times max(1, |a^0|_inf): from 10 to 1e-8 by factors of sqrt(10) (by factors of 10, a level's start can lie a
 # few mu from the next level's kink, past which a full Newton step lands in another branch)
@@ -54,7 +55,7 @@ def smoothing_homotopy(cfg: Config, z0: np.ndarray, x: np.ndarray | None = None,
     where that fails, the default method. None if no level down to ``CLOSE_ENOUGH`` converges. ``on_iterate`` sees
     every iterate of every level, numbered on from ``k0``; ``first`` is the relative mu to begin with (a start
     already near an equilibrium, such as a best response, begins small: a large mu smooths its basin away)."""
-    from .solving import iterate, make_solver
+    from .solving import make_solver
 
     z = np.asarray(z0, dtype=float)
     scale = max(1.0, float(np.max(np.abs(z), initial=0.0)))
@@ -75,7 +76,7 @@ def smoothing_homotopy(cfg: Config, z0: np.ndarray, x: np.ndarray | None = None,
                 if on_iterate is not None:
                     on_iterate(replace(state, k=offset + state.k))
 
-            state = iterate(solver_, solver_.init(z, x), seen)
+            state = iterate(solver_, solver_.init(z, x), on_iterate=seen)
             k += state.k
             if state.converged:
                 break

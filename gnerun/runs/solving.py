@@ -17,14 +17,16 @@ from ..game.building import no_check, polled
 from ..game.compile import CompiledGame, compile_game
 from ..language.config import Config, sparse_obstacles
 from ..log.mcap_log import json_ready
-from ..solvers.hybrid import globalized
-from ..solvers.ssn import SemismoothNewton, SSNState, Status
+from ..solvers.driver import Solver, iterate
+from ..solvers.globalization import FALLBACK, globalized, resolve
+from ..solvers.ssn import SemismoothNewton
+from ..solvers.status import SSNState, Status
 from ..threads import single_threaded_blas
 from .interrupt import Interrupt, Stopped
 from .rundir import RunDirectory, ended_by, recording
 
 
-def make_solver(cfg: Config, game: CompiledGame, *, disturbed: bool = True) -> SemismoothNewton:
+def make_solver(cfg: Config, game: CompiledGame, *, disturbed: bool = True) -> Solver:
     """The solver the config asks for (``solver.kind``, ``solver.globalization``), with its disturbance model
     (unless not ``disturbed``). Asks for one BLAS thread (:mod:`gnerun.threads`)."""
     single_threaded_blas()
@@ -78,21 +80,6 @@ def formulation(cfg: Config, game: CompiledGame) -> str:
     return "sparse" if game.size * ((game.horizon or 0) + 1) >= SPARSE_WORK else "condensed"
 
 
-def iterate(solver: SemismoothNewton, state: SSNState,
-            on_iterate: Callable[[SSNState], None] | None = None) -> SSNState:
-    """Step until ``terminate`` says done; ``on_iterate`` sees z^0, z^1, ... (the sink hook)."""
-    if on_iterate is not None:
-        on_iterate(state)
-    while True:
-        done, _ = solver.terminate(state)
-        if done:
-            return solver.finish(state)
-        previous = state.k
-        state = solver.step(state)
-        if on_iterate is not None and state.k != previous:  # a failed step makes no new iterate
-            on_iterate(state)
-
-
 @dataclass
 class Reference:
     """z*: a converged, undisturbed re-solve (the yardstick of error histories)."""
@@ -121,17 +108,17 @@ def reference_solution(game: CompiledGame, cfg: Config, z0: np.ndarray, x: np.nd
     last: SSNState | None = None
     # the exact solution is the centralised one: a distributed run is measured against SSN's
     first = cfg.solver.model_copy(update={"kind": "ssn"}) if cfg.solver.kind == "distributed" else cfg.solver
-    attempts = [first] + ([first.model_copy(update={"kind": "ssn", "globalization": "hybrid"})]
-                          if first.kind != "ssn" or first.method != "hybrid" else [])
+    attempts = [first] + ([first.model_copy(update={"kind": "ssn", "globalization": FALLBACK})]
+                          if first.kind != "ssn" or resolve(first) != FALLBACK else [])
     for options in attempts:
         opts = options.model_copy(update={"max_iter": max(options.max_iter, 100)})
         solver = make_solver(cfg.model_copy(update={"solver": opts}), game, disturbed=False)
-        state = iterate(solver, solver.init(z0, x), check)
+        state = iterate(solver, solver.init(z0, x), on_iterate=check)
         last = state
         if state.converged:
-            newton = getattr(solver, "newton", solver)  # polishing takes plain Newton steps
+            polisher = getattr(solver, "polisher", solver)  # its iterations, on from a solution
             for _ in range(polish):
-                nxt = newton.step(state)
+                nxt = polisher.iteration(state)
                 if nxt.status != Status.RUNNING or not nxt.residual_norm < state.residual_norm:
                     break
                 state = nxt
@@ -157,7 +144,7 @@ class Certified:
     diagnosis: dict = field(default_factory=dict)  # a failed solve's phase 1 (``infeasibility``), when run
 
 
-def certified_solve(game: CompiledGame, solver: SemismoothNewton, state: SSNState, x: np.ndarray | None = None,
+def certified_solve(game: CompiledGame, solver: Solver, state: SSNState, x: np.ndarray | None = None,
                     on_iterate: Callable[[SSNState], None] | None = None,
                     note: Callable[[str], None] | None = None, restarts: int | None = None,
                     best_responses: bool = True, responses=None,
@@ -177,7 +164,7 @@ def certified_solve(game: CompiledGame, solver: SemismoothNewton, state: SSNStat
     used = 0
     while True:
         t = time.perf_counter()
-        state = iterate(solver, state, on_iterate)
+        state = iterate(solver, state, on_iterate=on_iterate)
         elapsed += time.perf_counter() - t
         if not best_responses:
             return conclude(game, Certified(state, kkt_residuals(game, state.z, x), {}, used, elapsed), x,
@@ -219,7 +206,7 @@ def conclude(game: CompiledGame, out: Certified, x: np.ndarray | None = None, ce
     at the last iterate found a player without a best response; otherwise the solver's own status stays."""
     from ..solvers.certificate import assess
     from ..solvers.feasibility import phase_one
-    from ..solvers.ssn import FAILURES
+    from ..solvers.status import FAILURES
 
     state, cert = out.state, out.certificate
     status, message = Status(state.status), state.message
@@ -279,11 +266,11 @@ def conclude(game: CompiledGame, out: Certified, x: np.ndarray | None = None, ce
 def _smoothable(cfg: Config, game: CompiledGame, outcome: Certified) -> bool:
     """A failed solve of a game with abs, min or max of its decisions, by the default method, whose answer can be
     certified: the smoothing homotopy (gnerun.runs.smoothing) is tried."""
-    from ..solvers.ssn import FAILURES
+    from ..solvers.status import FAILURES
 
     failed = Status(outcome.status) in FAILURES or outcome.status == Status.MAX_ITER
     return (failed and outcome.status not in (Status.INFEASIBLE, Status.INFEASIBLE_STAGE_CONSTRAINT)
-            and game.piecewise and cfg.solver.kind == "ssn" and cfg.solver.method == "hybrid" and cfg.run.certificate)
+            and game.piecewise and cfg.solver.kind == "ssn" and resolve(cfg.solver) == "hybrid" and cfg.run.certificate)
 
 
 def _smoothed(cfg: Config, game: CompiledGame, solver, outcome: Certified, z0: np.ndarray, x: np.ndarray | None,
@@ -476,7 +463,7 @@ def failed_solve_summary(exc: BaseException, game: CompiledGame, seen: list[SSNS
     })
 
 
-def _solve(cfg: Config, game: CompiledGame, solver: SemismoothNewton, run: RunDirectory | None,
+def _solve(cfg: Config, game: CompiledGame, solver: Solver, run: RunDirectory | None,
            compile_time: float, on_iterate: Callable[[SSNState, float | None], None] | None,
            interrupt: Interrupt, on_stage: Callable[[str], None] | None = None) -> SolveResult:
     started = time.perf_counter()

@@ -16,13 +16,10 @@ paper's Study 1: agent 3 alone carries u3 >= u1 + u2) is no VI, and :meth:`Affin
 The AVI is solved by DAQP (Arnström, Bemporad and Axehill, IEEE TAC 2022), a dual active-set solver in C, in its
 AVI mode for an asymmetric P (``is_avi``: Arnström, Benenati and Belgioioso, "DR-DAQP: a hybrid operator splitting
 and active-set solver for affine variational inequalities", arXiv:2604.02531, 2026). Bounds (rows with one
-nonzero) are passed as DAQP's simple bounds, which it treats without rows (a quarter faster at T = 20). Measured on
-the bounded LQ family (fresh solves, OPENBLAS_NUM_THREADS=1, ratios in one process): at T = 5 (18 decisions, 42
-rows) the whole solve takes 0.2-0.3 ms against 0.8-1.1 ms for the five iterations of the semismooth Newton phases,
-3.4 times faster at T = 10, 2.5 at T = 15, 1.2 at T = 20 (63 decisions), 0.9 at T = 25 (78) and 0.6 at T = 30:
-DAQP adds the active rows one at a time, each at the cost of a factor update, so it is left to the Newton
-iterations from ``UP_TO`` decisions. Its solution is exact on the active set it ends with (to rounding); where it
-is not within the solver's tolerance, the Newton steps that follow finish from there.
+nonzero) are passed as DAQP's simple bounds, which it treats without rows. DAQP adds the active rows one at a time,
+each at the cost of a factor update, so it is left to the Newton iterations from ``UP_TO`` decisions (the break-even
+measured on the bounded LQ family: benchmarks/results/solver-design.md). Its solution is exact on the active set it
+ends with (to rounding); where it is not within the solver's tolerance, the Newton steps that follow finish from there.
 """
 
 from __future__ import annotations
@@ -33,7 +30,7 @@ import numpy as np
 
 from ..game.compile import CompiledGame
 
-UP_TO = 64  # decisions: larger LQ games are left to the semismooth Newton iterations (measured, module docstring)
+UP_TO = 64  # decisions: larger LQ games are left to the Newton iterations (benchmarks/results/solver-design.md)
 ROWS_UP_TO = 256  # ... and so are those with more (merged) constraint rows
 ITER_LIMIT = 20  # DAQP's iteration limit: this many times the number of rows, plus the number of decisions
 _INF = 1e30  # DAQP's infinity
@@ -69,7 +66,7 @@ class AffineVI:
         (kept on the game: found once)."""
         if not game.affine or game.n > UP_TO:
             return None
-        cache = game._affine_cache
+        cache = game.affine_cache
         if "avi" not in cache:
             cache["avi"] = _build(game)
         return cache["avi"]
@@ -98,14 +95,14 @@ class AffineVI:
 
 def _build(game: CompiledGame) -> AffineVI | None:
     n, m = game.n, game.m
-    cache = game._affine_cache
+    cache = game.affine_cache
     dL, C = cache["dL"], cache["dc"]
     P, E = dL[:, :n], dL[:, n:]
     equality = game.equality_mask
     reached = ~game.zero_gradient_rows
     # rows with the same gradient and kind are copies of one constraint when their offsets agree too; the offsets
     # depend on x, so rows are merged only where they agree at the start state and in their (affine) dependence on x
-    offset_map = game._offset_map
+    offset_map = game.offset_map
     keys: dict[bytes, int] = {}
     first: list[int] = []
     group = np.full(m, -1)

@@ -222,7 +222,7 @@ class NewtonResponses:
         if agent not in self._solvers:
             from ..game.compile import compile_agent_problem
             from ..language.config import SolverConfig
-            from .hybrid import globalized
+            from .globalization import globalized
             from .ssn import SemismoothNewton
 
             problem = compile_agent_problem(self.cfg, agent, 0.0)
@@ -244,7 +244,8 @@ class NewtonResponses:
                    multipliers: np.ndarray | None = None) -> list[tuple[np.ndarray, bool]]:
         """Each start's end point and whether its solve converged; the first start is warm with ``multipliers``
         (the candidate's, in the agent's row order)."""
-        from .ssn import FAILURES, Status
+        from .driver import iterate
+        from .status import Status
 
         problem, solver, order = self._solver(agent)
         game = self.game
@@ -252,16 +253,14 @@ class NewtonResponses:
         xv = game.x0 if x is None else np.asarray(x, dtype=float)
         p = np.concatenate([xv, a[: sl.start], a[sl.stop:], a[sl]])
         ends = []
+        check = self.check  # a stop request raises there, before every step
+        stop = None if check is None else (lambda state: bool(check()))
         for k, s in enumerate(starts):
             lam = np.zeros(problem.m)
             if k == 0 and multipliers is not None and (order >= 0).all():
                 lam = multipliers[order]
-            state = solver.init(np.concatenate([np.asarray(s, dtype=float), lam]), p)
-            while not solver.terminate(state)[0]:
-                if self.check is not None:
-                    self.check()
-                state = solver.step(state)
-            converged = solver.terminate(state)[1] == Status.CONVERGED and state.status not in FAILURES
+            state = iterate(solver, solver.init(np.concatenate([np.asarray(s, dtype=float), lam]), p), stop=stop)
+            converged = state.status == Status.CONVERGED
             ends.append((state.z[: problem.n].copy(), converged))
         return ends
 
@@ -406,7 +405,11 @@ class PlayerCheck:
 
 def check_player(game: CompiledGame, agent: int, z: np.ndarray, x: np.ndarray | None = None,
                  responses: NewtonResponses | None = None) -> PlayerCheck:
-    """Agent ``agent``'s best response to the others at z, as the module docstring describes."""
+    """Agent ``agent``'s best response to the others at z, as the module docstring describes.
+
+    One function of about 100 lines (the reason): its stages (design points, the box search, local solves, rays)
+    share the best value and decision found so far, and each stage's starts depend on what the earlier ones found.
+    """
     n = game.n
     a = np.asarray(z[:n], dtype=float)
     sl = game.agent_slices[agent]

@@ -53,8 +53,11 @@ import numpy as np
 
 from .avi import AffineVI
 from .interior_point import STARTS, InteriorIterate, InteriorPoint
+from .josephy_newton import kkt_lcp_point
+from .linalg import norm
 from .response_round import response_round
-from .ssn import FAILURES, SemismoothNewton, SSNState, Status, _norm
+from .ssn import SemismoothNewton
+from .status import FAILURES, SSNState, Status
 
 MEMORY = 4  # nonmonotone reference: the largest ||Phi|| of this many last accepted Newton iterates
 WATCHDOG = 4  # Newton steps without a new best ||Phi|| (SUFFICIENT below it) before the interior phase takes over
@@ -69,7 +72,7 @@ FLAT = 1e-2  # a Levenberg-Marquardt step that changes ||Phi|| by less than this
 PIVOTS = 8  # LQ games: Lemke's method from this many covering vectors after the interior phase's restarts
 
 
-@dataclass(slots=True, frozen=True)
+@dataclass(slots=True, frozen=True, kw_only=True)
 class Memory:
     """What the method keeps between steps (in ``SSNState.search``)."""
 
@@ -106,6 +109,14 @@ class HybridNewton:
         # games, which pivot instead; whether the game is LQ is asked only then)
         self.answers = handover and len(self.game.agent_names) > 1
 
+    @property
+    def polisher(self) -> SemismoothNewton:
+        """The method whose iterations polish a solution (the reference solution z*): the plain Newton steps."""
+        return self.newton
+
+    def at_solution(self, state: SSNState) -> bool:
+        return self.newton.at_solution(state)
+
     # the step-wise interface (STYLE.md) ----------------------------------------------------
     def init(self, z0: np.ndarray | None = None, x: np.ndarray | None = None,
              rng: np.random.Generator | None = None) -> SSNState:
@@ -114,7 +125,8 @@ class HybridNewton:
             return state
         merit = state.residual_norm
         threshold = self._threshold(merit)
-        memory = Memory("newton", (merit,), merit, 0, None, threshold, state.z, threshold, crash=self.avi is not None)
+        memory = Memory(phase="newton", merits=(merit,), best=merit, stalls=0, interior=None, handover=threshold,
+                        origin=state.z, handover0=threshold, crash=self.avi is not None)
         state.search = memory  # a new state, held by nothing else yet
         if not self.handover:  # the interior phase alone: its start point is z^0
             return self._start_interior(state, 0, k=0)
@@ -125,8 +137,7 @@ class HybridNewton:
         """``init`` for a start near an equilibrium (a KKT point at which some agents moved to their best
         responses, as :func:`~gnerun.runs.solving.certified_solve` restarts): the interior phase at once, with
         the small barrier of a warm start (``interior_point.WARM``); a Newton step from there, with its zero
-        multipliers, is rarely accepted. Measured on the 50 of 100 random ALGAMES merges whose first KKT point
-        was not an equilibrium: a fifth fewer iterations than ``init``, every restart certified."""
+        multipliers, is rarely accepted (measured: benchmarks/results/solver-design.md)."""
         state = self.init(z0, x, rng)
         if state.status in FAILURES or not self.handover:
             return state
@@ -139,8 +150,9 @@ class HybridNewton:
         return self.newton.finish(state)
 
     def step(self, state: SSNState) -> SSNState:
-        """Exactly one iteration (see the module docstring)."""
-        if state.status in FAILURES:
+        """Exactly one iteration (see the module docstring); a failed or converged state is returned unchanged (a
+        step at a solution keeps it: no phase change, no interior restart)."""
+        if state.status in FAILURES or self.newton.at_solution(state):
             return state
         memory: Memory = state.search
         if memory.phase == "newton":
@@ -177,8 +189,9 @@ class HybridNewton:
         merit = candidate.residual_norm
         if candidate.status != Status.RUNNING or not merit < state.residual_norm:
             return None
-        candidate.search = Memory("newton", (*memory.merits[-MEMORY + 1:], merit), merit, 0, None, memory.handover,
-                                  memory.origin, memory.handover0)
+        candidate.search = Memory(phase="newton", merits=(*memory.merits[-MEMORY + 1:], merit), best=merit, stalls=0,
+                                  interior=None, handover=memory.handover, origin=memory.origin,
+                                  handover0=memory.handover0)
         return candidate
 
     def _newton_step(self, state: SSNState, memory: Memory) -> SSNState:
@@ -205,7 +218,7 @@ class HybridNewton:
         it = memory.interior
         memory = replace(memory, phase="interior", best=math.inf, stalls=0,
                          handover=0.1 * min(memory.handover, state.residual_norm))
-        return self._interior_step(self._state_at(state, it.z, memory, k=state.k), memory)
+        return self._interior_step(self.newton.advance(state, it.z, search=memory, k=state.k), memory)
 
     def _start_interior(self, state: SSNState, attempt: int, *, k: int | None = None,
                         warm: bool = False) -> SSNState:
@@ -216,7 +229,7 @@ class HybridNewton:
         z, w, eps = self.interior.start(memory.origin, state.x, attempt, warm)
         memory = replace(memory, phase="interior", best=math.inf, stalls=0, attempt=attempt,
                          handover=memory.handover0, crash=False)
-        start = self._state_at(state, z, memory, k=state.k if k is None else k)
+        start = self.newton.advance(state, z, search=memory, k=state.k if k is None else k)
         memory = replace(memory, interior=self.interior.measure(z, w, start.parts.L, start.parts.c, eps))
         start = replace(start, search=memory)
         return start if k is not None else self._interior_step(start, memory)
@@ -231,7 +244,7 @@ class HybridNewton:
         if z is None:
             return None
         phi, _ = newton.phi(*newton.kkt_residual(z, state.x), z)
-        if not _norm(phi) <= HANDOVER_DECREASE * state.residual_norm:
+        if not norm(phi) <= HANDOVER_DECREASE * state.residual_norm:
             return None
         candidate = newton.advance(state, z, rcond=rcond)
         return candidate if candidate.status == Status.RUNNING else None
@@ -248,7 +261,7 @@ class HybridNewton:
         if proposal[0] is None:
             return self._restart(state, memory, Status.SINGULAR_JACOBIAN, proposal[1])
         z, w, t, rcond = proposal
-        new = self._state_at(state, z, memory, rcond=rcond)
+        new = self.newton.advance(state, z, search=memory, rcond=rcond)
         if new.status in FAILURES:  # NaN or divergence: restart if a start is left
             return self._restart(state, memory, new.status, new.message)
         it = self.interior.measure(z, w, new.parts.L, new.parts.c, memory.interior.eps, t)
@@ -303,9 +316,7 @@ class HybridNewton:
         """LQ games: the KKT system is a linear complementarity problem; solve it by Lemke's method from z^0 with
         the covering vectors of the remaining attempts (all ones, then seeded random ones), the first solution
         is the next iterate (one iteration). None if every attempt ends on a ray."""
-        from .josephy_newton import kkt_lcp_point
-
-        parts = self.newton._evaluate(memory.origin, state.x)[0]
+        parts = self.newton.evaluate(memory.origin, state.x)[0]
         rng = np.random.default_rng(0)
         for attempt in range(memory.attempt - RESTARTS, PIVOTS):
             d = None if attempt == 0 else rng.uniform(0.1, 10.0, size=state.z.size * 4)
@@ -313,26 +324,5 @@ class HybridNewton:
             if z is not None:
                 memory = replace(memory, phase="newton", merits=(state.residual_norm,), best=state.residual_norm,
                                  stalls=0, interior=None, attempt=RESTARTS + PIVOTS)
-                return self._state_at(state, z, memory)
+                return self.newton.advance(state, z, search=memory)
         return None
-
-    def _state_at(self, state: SSNState, z: np.ndarray, memory: Memory, *, k: int | None = None,
-                  rcond: float = math.nan) -> SSNState:
-        """The iterate after ``state`` (or ``state`` moved to iteration ``k``) at z, evaluated with its
-        derivatives for the next step."""
-        newton = self.newton
-        parts, phi, active = newton._evaluate(z, state.x)
-        new = SSNState(z=z, x=state.x, k=state.k + 1 if k is None else k, phi=phi, residual_norm=_norm(phi),
-                       parts=parts, active=active, z_prev=state.z if k is None else state.z_prev,
-                       active_prev=state.active if k is None else state.active_prev, status=Status.RUNNING,
-                       message="", rng=state.rng, rcond=rcond, search=memory)
-        return newton._checked(new)
-
-
-def globalized(newton: SemismoothNewton) -> SemismoothNewton | HybridNewton:
-    """``newton`` inside the globalization its options ask for (``hybrid``, ``interior_point``), or as it is
-    (``none``, ``line_search``: the semismooth Newton class takes those steps itself)."""
-    method = newton.options.method
-    if method in ("hybrid", "interior_point"):
-        return HybridNewton(newton, handover=method == "hybrid")
-    return newton

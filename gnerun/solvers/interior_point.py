@@ -16,7 +16,8 @@ with D = diag(w / lambda_I) and dw = eps/lambda_I - w - D dlambda_I. It stays no
 Newton matrix is not (zero multipliers meeting active bounds, costs linear in a player's own variables, dependent
 constraint gradients), because lambda_I and w are positive.
 
-What makes it work on the field's games, measured on the benchmark suite (``python -m benchmarks robustness``):
+What makes it work on the field's games (``python -m benchmarks robustness``; the measurements behind each choice:
+benchmarks/results/solver-design.md):
 
 - **Each player's own block is made positive definite** (in its symmetric part), by the smallest multiple of the
   identity that does, like the inertia correction of interior-point methods for one nonconvex program (IPOPT):
@@ -30,15 +31,10 @@ What makes it work on the field's games, measured on the benchmark suite (``pyth
   large the multipliers must become: decisions starting at their bounds with gradients of 1e4, FK A.6 from 10).
 - **Slacks start close**: at -c, or ``START_FLOOR`` = 0.1 where a row is violated or nearly active (not 1, which is
   ten times the size of a trajectory game's constraint values: collision distances and road margins of order 0.1),
-  and the barrier target eps shrinks once every residual of H_eps is below ``KAPPA`` = 100 eps. Measured against
-  a floor of 1 and KAPPA = 10 on 100 random ALGAMES merges: a median of 31 iterations instead of 56 and a 90th
-  percentile of 62 instead of 127 (on 100 merges of another seed: 30 and 60 instead of 52 and 118); 50
-  T-intersections, 28 instead of 39; the FK library and the bounded LQ games stay certified at every start. The
-  smaller slack does not raise the multiplier (mu / max(w, 1)): with mu / w the merges took 10% more iterations and
-  FK A.10d and A.10e twice as many.
-- **No merit function**: every step is taken at its full length to the boundary. A potential-reduction line
-  search (Dreves et al.) and residual-based backtracking were both measured and lost robustness on nonconvex
-  games (the potential reduction solved 1 of 6 ALGAMES merges); instead, the globalized method
+  and the barrier target eps shrinks once every residual of H_eps is below ``KAPPA`` = 100 eps (the
+  measurements that chose both: benchmarks/results/solver-design.md).
+- **No merit function**: every step is taken at its full length to the boundary (a potential-reduction line search
+  and residual-based backtracking lost robustness on nonconvex games); instead, the globalized method
   (:mod:`gnerun.solvers.hybrid`) watches for stalls and restarts.
 
 The linear algebra has the two forms of the semismooth Newton step: condensed (the inequality multipliers
@@ -57,6 +53,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.linalg import lapack
+
+from .linalg import factor
 
 BOUNDARY = 0.995  # a step goes at most this fraction of the way to the boundary lambda_I = 0 or w = 0
 SHRINK = 0.2  # eps shrinks by this factor ...
@@ -273,7 +271,7 @@ class DenseBarrier:
         def solve(delta: float):
             if delta:
                 M[idx, idx] = diag + delta
-            lu, piv, info, rcond = _factor(M)
+            lu, piv, info, rcond = factor(M)
             if info != 0 or not rcond > 0.0:
                 return None
             sol, _ = lapack.dgetrs(lu, piv, rhs)
@@ -428,12 +426,6 @@ class _Gather:
         out = np.zeros(self.shape)
         out[self.indices, self.col_of] = data[self.positions]
         return out
-
-
-def _factor(M: np.ndarray):
-    from .ssn import _factor as factor
-
-    return factor(M)
 
 
 def convexify(S: np.ndarray, blocks: list[slice]) -> None:

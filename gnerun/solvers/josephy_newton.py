@@ -25,8 +25,10 @@ import numpy as np
 from ..errors import InputError
 from ..game.compile import CompiledGame
 from ..language.config import DisturbanceConfig, SolverConfig
+from .kkt import KKTSystem
 from .lcp import lemke
-from .ssn import FAILURES, SemismoothNewton, SSNState, Status, _noise
+from .linalg import noise
+from .status import FAILURES, SSNState, Status
 
 
 def check_nash_problem(game: CompiledGame) -> None:
@@ -125,21 +127,41 @@ def kkt_lcp_point(parts, z: np.ndarray, equality: np.ndarray, d: np.ndarray | No
     return np.concatenate([a_new, lam_new])
 
 
-class JosephyNewton(SemismoothNewton):
-    """Josephy-Newton steps [eq:JN]; init, terminate and the residual ||Phi|| are shared with SSN."""
+class JosephyNewton:
+    """Josephy-Newton steps [eq:JN]. Phi, the iterate states and their end (``init``, ``terminate``, ``finish``) are a
+    :class:`~gnerun.solvers.kkt.KKTSystem`'s, so iterates are measured by the same ||Phi|| as SSN's."""
 
     def __init__(self, game: CompiledGame, solver: SolverConfig, disturbance: DisturbanceConfig | None = None):
         check_nash_problem(game)
-        super().__init__(game, solver, disturbance)
+        self.kkt = KKTSystem(game, solver, disturbance)
+        self.game = game
+        self.options = solver
+        self.disturbance = self.kkt.disturbance
 
     def init(self, z0: np.ndarray | None = None, x: np.ndarray | None = None,
              rng: np.random.Generator | None = None) -> SSNState:
         if rng is None and self.disturbance.kind == "pseudogradient":
             rng = np.random.default_rng(self.disturbance.seed)
-        return super().init(z0, x, rng)
+        return self.kkt.init(z0, x, rng)
+
+    def terminate(self, state: SSNState) -> tuple[bool, Status]:
+        return self.kkt.terminate(state)
+
+    def finish(self, state: SSNState) -> SSNState:
+        return self.kkt.finish(state)
+
+    def at_solution(self, state: SSNState) -> bool:
+        return self.kkt.at_solution(state)
 
     def step(self, state: SSNState) -> SSNState:
-        """One (perturbed) Josephy-Newton step: the affine VI at a^k, solved exactly by Lemke's method."""
+        """One (perturbed) Josephy-Newton step: the affine VI at a^k, solved exactly by Lemke's method; a failed or
+        converged state is returned unchanged (:meth:`iteration` steps on from a solution)."""
+        if state.status in FAILURES or self.kkt.at_solution(state):
+            return state
+        return self.iteration(state)
+
+    def iteration(self, state: SSNState) -> SSNState:
+        """One Josephy-Newton step from ``state``, also at a solution."""
         if state.status in FAILURES:
             return state
         game = self.game
@@ -148,16 +170,16 @@ class JosephyNewton(SemismoothNewton):
         F, H = game.pseudogradient(a, state.x)
         d = self.disturbance
         if d.kind == "pseudogradient" and d.scale > 0:
-            F = F + d.scale * _noise(state.rng, F.shape, d.distribution)
-            H = H + d.scale * _noise(state.rng, H.shape, d.distribution)
+            F = F + d.scale * noise(state.rng, F.shape, d.distribution)
+            H = H + d.scale * noise(state.rng, H.shape, d.distribution)
         if not (np.all(np.isfinite(F)) and np.all(np.isfinite(H))):
             return replace(state, status=Status.NAN, message=f"F or H is not finite at a^{state.k}")
         G = state.parts.dc_da
         h = G @ a - state.parts.c  # c is affine: c(a') = c(a) + G (a' - a)
         # the affine VI in the variable a: H a + (F - H a^k) + G^T lam = 0, complementarity with h - G a
-        a_new, lam_new, sub = solve_affine_vi(H, F - H @ a, G, h, self._eq, tol=1e-12)
+        a_new, lam_new, sub = solve_affine_vi(H, F - H @ a, G, h, game.equality_mask, tol=1e-12)
         if not sub.solved:
             return replace(state, status=Status.SUBPROBLEM_FAILED,
                            message=f"the Josephy-Newton subproblem at a^{state.k} has no solution found by Lemke's "
                                    f"method: {sub.message}; the step was not taken")
-        return self.advance(state, np.concatenate([a_new, lam_new]))
+        return self.kkt.advance(state, np.concatenate([a_new, lam_new]))

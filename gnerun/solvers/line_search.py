@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import TypeVar
 
 T = TypeVar("T")
@@ -32,3 +33,17 @@ def backtrack(merit0: float, slope: float, trial: Callable[[float], tuple[float,
             return t, value
         t *= beta
     return None
+
+
+@dataclass(frozen=True, slots=True)
+class Armijo:
+    """The backtracking search as an object a globalization is given (:func:`backtrack` with these constants)."""
+
+    t0: float = 1.0
+    sigma: float = 1e-4
+    beta: float = 0.5
+    t_min: float = 1e-12
+
+    def search(self, merit0: float, slope: float, trial: Callable[[float], tuple[float, T]]) -> tuple[float, T] | None:
+        """The accepted step length and what ``trial`` computed there, or ``None`` (see :func:`backtrack`)."""
+        return backtrack(merit0, slope, trial, t0=self.t0, sigma=self.sigma, beta=self.beta, t_min=self.t_min)

@@ -24,14 +24,18 @@ import numpy as np
 from ..errors import InputError
 from ..game.compile import CompiledGame, compile_agent_problem
 from ..language.config import Config, SolverConfig
-from .hybrid import globalized
-from .ssn import FAILURES, SemismoothNewton, SSNState
+from .driver import Solver, iterate
+from .globalization import globalized
+from .josephy_newton import JosephyNewton
+from .kkt import KKTSystem
+from .ssn import SemismoothNewton
+from .status import FAILURES, SSNState, Status
 
 
 class Agent:
     """One agent's computation: its proximal response problem and the inner Newton method."""
 
-    def __init__(self, name: str, problem: CompiledGame, inner: SemismoothNewton, max_iter: int):
+    def __init__(self, name: str, problem: CompiledGame, inner: Solver, max_iter: int):
         self.name = name
         self.problem = problem
         self.inner = inner
@@ -40,13 +44,7 @@ class Agent:
     def respond(self, x: np.ndarray, others: np.ndarray, own: np.ndarray, multipliers: np.ndarray) -> SSNState:
         """The proximal response to the others' last decisions, from the agent's own last (a_i, lambda_i)."""
         p = np.concatenate([x, others, own])
-        state = self.inner.init(np.concatenate([own, multipliers]), p)
-        for _ in range(self.max_iter):
-            done, _ = self.inner.terminate(state)
-            if done:
-                break
-            state = self.inner.step(state)
-        return self.inner.finish(state)
+        return iterate(self.inner, self.inner.init(np.concatenate([own, multipliers]), p), self.max_iter)
 
 
 def make_agents(cfg: Config, game: CompiledGame) -> list[Agent]:
@@ -58,18 +56,17 @@ def make_agents(cfg: Config, game: CompiledGame) -> list[Agent]:
     for i, name in enumerate(game.agent_names):
         problem = compile_agent_problem(cfg, i, opts.tau)
         if opts.inner == "jn":
-            from .josephy_newton import JosephyNewton
-
-            inner: SemismoothNewton = JosephyNewton(problem, inner_opts)
+            inner: Solver = JosephyNewton(problem, inner_opts)
         else:
             inner = globalized(SemismoothNewton(problem, inner_opts))
         agents.append(Agent(name, problem, inner, opts.inner_max_iter))
     return agents
 
 
-class ProximalResponse(SemismoothNewton):
-    """Rounds of proximal responses. ``init``, ``terminate`` and ``finish`` are those of SSN: the
-    coordinator measures ||Phi(z)|| of the whole game to decide convergence, the agents never see it."""
+class ProximalResponse:
+    """Rounds of proximal responses. ``init``, ``terminate`` and ``finish`` are the whole game's
+    :class:`~gnerun.solvers.kkt.KKTSystem`'s: the coordinator measures ||Phi(z)|| of the whole game to decide
+    convergence, the agents never see it."""
 
     def __init__(self, cfg: Config, game: CompiledGame):
         if game.shared_slice.stop > game.shared_slice.start:
@@ -79,12 +76,35 @@ class ProximalResponse(SemismoothNewton):
         if cfg.disturbance.kind != "none":
             raise InputError("solver.kind 'distributed' takes no solver-side disturbance yet (disturbance.kind "
                              f"{cfg.disturbance.kind!r}); plant disturbances work")
-        super().__init__(game, cfg.solver, None)
+        self.kkt = KKTSystem(game, cfg.solver, None)
+        self.game = game
+        self.options = cfg.solver
+        self.disturbance = self.kkt.disturbance
         self.agents = make_agents(cfg, game)
         self.gauss_seidel = cfg.solver.scheme == "gauss_seidel"
 
+    def init(self, z0: np.ndarray | None = None, x: np.ndarray | None = None,
+             rng: np.random.Generator | None = None) -> SSNState:
+        return self.kkt.init(z0, x, rng)
+
+    def terminate(self, state: SSNState) -> tuple[bool, Status]:
+        return self.kkt.terminate(state)
+
+    def finish(self, state: SSNState) -> SSNState:
+        return self.kkt.finish(state)
+
+    def at_solution(self, state: SSNState) -> bool:
+        return self.kkt.at_solution(state)
+
     def step(self, state: SSNState) -> SSNState:
-        """One round: every agent's proximal response once."""
+        """One round: every agent's proximal response once; a failed or converged state is returned unchanged
+        (:meth:`iteration` takes a round from a solution)."""
+        if state.status in FAILURES or self.kkt.at_solution(state):
+            return state
+        return self.iteration(state)
+
+    def iteration(self, state: SSNState) -> SSNState:
+        """One round from ``state``, also at a solution."""
         if state.status in FAILURES:
             return state
         game = self.game
@@ -101,4 +121,4 @@ class ProximalResponse(SemismoothNewton):
                                        f"{response.message}")
             new_a[sl] = response.z[: sl.stop - sl.start]
             new_lam[ms] = response.z[sl.stop - sl.start :]
-        return self.advance(state, np.concatenate([new_a, new_lam]))
+        return self.kkt.advance(state, np.concatenate([new_a, new_lam]))

@@ -14,17 +14,8 @@ lowest feasible cost kept. Every player answers the same plans, so the round doe
 The players' answers together are the new start: each car has planned around the others, and the coupling rows
 are close to where an equilibrium puts them. The joint problem is then solved from there.
 
-Measured on a family of overtaking games (the robustness suite's, varied: gaps 0.2-0.8, speeds 1.0-1.5 behind
-0.3-0.7, road widths 0.34 and 0.4; 126 variants, 28 of which stalled from zero inputs under the default method), each
-tried on the 28 as the default method's start in place of z^0 -- each player alone without the coupling rows: 0
-certified (here that is the zero-input start itself); the nearest feasible point by SLSQP on the constraints alone: 13;
-a homotopy on the violated rows (c - theta max(c(z^0), 0) <= 0, theta = 0.75, 0.5, 0.25, 0): 18; on the collision
-radius (0.5, 0.75, 1 of it): 20; a fourth interior start with a barrier of 1: 19 (0.1: 15); this round: 23 with SLSQP
-answers, 24 with Newton answers on each player's compiled problem. As the globalized method runs it, after its three
-interior starts (the other 98 variants never get there and take the same steps as before): 19 of the 28 certified, a
-median of 110 iterations in all; the round itself takes about 0.1 s of SLSQP at 26 decisions per car (a quiet
-machine). ``MAX_ITER`` = 50, 100, 200 and SLSQP's tolerance 1e-15 instead of its default gave 19, 19, 19 and 21 of
-the 28.
+Chosen among other new starts (the nearest feasible point, homotopies on the violated rows or the collision radius,
+another interior start) on a family of overtaking games: benchmarks/results/solver-design.md.
 """
 
 from __future__ import annotations

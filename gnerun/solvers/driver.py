@@ -1,0 +1,52 @@
+"""The driver loop: one solver's steps from a state to the end, for every caller.
+
+A solver is a step function (STYLE.md, after optimistix): ``init(z0, x, rng) -> state``, ``step(state) -> state``
+(exactly one iteration; a failed or converged state comes back unchanged), ``terminate(state) -> (done, status)``
+and ``finish(state) -> state`` (the final status and its message). :func:`iterate` runs the steps: a solve, an
+agent's proximal response, a best response of the certificate, the benchmarks. A new status is handled once, in
+``terminate``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+from .status import SSNState, Status
+
+
+@runtime_checkable
+class Solver(Protocol):
+    """What :func:`iterate` needs of a solver (every solver of :mod:`gnerun.solvers` has it)."""
+
+    def init(self, z0: np.ndarray | None = None, x: np.ndarray | None = None,
+             rng: np.random.Generator | None = None) -> SSNState: ...
+
+    def step(self, state: SSNState) -> SSNState: ...
+
+    def terminate(self, state: SSNState) -> tuple[bool, Status]: ...
+
+    def finish(self, state: SSNState) -> SSNState: ...
+
+
+def iterate(solver: Solver, state: SSNState, max_steps: int | None = None,
+            on_iterate: Callable[[SSNState], None] | None = None, *,
+            stop: Callable[[SSNState], bool] | None = None, finish: bool = True) -> SSNState:
+    """Step ``solver`` from ``state`` until ``terminate`` says done, ``max_steps`` steps were taken (None: no limit
+    but the solver's max_iter) or ``stop(state)`` says so before a step (it may also raise, as a stop request does);
+    then ``finish`` (unless not ``finish``: the state as the last step left it). ``on_iterate`` sees the state
+    given and every new iterate after it (a step that makes none, a failed one, is not shown)."""
+    if on_iterate is not None:
+        on_iterate(state)
+    steps = 0
+    while not solver.terminate(state)[0]:
+        if (max_steps is not None and steps >= max_steps) or (stop is not None and stop(state)):
+            break
+        previous = state.k
+        state = solver.step(state)
+        steps += 1
+        if on_iterate is not None and state.k != previous:
+            on_iterate(state)
+    return solver.finish(state) if finish else state
