@@ -222,7 +222,7 @@ def validate(config: ConfigArg, set_: SetOpt = None, quiet: QuietOpt = False, ex
         _warn(config, large, quiet)
         if not cfg.size.problems()[1]:  # a game of a size that builds in seconds is built
             from .game.compile import compile_game
-            from .runs.solving import make_solver
+            from .solvers.factory import make_solver
 
             game = compile_game(cfg)
             make_solver(cfg, game)  # refuses what the configured method cannot solve

@@ -11,6 +11,7 @@ import pytest
 from gnerun.errors import ConfigError, InputError
 from gnerun.language.config import load_config, parse_override
 from gnerun.language.yaml_source import MAX_CONFIG_BYTES
+from gnerun.solvers.globalization import resolve
 
 from .conftest import CONFIGS, shipped_configs
 
@@ -54,7 +55,7 @@ def test_defaults_are_filled_in() -> None:
     cfg = load_config("cfg.yaml", text=STATIC)
     assert cfg.version == 1
     assert cfg.solver.kind == "ssn" and cfg.solver.complementarity == "min" and cfg.solver.max_iter == 300
-    assert cfg.solver.globalization == "auto" and cfg.solver.method == "hybrid"
+    assert cfg.solver.globalization == "auto" and resolve(cfg.solver) == "hybrid"
     assert cfg.disturbance.kind == "none" and cfg.disturbance.plant.kind == "none"
     assert cfg.game.equilibrium == "generalized" and cfg.game.shared_constraints == []
     resolved = cfg.resolved_yaml()
@@ -257,4 +258,4 @@ def test_josephy_newton_takes_no_globalization_of_semismooth_newton() -> None:
     [problem] = _problems(STATIC.replace("  tol: 1.0e-10\n", "  tol: 1.0e-10\n  kind: jn\n  globalization: hybrid\n"))
     assert "solver.globalization" in problem and "Josephy-Newton" in problem
     jn = load_config("cfg.yaml", text=STATIC.replace("  tol: 1.0e-10\n", "  tol: 1.0e-10\n  kind: jn\n"))
-    assert jn.solver.method == "none"
+    assert resolve(jn.solver) == "none"

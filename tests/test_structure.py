@@ -31,19 +31,11 @@ DEFERRED = {
     ("gnerun.runs.sweep", "gnerun.runs.closed_loop"): "a sweep worker loads the run it makes",
     ("gnerun.runs.sweep", "gnerun.runs.solving"): "a sweep worker loads the run it makes",
     ("gnerun.runs.sweep", "gnerun.runs.interrupt"): "a worker process's signal handling, set up in the worker",
-    # open: solvers/ and runs/solving.py are being restructured on their own branch (the driver, the status module)
-    ("gnerun.runs.solving", "*"): "open: the solver table loads the solvers it builds",
-    ("gnerun.runs.smoothing", "gnerun.runs.solving"): "open: iterate and make_solver move to solvers/driver.py",
-    ("gnerun.solvers.certificate", "*"): "open: solvers/ is restructured on its own branch",
-    ("gnerun.solvers.hybrid", "gnerun.solvers.josephy_newton"): "open: solvers/ is restructured on its own branch",
-    ("gnerun.solvers.interior_point", "gnerun.solvers.ssn"): "open: solvers/ is restructured on its own branch",
-    ("gnerun.solvers.proximal_response", "gnerun.solvers.josephy_newton"): "open: solvers/ is restructured on its "
-                                                                            "own branch",
+    ("gnerun.runs.solving", "*"): "the certificate and phase 1 load when a solve ends, and only where they are used",
+    ("gnerun.solvers.certificate", "*"): "the best responses load their solvers when a player is checked",
 }
 # cycles closed by a deferred import, each as its sorted modules -> why it is still there
-CYCLES = {
-    ("gnerun.runs.smoothing", "gnerun.runs.solving"): "open: smoothing needs the driver, which moves to solvers/",
-}
+CYCLES: dict[tuple[str, ...], str] = {}
 
 
 def _modules() -> dict[str, Path]:

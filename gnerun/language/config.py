@@ -246,14 +246,6 @@ class SolverConfig(Strict):
     inner: Literal["ssn", "jn"] = "ssn"
     inner_max_iter: int = Field(20, ge=1, le=1_000_000, description="inner Newton iterations per proximal response")
 
-    @property
-    def method(self) -> str:
-        """The globalization in effect: ``auto`` is ``hybrid`` for semismooth Newton (also the inner one of
-        ``distributed``) and ``none`` for Josephy-Newton, which solves each step's subproblem exactly."""
-        if self.globalization != "auto":
-            return self.globalization
-        return "none" if self.kind == "jn" else "hybrid"
-
 
 def _scale(v: Any) -> float | list[float]:
     """A plant disturbance's scale: one number, or a list of numbers (one per state)."""

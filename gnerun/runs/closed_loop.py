@@ -29,12 +29,13 @@ from ..language.config import Config, PlantDisturbance
 from ..log import topics
 from ..log.mcap_log import json_ready
 from ..log.messages import MpcError, MpcIterate, MpcState
-from ..solvers.ssn import FAILURES, Status
+from ..solvers.driver import iterate
+from ..solvers.factory import make_solver
+from ..solvers.status import FAILURES, Status
 from .interrupt import Interrupt, Stopped
 from .reference import ReferenceSolver
 from .rundir import RunDirectory, ended_by, recording
 from .safeguard import Fallback, PaperRule
-from .solving import make_solver
 
 
 @dataclass
@@ -336,19 +337,15 @@ class ClosedLoop:
     def _iterate(self, state, budget: int) -> tuple[object, list, float]:
         """Up to ``budget`` solver steps from ``state``, stopped at convergence or a failed step (whose iterate is
         not kept): the last state, the iterates as (k, ||Phi||, z^k) from the start on, the steps' time."""
-        solver = self.solver
-        trace = [(0, state.residual_norm, state.z)]
-        elapsed = 0.0
-        for _ in range(budget):
-            if solver.terminate(state)[1] in FAILURES | {Status.CONVERGED}:
-                break
-            t0 = time.perf_counter()
-            state = solver.step(state)
-            elapsed += time.perf_counter() - t0
-            if state.status in FAILURES:
-                break
-            trace.append((state.k, state.residual_norm, state.z))
-        return state, trace, elapsed
+        trace: list = []
+
+        def keep(s) -> None:  # a failed step's iterate is not kept
+            if s.status not in FAILURES:
+                trace.append((s.k, s.residual_norm, s.z))
+
+        t0 = time.perf_counter()
+        state = iterate(self.solver, state, budget, keep, finish=False, ends=FAILURES | {Status.CONVERGED})
+        return state, trace, time.perf_counter() - t0
 
     def _interrupted(self, t: int, plural: bool = False) -> None:
         if self.log is not None:

@@ -22,6 +22,7 @@ import numpy as np
 from ..game.compile import compile_game
 from ..language.config import Config
 from ..solvers.driver import iterate
+from ..solvers.factory import make_solver
 from ..solvers.status import SSNState
 
 # mu, times max(1, |a^0|_inf): from 10 to 1e-8 by factors of sqrt(10) (by factors of 10, a level's start can lie a
@@ -55,8 +56,6 @@ def smoothing_homotopy(cfg: Config, z0: np.ndarray, x: np.ndarray | None = None,
     where that fails, the default method. None if no level down to ``CLOSE_ENOUGH`` converges. ``on_iterate`` sees
     every iterate of every level, numbered on from ``k0``; ``first`` is the relative mu to begin with (a start
     already near an equilibrium, such as a best response, begins small: a large mu smooths its basin away)."""
-    from .solving import make_solver
-
     z = np.asarray(z0, dtype=float)
     scale = max(1.0, float(np.max(np.abs(z), initial=0.0)))
     levels: list[tuple[float, str, int]] = []

@@ -15,69 +15,14 @@ import numpy as np
 
 from ..game.building import no_check, polled
 from ..game.compile import CompiledGame, compile_game
-from ..language.config import Config, sparse_obstacles
+from ..language.config import Config
 from ..log.mcap_log import json_ready
 from ..solvers.driver import Solver, iterate
-from ..solvers.globalization import FALLBACK, globalized, resolve
-from ..solvers.ssn import SemismoothNewton
-from ..solvers.status import SSNState, Status
-from ..threads import single_threaded_blas
+from ..solvers.factory import SPARSE_FROM, SPARSE_WORK, formulation, make_solver  # noqa: F401 - the API's names
+from ..solvers.globalization import FALLBACK, resolve
+from ..solvers.status import FAILURES, SSNState, Status
 from .interrupt import Interrupt, Stopped
 from .rundir import RunDirectory, ended_by, recording
-
-
-def make_solver(cfg: Config, game: CompiledGame, *, disturbed: bool = True) -> Solver:
-    """The solver the config asks for (``solver.kind``, ``solver.globalization``), with its disturbance model
-    (unless not ``disturbed``). Asks for one BLAS thread (:mod:`gnerun.threads`)."""
-    single_threaded_blas()
-    disturbance = cfg.disturbance if disturbed else None
-    if cfg.solver.kind == "distributed":
-        from ..solvers.proximal_response import ProximalResponse
-
-        return ProximalResponse(cfg if disturbed else cfg.model_copy(update={"disturbance": type(cfg.disturbance)()}),
-                                game)
-    if cfg.solver.kind == "jn":
-        from ..solvers.josephy_newton import JosephyNewton
-
-        return JosephyNewton(game, cfg.solver, disturbance)
-    if formulation(cfg, game) == "sparse":
-        from ..game.sparse import compile_sparse
-        from ..solvers.sparse_ssn import SparseSemismoothNewton
-
-        system = game.derived.get("sparse")
-        if system is None:
-            system = game.derived["sparse"] = compile_sparse(cfg, game)
-        newton: SemismoothNewton = SparseSemismoothNewton(game, cfg.solver, disturbance, system)
-    else:
-        newton = SemismoothNewton(game, cfg.solver, disturbance)
-    return globalized(newton)
-
-
-# auto, nonlinear dynamics: the sparse formulation once the condensed system's size times the number of stages,
-# U (T + 1), reaches SPARSE_WORK: the condensed derivatives are dense and nest through the dynamics (their cost grows
-# with both), the sparse system's grow with T alone. Measured per iteration, condensed / sparse (this machine,
-# OPENBLAS_NUM_THREADS=1, loaded): ALGAMES's merge N = 2..5 at T = 19 (U (T + 1) = 3,600..12,000) 0.37, 0.61, 0.93,
-# 0.65; the 41-knot MPC merge at T = 9, 19, 29, 39 (1,500..24,000) 0.65, 0.60, 1.13, 1.10; the intersection (27,200)
-# 1.70. A count of unknowns alone (500) took the sparse form for the 5-car merge (1.5 times slower there).
-# Linear dynamics: from SPARSE_FROM unknowns, the measured crossover of LQ games, whose condensed matrices are
-# constant (no evaluation, factorisations kept per active set): the bounded LQ family's plain GNE at T = 40 (492
-# unknowns, 20,000 by the other measure) takes 0.23 s sparse against 16 ms condensed through its interior phase.
-SPARSE_WORK = 20_000
-SPARSE_FROM = 800
-
-
-def formulation(cfg: Config, game: CompiledGame) -> str:
-    """The formulation a solve uses: the config's choice, or for ``auto`` sparse where it applies and the
-    condensed system is large: ``SPARSE_FROM`` unknowns with linear dynamics, ``SPARSE_WORK`` unknowns times stages
-    with nonlinear ones."""
-    chosen = cfg.solver.formulation
-    if chosen != "auto":
-        return chosen
-    if sparse_obstacles(cfg):
-        return "condensed"
-    if game.linear_dynamics:
-        return "sparse" if game.size >= SPARSE_FROM else "condensed"
-    return "sparse" if game.size * ((game.horizon or 0) + 1) >= SPARSE_WORK else "condensed"
 
 
 @dataclass
@@ -206,8 +151,6 @@ def conclude(game: CompiledGame, out: Certified, x: np.ndarray | None = None, ce
     at the last iterate found a player without a best response; otherwise the solver's own status stays."""
     from ..solvers.certificate import assess
     from ..solvers.feasibility import phase_one
-    from ..solvers.status import FAILURES
-
     state, cert = out.state, out.certificate
     status, message = Status(state.status), state.message
     if status == Status.CONVERGED:
@@ -266,8 +209,6 @@ def conclude(game: CompiledGame, out: Certified, x: np.ndarray | None = None, ce
 def _smoothable(cfg: Config, game: CompiledGame, outcome: Certified) -> bool:
     """A failed solve of a game with abs, min or max of its decisions, by the default method, whose answer can be
     certified: the smoothing homotopy (gnerun.runs.smoothing) is tried."""
-    from ..solvers.status import FAILURES
-
     failed = Status(outcome.status) in FAILURES or outcome.status == Status.MAX_ITER
     return (failed and outcome.status not in (Status.INFEASIBLE, Status.INFEASIBLE_STAGE_CONSTRAINT)
             and game.piecewise and cfg.solver.kind == "ssn" and resolve(cfg.solver) == "hybrid" and cfg.run.certificate)

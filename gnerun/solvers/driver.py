@@ -33,15 +33,20 @@ class Solver(Protocol):
 
 def iterate(solver: Solver, state: SSNState, max_steps: int | None = None,
             on_iterate: Callable[[SSNState], None] | None = None, *,
-            stop: Callable[[SSNState], bool] | None = None, finish: bool = True) -> SSNState:
+            stop: Callable[[SSNState], bool] | None = None, finish: bool = True,
+            ends: frozenset[Status] | None = None) -> SSNState:
     """Step ``solver`` from ``state`` until ``terminate`` says done, ``max_steps`` steps were taken (None: no limit
     but the solver's max_iter) or ``stop(state)`` says so before a step (it may also raise, as a stop request does);
     then ``finish`` (unless not ``finish``: the state as the last step left it). ``on_iterate`` sees the state
-    given and every new iterate after it (a step that makes none, a failed one, is not shown)."""
+    given and every new iterate after it (a step that makes none, a failed one, is not shown). With ``ends``, only
+    those statuses of ``terminate`` end the loop: a closed loop's budget of K steps is not cut by max_iter."""
     if on_iterate is not None:
         on_iterate(state)
     steps = 0
-    while not solver.terminate(state)[0]:
+    while True:
+        done, status = solver.terminate(state)
+        if (done if ends is None else status in ends):
+            break
         if (max_steps is not None and steps >= max_steps) or (stop is not None and stop(state)):
             break
         previous = state.k

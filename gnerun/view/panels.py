@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 
-from ..solvers.ssn import FAILURES
+from ..solvers.status import FAILURES
 
 COLUMN_WIDTH = 3.5  # inches: the paper's column (IEEEtran \columnwidth)
 TEXT_WIDTH = 7.16  # inches: both columns (\textwidth)
