@@ -384,9 +384,8 @@ class ClosedLoop:
                 + f" (plant disturbance {plant.kind}, scale {plant.scale}); the closed loop ends here (diverged)")
 
     def run(self) -> ClosedLoopResult:
-        cfg, game, K, rec, log = self.cfg, self.game, self.K, self.record, self.log
+        cfg, game, rec, log = self.cfg, self.game, self.record, self.log
         steps = cfg.run.steps
-        unknown = np.full(game.size, np.nan)
         message = ""
         x = np.array(game.x0, dtype=float)
         z_warm = game.z_start()
@@ -412,20 +411,9 @@ class ClosedLoop:
             state, trace, elapsed = self._solve(t, x, z_warm)
             _, final = self.solver.terminate(state)
             failed = final in FAILURES
-            status = "converged" if final == Status.CONVERGED else str(final) if failed else "incomplete"
-            z = state.z
-            e = math.nan if z_star is None else float(np.linalg.norm(z - z_star))
-            e_agent = {a: math.nan if z_star is None else float(np.linalg.norm(z[idx] - z_star[idx]))
-                       for a, idx in zip(game.agent_names, self.agent_idx, strict=True)}
-            solved = dict(e_norm=e, e_norm_agent=e_agent, residual_norm=state.residual_norm, iterations=state.k,
-                          solve_time_s=elapsed, status=status, reference_status=ref_status, z=z,
-                          z_star=unknown if z_star is None else z_star)
-            if failed and log is not None:
-                action = ("the closed loop stops here (on_failure: stop)" if cfg.run.on_failure == "stop" else
-                          "the plant gets the best plan at hand (safeguard: fallback)"
-                          if cfg.run.safeguard == "fallback" else
-                          "the plant gets the inputs of the last iterate before it (on_failure: continue)")
-                log.log("warning", f"K={K} t={t}: {final}: {state.message}; {action}")
+            solved = self._solved(state, final, failed, z_star, ref_status, elapsed)
+            if failed:
+                self._warn_failed(t, final, state)
             if failed and cfg.run.on_failure == "stop":
                 sample = Sample(u=np.full(self.nu, np.nan), w=np.zeros(game.nx), constraint_violation=math.nan,
                                 worst_constraint=None, fallback=False, **solved)
@@ -434,29 +422,19 @@ class ClosedLoop:
                     log.sampling_time(t, trace, z_star, x, None, sample)
                 ended, completed = "stopped", t + 1
                 break
-            applied = self.safeguard.apply(x, trace, z, state.k, final == Status.CONVERGED, failed,
+            applied = self.safeguard.apply(x, trace, state.z, state.k, final == Status.CONVERGED, failed,
                                            None if t == 0 else applied_z)
             applied_z = applied.z
-            plan = applied.plan
-            if plan is not None and applied.fallback and log is not None and not failed:
-                which = "the shifted previous plan" if plan.k < 0 else f"iterate {plan.k}"
-                log.log("info", f"K={K} t={t}: fallback to {which} (||Phi|| {plan.residual_norm:.2e}, first step "
-                                f"violation {plan.violation:.2e}; z^K: ||Phi|| {state.residual_norm:.2e})")
-            u = game.first_inputs(applied_z[: game.n])
-            w = self.plant()
-            with np.errstate(all="ignore"):  # a plant that overflows is reported below, as a state that diverged
-                x_next = game.step_dynamics(x, u) + w
-                violation, label = self.stage.violation(x_next, u)
-            sample = Sample(u=u, w=w, constraint_violation=violation, worst_constraint=label,
-                            fallback=applied.fallback, **solved)
+            if not failed:
+                self._note_fallback(t, applied, state)
+            x_next, sample = self._plant_step(x, applied, solved)
             rec.add(sample, x_next)
-
             if log is not None:
-                log.sampling_time(t, trace, z_star, x, u, sample)
+                log.sampling_time(t, trace, z_star, x, sample.u, sample)
             if self.progress is not None:
-                self.progress(StepReport(K, t, steps, x.copy(), u.copy(), status, bool(applied.fallback),
-                                         float(violation), int(state.k), float(state.residual_norm), e,
-                                         float(elapsed)))
+                self.progress(StepReport(self.K, t, steps, x.copy(), sample.u.copy(), sample.status,
+                                         bool(applied.fallback), float(sample.constraint_violation), int(state.k),
+                                         float(state.residual_norm), solved["e_norm"], float(elapsed)))
             size_of_x = float(np.max(np.abs(x_next))) if np.all(np.isfinite(x_next)) else math.inf
             if size_of_x > cfg.solver.divergence_limit:
                 ended, completed = "diverged", t + 1
@@ -466,9 +444,8 @@ class ClosedLoop:
                     log.last_state(t + 1, x_next, "diverged")
                     log.log("warning", message)
                 break
-
             x = x_next
-            z_next = self.safeguard.next_start(trace, applied, z, failed)
+            z_next = self.safeguard.next_start(trace, applied, state.z, failed)
             z_warm = game.shift(z_next) if cfg.run.warm_start == "shift" else z_next
         else:
             rec.xs.append(x)
@@ -478,6 +455,47 @@ class ClosedLoop:
                 log.run.flush()
 
         return rec.result(ended, completed, message)
+
+    def _solved(self, state, final: Status, failed: bool, z_star: np.ndarray | None, ref_status: str,
+                elapsed: float) -> dict:
+        """What a sampling time's solve gives its Sample: the errors to z*(t) (NaN without it), the status, z."""
+        status = "converged" if final == Status.CONVERGED else str(final) if failed else "incomplete"
+        z = state.z
+        e = math.nan if z_star is None else float(np.linalg.norm(z - z_star))
+        e_agent = {a: math.nan if z_star is None else float(np.linalg.norm(z[idx] - z_star[idx]))
+                   for a, idx in zip(self.game.agent_names, self.agent_idx, strict=True)}
+        return dict(e_norm=e, e_norm_agent=e_agent, residual_norm=state.residual_norm, iterations=state.k,
+                    solve_time_s=elapsed, status=status, reference_status=ref_status, z=z,
+                    z_star=np.full(self.game.size, np.nan) if z_star is None else z_star)
+
+    def _warn_failed(self, t: int, final: Status, state) -> None:
+        if self.log is None:
+            return
+        cfg = self.cfg
+        action = ("the closed loop stops here (on_failure: stop)" if cfg.run.on_failure == "stop" else
+                  "the plant gets the best plan at hand (safeguard: fallback)"
+                  if cfg.run.safeguard == "fallback" else
+                  "the plant gets the inputs of the last iterate before it (on_failure: continue)")
+        self.log.log("warning", f"K={self.K} t={t}: {final}: {state.message}; {action}")
+
+    def _note_fallback(self, t: int, applied, state) -> None:
+        plan = applied.plan
+        if plan is not None and applied.fallback and self.log is not None:
+            which = "the shifted previous plan" if plan.k < 0 else f"iterate {plan.k}"
+            self.log.log("info", f"K={self.K} t={t}: fallback to {which} (||Phi|| {plan.residual_norm:.2e}, first "
+                                 f"step violation {plan.violation:.2e}; z^K: ||Phi|| {state.residual_norm:.2e})")
+
+    def _plant_step(self, x: np.ndarray, applied, solved: dict) -> tuple[np.ndarray, Sample]:
+        """The applied plan's first inputs into the plant (with its disturbance): x(t + 1) and the sampling time's
+        Sample with the first stage's violation."""
+        game = self.game
+        u = game.first_inputs(applied.z[: game.n])
+        w = self.plant()
+        with np.errstate(all="ignore"):  # a plant that overflows is reported by run, as a state that diverged
+            x_next = game.step_dynamics(x, u) + w
+            violation, label = self.stage.violation(x_next, u)
+        return x_next, Sample(u=u, w=w, constraint_violation=violation, worst_constraint=label,
+                              fallback=applied.fallback, **solved)
 
 
 def closed_loop(cfg: Config, game: CompiledGame, K: int, run: RunDirectory | None = None,

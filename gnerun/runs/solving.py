@@ -428,10 +428,7 @@ def _solve(cfg: Config, game: CompiledGame, solver: Solver, run: RunDirectory | 
         sink_time += time.perf_counter() - t
 
     if run is not None:
-        run.log("info", f"solve {cfg.name}: {game.n} decisions, {game.m} multipliers, {cfg.solver.kind} "
-                        f"({cfg.solver.complementarity}), disturbance {cfg.disturbance.kind}")
-        for warning in cfg.size_warnings("solve"):
-            run.log("warning", warning)
+        _announce(cfg, game, run)
 
     def note(text: str) -> None:
         if run is not None:
@@ -466,13 +463,30 @@ def _solve(cfg: Config, game: CompiledGame, solver: Solver, run: RunDirectory | 
     if exact and outcome.restarts and state.status == Status.CONVERGED:  # the equilibrium reached, polished
         ref = reference_solution(game, cfg, state.z, x)
         z_star = ref.z if ref.converged else None
-    errors = None if z_star is None else [float(np.linalg.norm(s.z - z_star)) for s in history]
-    status, message = outcome.status, outcome.message
     if outcome.diagnosis:
         cert = {**cert, **outcome.diagnosis}
-    result = SolveResult(
-        status=status,
-        message=message,
+    result = _result(game, outcome, history, z_star, ref, cert, elapsed, compile_time, x, run)
+    if run is not None:
+        run.log("info" if result.success else "warning", f"status {result.status}: {result.message}")
+        run.write_summary(result.summary())
+    return result
+
+
+def _announce(cfg: Config, game: CompiledGame, run: RunDirectory) -> None:
+    run.log("info", f"solve {cfg.name}: {game.n} decisions, {game.m} multipliers, {cfg.solver.kind} "
+                    f"({cfg.solver.complementarity}), disturbance {cfg.disturbance.kind}")
+    for warning in cfg.size_warnings("solve"):
+        run.log("warning", warning)
+
+
+def _result(game: CompiledGame, outcome, history: list[SSNState], z_star: np.ndarray | None, ref, cert: dict,
+            elapsed: float, compile_time: float, x, run: RunDirectory | None) -> SolveResult:
+    """A finished solve's result: its histories (errors to z* where there is one) and its certificate."""
+    state = outcome.state
+    errors = None if z_star is None else [float(np.linalg.norm(s.z - z_star)) for s in history]
+    return SolveResult(
+        status=outcome.status,
+        message=outcome.message,
         iterations=state.k,
         z=state.z,
         residual_norm=state.residual_norm,
@@ -491,10 +505,6 @@ def _solve(cfg: Config, game: CompiledGame, solver: Solver, run: RunDirectory | 
         game=game,
         run_dir=run.path if run is not None else None,
     )
-    if run is not None:
-        run.log("info" if result.success else "warning", f"status {result.status}: {result.message}")
-        run.write_summary(result.summary())
-    return result
 
 
 def _interrupted(cfg: Config, game: CompiledGame, run: RunDirectory | None, history: list[SSNState],
