@@ -34,7 +34,7 @@ from .extent import MAX_ITEMS, Extent, game_section
 from .families import EXPANSION_SECONDS, NAME, Families, Scope
 from .located import Problem, is_expression
 from .positions import Positions
-from .substitute import Substitution, checked_vector, dag_names
+from .substitute import Substitution, dag_names
 from .templates import AGGREGATES, Template
 from .yaml_source import PathKey, SourceMap
 
@@ -115,7 +115,7 @@ class Expander:
         return out
 
     def _game(self, game: dict) -> dict:
-        kept, base = self._parameters(game)
+        kept, base = self.subst.parameters(game)
         self._measure(game, base)
         scope = Scope(base)
         self._definitions(game, kept, scope)
@@ -138,27 +138,6 @@ class Expander:
                 raise Problem(("game", "definitions", name), f"definition {name!r} has the name of {declared[name]}; "
                                "a definition may not shadow a variable, state, input, parameter or constant", key=True)
         return out
-
-    def _parameters(self, game: dict) -> tuple[dict[str, Any], dict[str, int]]:
-        """The game's parameters that stay (numbers: vectors and matrices are written in where used), and the
-        integers a template may use (integer parameters and T)."""
-        base: dict[str, int] = {}
-        params = game.get("parameters", {})
-        kept: dict[str, Any] = {}
-        if isinstance(params, dict):
-            for name, value in params.items():
-                if isinstance(value, list):
-                    self.vectors[name] = checked_vector(value, ("game", "parameters", name))
-                    continue
-                kept[name] = value
-                if isinstance(value, int | float) and not isinstance(value, bool):
-                    self.subst.scalars[name] = value
-                if isinstance(value, int) and not isinstance(value, bool):
-                    base[name] = value
-        horizon = game.get("horizon")
-        if isinstance(horizon, int) and not isinstance(horizon, bool):
-            base["T"] = horizon
-        return kept, base
 
     def _definitions(self, game: dict, kept: dict[str, Any], scope: Scope) -> None:
         """The game's definitions expanded, in the order written (one may use those before it)."""

@@ -41,6 +41,27 @@ class Substitution:
         self.templates: dict[str, Template] = {}  # parsed once per text
         self.changed = False  # whether the expression being expanded had anything written in
 
+    def parameters(self, game: dict) -> tuple[dict[str, Any], dict[str, int]]:
+        """The game's parameters that stay (numbers: vectors and matrices are written in where used), and the
+        integers a template may use (integer parameters and T)."""
+        base: dict[str, int] = {}
+        params = game.get("parameters", {})
+        kept: dict[str, Any] = {}
+        if isinstance(params, dict):
+            for name, value in params.items():
+                if isinstance(value, list):
+                    self.vectors[name] = checked_vector(value, ("game", "parameters", name))
+                    continue
+                kept[name] = value
+                if isinstance(value, int | float) and not isinstance(value, bool):
+                    self.scalars[name] = value
+                if isinstance(value, int) and not isinstance(value, bool):
+                    base[name] = value
+        horizon = game.get("horizon")
+        if isinstance(horizon, int) and not isinstance(horizon, bool):
+            base["T"] = horizon
+        return kept, base
+
     def template(self, text: str, path: PathKey, scope: Scope) -> str:
         """``{...}`` in a string that is not an expression (a name, a key): the integers written in."""
         if "{" not in text and "}" not in text:
