@@ -13,7 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from gnerun.errors import ConfigError
-from gnerun.language import expand as expand_module
+from gnerun.language import families as families_module
 from gnerun.language.config import estimate_before_expanding, load_config
 from gnerun.language.expand import Expander
 from gnerun.language.extent import MAX_EXPRESSION_NODES, MAX_ITEMS, MAX_NODES, Rows, game_section
@@ -194,7 +194,7 @@ def test_the_limit_on_one_expression_is_the_parsers() -> None:
 
 
 def test_the_wall_clock_budget_names_the_construct(monkeypatch) -> None:
-    monkeypatch.setattr(expand_module, "EXPANSION_SECONDS", 0.0)
+    monkeypatch.setattr(families_module, "EXPANSION_SECONDS", 0.0)
     with pytest.raises(ConfigError) as err:
         load_config(text=yaml.safe_dump(_family(5000), sort_keys=False))
     assert len(err.value.problems) == 1

@@ -217,9 +217,9 @@ def _canonical(node) -> tuple:
 
 
 def _scope(i: int):
-    from gnerun.language.expand import _Scope
+    from gnerun.language.families import Scope
 
-    return _Scope({}, {"i": i})
+    return Scope({}, {"i": i})
 
 
 # the reported cases, written out ---------------------------------------------------------------------------

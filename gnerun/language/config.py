@@ -708,168 +708,209 @@ def is_sweep_spec(data: Any) -> bool:
 
 def check_semantics(cfg: Config, smap: SourceMap) -> list[str]:
     """Every problem a schema cannot see, as ``file:line:column: path: message`` lines."""
-    problems: list[str] = []
+    checks = _SemanticChecks(cfg, smap)
+    checks.names()
+    checks.expressions()
+    checks.disturbance()
+    checks.solver()
+    checks.sampling_time()
+    return checks.problems
 
-    def report(path: PathKey, message: str, *, key: bool = False, column: int | None = None) -> None:
-        where = smap.locate_in_text(path, column) if column is not None else smap.locate(path, key=key)
-        problems.append(f"{where}: {show_path(path)}: {message}")
 
-    g = cfg.game
-    seen: dict[str, str] = {}
+class _SemanticChecks:
+    """The semantic checks of one config, section by section, each problem reported where it was written."""
 
-    def declare(name: str, path: PathKey, what: str, *, key: bool = False) -> None:
+    def __init__(self, cfg: Config, smap: SourceMap):
+        self.cfg, self.smap, self.g = cfg, smap, cfg.game
+        self.static = isinstance(self.g, StaticGame)
+        self.problems: list[str] = []
+        self.seen: dict[str, str] = {}  # every name declared so far, and what it is
+        self.agent_names: set[str] = set()
+
+    def report(self, path: PathKey, message: str, *, key: bool = False, column: int | None = None) -> None:
+        where = self.smap.locate_in_text(path, column) if column is not None else self.smap.locate(path, key=key)
+        self.problems.append(f"{where}: {show_path(path)}: {message}")
+
+    def declare(self, name: str, path: PathKey, what: str, *, key: bool = False) -> None:
         if not _IDENTIFIER.match(name):
-            report(path, f"{what} {name!r} is not a valid name (letters, digits and _, not starting with a digit)",
-                   key=key)
+            self.report(path, f"{what} {name!r} is not a valid name (letters, digits and _, not starting with a digit)",
+                        key=key)
         elif name in FUNCTIONS:
-            report(path, f"{what} {name!r} is the name of a function", key=key)
+            self.report(path, f"{what} {name!r} is the name of a function", key=key)
         elif name in CONSTANTS:
-            report(path, f"{what} {name!r} is the name of a constant", key=key)
-        elif name == "tau" and not isinstance(g, StaticGame):
-            report(path, f"{what} 'tau' is the name of the stage index", key=key)
-        elif name in seen:
-            report(path, f"{what} {name!r} is already declared as {seen[name]}", key=key)
+            self.report(path, f"{what} {name!r} is the name of a constant", key=key)
+        elif name == "tau" and not self.static:
+            self.report(path, f"{what} 'tau' is the name of the stage index", key=key)
+        elif name in self.seen:
+            self.report(path, f"{what} {name!r} is already declared as {self.seen[name]}", key=key)
         else:
-            seen[name] = what
+            self.seen[name] = what
 
-    for pname, value in g.parameters.items():
-        declare(pname, ("game", "parameters", pname), "parameter", key=True)
-        if not math.isfinite(value):
-            report(("game", "parameters", pname), "must be finite")
+    # names ------------------------------------------------------------------------------------------
+    def names(self) -> None:
+        """Parameters, agents, states and the agents' variables or inputs: valid, distinct names, and bounds."""
+        g = self.g
+        for pname, value in g.parameters.items():
+            self.declare(pname, ("game", "parameters", pname), "parameter", key=True)
+            if not math.isfinite(value):
+                self.report(("game", "parameters", pname), "must be finite")
+        for i, agent in enumerate(g.agents):
+            if agent.name in self.agent_names:
+                self.report(("game", "agents", i, "name"), f"agent {agent.name!r} is declared twice")
+            self.agent_names.add(agent.name)
+        if not self.static:
+            for j, s in enumerate(g.states):
+                self.declare(s, ("game", "states", j), "state")
+        for i, agent in enumerate(g.agents):
+            self._variables(i, agent)
 
-    agent_names: set[str] = set()
-    for i, agent in enumerate(g.agents):
-        if agent.name in agent_names:
-            report(("game", "agents", i, "name"), f"agent {agent.name!r} is declared twice")
-        agent_names.add(agent.name)
-
-    static = isinstance(g, StaticGame)
-    variable_field = "variables" if static else "inputs"
-    if not static:
-        for j, s in enumerate(g.states):
-            declare(s, ("game", "states", j), "state")
-    for i, agent in enumerate(g.agents):
+    def _variables(self, i: int, agent: StaticAgent | DynamicAgent) -> None:
+        g, static = self.g, self.static
+        variable_field = "variables" if static else "inputs"
         variables = agent.variables if static else agent.inputs
         if not variables:
-            report(("game", "agents", i, variable_field), f"agent {agent.name!r} has no {variable_field}")
+            self.report(("game", "agents", i, variable_field), f"agent {agent.name!r} has no {variable_field}")
         for vname, var in variables.items():
             path = ("game", "agents", i, variable_field, vname)
-            declare(vname, path, "variable" if static else "input", key=True)
+            self.declare(vname, path, "variable" if static else "input", key=True)
             lo = var.lower if var.lower is not None else -math.inf
             hi = var.upper if var.upper is not None else math.inf
             starts = var.start if isinstance(var.start, list) else [var.start]
             if isinstance(var.start, list) and static:
-                report(path + ("start",), "a variable's start is one number (lists over stages are for inputs)")
+                self.report(path + ("start",), "a variable's start is one number (lists over stages are for inputs)")
             elif isinstance(var.start, list) and len(var.start) != g.horizon + 1:
-                report(path + ("start",), f"has {len(var.start)} entries for the {g.horizon + 1} stages 0..T")
+                self.report(path + ("start",), f"has {len(var.start)} entries for the {g.horizon + 1} stages 0..T")
             if math.isnan(lo) or math.isnan(hi) or not all(math.isfinite(v) for v in starts):
-                report(path, "bounds and start must be numbers (start finite)")
+                self.report(path, "bounds and start must be numbers (start finite)")
             elif lo > hi:
-                report(path, f"lower bound {lo} exceeds upper bound {hi}")
+                self.report(path, f"lower bound {lo} exceeds upper bound {hi}")
 
-    def check(text: StageConstraint | SharedSpec, path: PathKey, names: set[str], constraint: bool) -> None:
+    # expressions ------------------------------------------------------------------------------------
+    def check(self, text: StageConstraint | SharedSpec, path: PathKey, names: set[str], constraint: bool) -> None:
+        """One expression or constraint (with its stages and agents): it parses and uses only ``names``."""
+        g = self.g
         if not isinstance(text, str):
-            if text.stages is not None and static:
-                report(path + ("stages",), "a static game has no stages")
+            if text.stages is not None and self.static:
+                self.report(path + ("stages",), "a static game has no stages")
             elif text.stages is not None:
                 bad = [t for t in text.stages if not 0 <= t <= g.horizon]
                 if bad:
-                    report(path + ("stages",), f"stage {bad[0]} is outside 0..T = 0..{g.horizon}")
+                    self.report(path + ("stages",), f"stage {bad[0]} is outside 0..T = 0..{g.horizon}")
             for name in getattr(text, "agents", None) or []:
-                if name not in agent_names:
-                    report(path + ("agents",), f"{name!r} is not an agent (agents: "
-                                               f"{', '.join(a.name for a in g.agents)})")
+                if name not in self.agent_names:
+                    self.report(path + ("agents",), f"{name!r} is not an agent (agents: "
+                                                    f"{', '.join(a.name for a in g.agents)})")
             carriers = getattr(text, "agents", None) or []
             if len(set(carriers)) != len(carriers):
-                report(path + ("agents",), "names an agent twice")
+                self.report(path + ("agents",), "names an agent twice")
             text, path = text.expr, path + ("expr",)
         try:
             parsed = parse_constraint(text) if constraint else parse_expression(text)
             check_names(parsed, names)
         except ExpressionError as e:
-            report(path, e.describe(), column=e.column)
+            self.report(path, e.describe(), column=e.column)
 
-    params = set(g.parameters)
-    decisions = {v for a in g.agents for v in (a.variables if static else a.inputs)}
-    if static:
-        scope = decisions | params
-        for i, agent in enumerate(g.agents):
-            check(agent.cost, ("game", "agents", i, "cost"), scope, False)
-            for j, c in enumerate(agent.constraints):
-                check(c, ("game", "agents", i, "constraints", j), scope, True)
-    else:
-        states = set(g.states)
-        scope = states | decisions | params | {"tau"}  # tau: the stage index, 0..T
-        for i, agent in enumerate(g.agents):
-            check(agent.stage_cost, ("game", "agents", i, "stage_cost"), scope, False)
-            check(agent.terminal_cost, ("game", "agents", i, "terminal_cost"), states | params, False)
-            for j, c in enumerate(agent.constraints):
-                check(c, ("game", "agents", i, "constraints", j), scope, True)
+    def expressions(self) -> None:
+        """Costs, constraints, x0 and dynamics, and the shared constraints."""
+        g, static = self.g, self.static
+        params = set(g.parameters)
+        decisions = {v for a in g.agents for v in (a.variables if static else a.inputs)}
+        if static:
+            scope = decisions | params
+            for i, agent in enumerate(g.agents):
+                self.check(agent.cost, ("game", "agents", i, "cost"), scope, False)
+                for j, c in enumerate(agent.constraints):
+                    self.check(c, ("game", "agents", i, "constraints", j), scope, True)
+        else:
+            states = set(g.states)
+            scope = states | decisions | params | {"tau"}  # tau: the stage index, 0..T
+            for i, agent in enumerate(g.agents):
+                self.check(agent.stage_cost, ("game", "agents", i, "stage_cost"), scope, False)
+                self.check(agent.terminal_cost, ("game", "agents", i, "terminal_cost"), states | params, False)
+                for j, c in enumerate(agent.constraints):
+                    self.check(c, ("game", "agents", i, "constraints", j), scope, True)
+            self._dynamics(scope)
+        for j, c in enumerate(g.shared_constraints):
+            self.check(c, ("game", "shared_constraints", j), scope, True)
+
+    def _dynamics(self, scope: set[str]) -> None:
+        """x0 and the dynamics of a dynamic game: shapes, finite numbers, one equation per state."""
+        g = self.g
         inputs = [u for a in g.agents for u in a.inputs]
         nx, nu = len(g.states), len(inputs)
         if len(g.x0) != nx:
-            report(("game", "x0"), f"has {len(g.x0)} entries for {nx} states")
+            self.report(("game", "x0"), f"has {len(g.x0)} entries for {nx} states")
         elif not all(math.isfinite(v) for v in g.x0):
-            report(("game", "x0"), "must be finite")
+            self.report(("game", "x0"), "must be finite")
         if isinstance(g.dynamics, LinearDynamics):
             A, B = g.dynamics.A, g.dynamics.B
             if len(A) != nx or any(len(r) != nx for r in A):
-                report(("game", "dynamics", "A"), f"must be {nx} x {nx} (states {', '.join(g.states)})")
+                self.report(("game", "dynamics", "A"), f"must be {nx} x {nx} (states {', '.join(g.states)})")
             if len(B) != nx or any(len(r) != nu for r in B):
-                report(("game", "dynamics", "B"), f"must be {nx} x {nu} (inputs in agent order: {', '.join(inputs)})")
+                self.report(("game", "dynamics", "B"),
+                            f"must be {nx} x {nu} (inputs in agent order: {', '.join(inputs)})")
             if not all(math.isfinite(v) for row in A + B for v in row):
-                report(("game", "dynamics"), "A and B must be finite")
-        else:
-            equations, where = (g.dynamics.ode, ("game", "dynamics", "ode")) if isinstance(
-                g.dynamics, ContinuousDynamics) else (g.dynamics, ("game", "dynamics"))
-            for s in g.states:
-                if s not in equations:
-                    report(where, f"no equation for state {s!r}")
-            for s, text in equations.items():
-                if s not in states:
-                    report(where + (s,), f"{s!r} is not a declared state (states: {', '.join(g.states)})", key=True)
-                else:  # the dynamics are the same at every stage (no tau)
-                    check(text, where + (s,), scope - {"tau"}, False)
-    for j, c in enumerate(g.shared_constraints):
-        check(c, ("game", "shared_constraints", j), scope, True)
+                self.report(("game", "dynamics"), "A and B must be finite")
+            return
+        equations, where = (g.dynamics.ode, ("game", "dynamics", "ode")) if isinstance(
+            g.dynamics, ContinuousDynamics) else (g.dynamics, ("game", "dynamics"))
+        for s in g.states:
+            if s not in equations:
+                self.report(where, f"no equation for state {s!r}")
+        for s, text in equations.items():
+            if s not in g.states:
+                self.report(where + (s,), f"{s!r} is not a declared state (states: {', '.join(g.states)})", key=True)
+            else:  # the dynamics are the same at every stage (no tau)
+                self.check(text, where + (s,), scope - {"tau"}, False)
 
-    plant = cfg.disturbance.plant
-    scales = plant.scale if isinstance(plant.scale, list) else [plant.scale]
-    if not all(math.isfinite(v) for v in scales) or (plant.kind != "constant" and any(v < 0 for v in scales)):
-        report(("disturbance", "plant", "scale"), "must be finite" + (" and >= 0" if plant.kind != "constant" else ""))
-    if isinstance(plant.scale, list):
-        nx = 0 if static else len(g.states)
-        if len(plant.scale) != nx:
-            report(("disturbance", "plant", "scale"), f"has {len(plant.scale)} entries for {nx} states")
-    if plant.kind != "none" and static:
-        report(("disturbance", "plant", "kind"), "a static game has no plant")
-    if cfg.disturbance.kind == "pseudogradient" and cfg.solver.kind == "ssn":
-        report(("disturbance", "kind"), "'pseudogradient' perturbs the Josephy-Newton method; with solver.kind "
-               "'ssn' use 'jacobian_noise' or 'residual'")
-    if cfg.solver.formulation == "sparse":
-        why = sparse_obstacles(cfg)
-        if why:
-            report(("solver", "formulation"), "'sparse' is not available here: " + "; ".join(why)
-                   + " (use 'condensed' or 'auto')")
-    if cfg.solver.kind == "jn" and cfg.solver.globalization not in ("auto", "none"):
-        report(("solver", "globalization"), f"{cfg.solver.globalization!r} globalizes semismooth Newton; "
-               "Josephy-Newton solves each step's affine VI exactly (use auto or none, or solver.kind 'ssn')")
-    if cfg.disturbance.kind in ("jacobian_noise", "residual") and cfg.solver.kind == "jn":
-        report(("disturbance", "kind"), f"{cfg.disturbance.kind!r} perturbs semismooth Newton; with solver.kind "
-               "'jn' use 'pseudogradient' (noise on F and H)")
-    dynamics = getattr(g, "dynamics", None)
-    if not static:  # a closed loop's log time is t x sampling_time in nanoseconds, an unsigned 64-bit integer
-        given = ("run", "sampling_time") if smap.has(("run", "sampling_time")) or not isinstance(
-            dynamics, ContinuousDynamics) else ("game", "dynamics", "dt")
-        ts, end = cfg.run.sampling_time, cfg.run.steps * cfg.run.sampling_time
-        if ts < MIN_SAMPLING_TIME:
-            report(given, f"is {ts:g} s, below the log's resolution of one nanosecond (every sampling time would be "
-                          "logged at the same time)")
-        elif end > MAX_LOG_SECONDS:
-            report(given, f"is {ts:g} s: run.steps = {cfg.run.steps:,} sampling times of it span {end:.3g} s, "
-                          f"beyond the {MAX_LOG_SECONDS:.3g} s (about {MAX_LOG_SECONDS / 3.156e7:,.0f} years) a run "
-                          "log's time in nanoseconds can count")
-    if isinstance(dynamics, ContinuousDynamics) and cfg.run.sampling_time != dynamics.dt:
-        report(("run", "sampling_time"), f"is {cfg.run.sampling_time:g} s, but the ode is integrated over one "
-               f"sampling time of dynamics.dt = {dynamics.dt:g} s (leave it out, or make the two equal)")
-    return problems
+    # the other sections -----------------------------------------------------------------------------
+    def disturbance(self) -> None:
+        """The plant disturbance's scale and kind."""
+        plant = self.cfg.disturbance.plant
+        scales = plant.scale if isinstance(plant.scale, list) else [plant.scale]
+        if not all(math.isfinite(v) for v in scales) or (plant.kind != "constant" and any(v < 0 for v in scales)):
+            self.report(("disturbance", "plant", "scale"),
+                        "must be finite" + (" and >= 0" if plant.kind != "constant" else ""))
+        if isinstance(plant.scale, list):
+            nx = 0 if self.static else len(self.g.states)
+            if len(plant.scale) != nx:
+                self.report(("disturbance", "plant", "scale"), f"has {len(plant.scale)} entries for {nx} states")
+        if plant.kind != "none" and self.static:
+            self.report(("disturbance", "plant", "kind"), "a static game has no plant")
+
+    def solver(self) -> None:
+        """The solver's options that go together (with each other and with the disturbance)."""
+        cfg = self.cfg
+        if cfg.disturbance.kind == "pseudogradient" and cfg.solver.kind == "ssn":
+            self.report(("disturbance", "kind"), "'pseudogradient' perturbs the Josephy-Newton method; with "
+                        "solver.kind 'ssn' use 'jacobian_noise' or 'residual'")
+        if cfg.solver.formulation == "sparse":
+            why = sparse_obstacles(cfg)
+            if why:
+                self.report(("solver", "formulation"), "'sparse' is not available here: " + "; ".join(why)
+                            + " (use 'condensed' or 'auto')")
+        if cfg.solver.kind == "jn" and cfg.solver.globalization not in ("auto", "none"):
+            self.report(("solver", "globalization"), f"{cfg.solver.globalization!r} globalizes semismooth Newton; "
+                        "Josephy-Newton solves each step's affine VI exactly (use auto or none, or solver.kind 'ssn')")
+        if cfg.disturbance.kind in ("jacobian_noise", "residual") and cfg.solver.kind == "jn":
+            self.report(("disturbance", "kind"), f"{cfg.disturbance.kind!r} perturbs semismooth Newton; with "
+                        "solver.kind 'jn' use 'pseudogradient' (noise on F and H)")
+
+    def sampling_time(self) -> None:
+        """The closed loop's sampling time: one the run log can count, and the ode's dt."""
+        cfg = self.cfg
+        dynamics = getattr(self.g, "dynamics", None)
+        if not self.static:  # a closed loop's log time is t x sampling_time in nanoseconds, an unsigned 64-bit integer
+            given = ("run", "sampling_time") if self.smap.has(("run", "sampling_time")) or not isinstance(
+                dynamics, ContinuousDynamics) else ("game", "dynamics", "dt")
+            ts, end = cfg.run.sampling_time, cfg.run.steps * cfg.run.sampling_time
+            if ts < MIN_SAMPLING_TIME:
+                self.report(given, f"is {ts:g} s, below the log's resolution of one nanosecond (every sampling time "
+                                   "would be logged at the same time)")
+            elif end > MAX_LOG_SECONDS:
+                self.report(given, f"is {ts:g} s: run.steps = {cfg.run.steps:,} sampling times of it span "
+                                   f"{end:.3g} s, beyond the {MAX_LOG_SECONDS:.3g} s (about "
+                                   f"{MAX_LOG_SECONDS / 3.156e7:,.0f} years) a run log's time in nanoseconds can count")
+        if isinstance(dynamics, ContinuousDynamics) and cfg.run.sampling_time != dynamics.dt:
+            self.report(("run", "sampling_time"), f"is {cfg.run.sampling_time:g} s, but the ode is integrated over "
+                        f"one sampling time of dynamics.dt = {dynamics.dt:g} s (leave it out, or make the two equal)")

@@ -206,21 +206,42 @@ class Counter:
 
 def game_section(expander: Expander, game: dict, base: dict[str, int]) -> Extent:
     """The extent of an (unexpanded) game section; raises the expander's problem past a limit."""
-    c = Counter(expander, base)
-    stages = (base["T"] + 1) if "T" in base and game.get("kind") == "dynamic" else 1
+    section = _Section(Counter(expander, base), expander)
+    section.definitions(game)
     one = Rows(1)
+    for key, value in game.items():
+        if key in ("definitions", "parameters"):
+            continue
+        if key == "dynamics" and isinstance(value, list):
+            section.merged(value, one, ("dynamics",), ("game", key))
+        else:
+            section.walk(value, one, (key,), ("game", key))
+    section.c.extent.stages = (base["T"] + 1) if "T" in base and game.get("kind") == "dynamic" else 1
+    return section.c.extent
 
-    definitions = game.get("definitions")
-    if isinstance(definitions, dict):
+
+class _Section:
+    """The walk of :func:`game_section` through a game section, counting into ``c``."""
+
+    def __init__(self, c: Counter, expander: Expander):
+        self.c = c
+        self.x = expander
+
+    def definitions(self, game: dict) -> None:
+        """The nodes every definition expands to (a name counts as its definition's nodes)."""
+        definitions = game.get("definitions")
+        if not isinstance(definitions, dict):
+            return
         for name, text in definitions.items():
             if not isinstance(name, str) or not isinstance(text, str | int | float) or isinstance(text, bool):
                 continue
             path = ("game", "definitions", name)
-            template = expander.template(str(text), path)
-            c.definition_nodes[name] = int(c.template(template, one, path, f"definition {name!r}")[0])
+            template = self.x.template(str(text), path)
+            self.c.definition_nodes[name] = int(self.c.template(template, Rows(1), path, f"definition {name!r}")[0])
 
-    def expression(text: str, rows: Rows, path: PathKey, logical: tuple, staged: bool) -> None:
-        template = expander.template(text, path)
+    def expression(self, text: str, rows: Rows, path: PathKey, logical: tuple, staged: bool) -> None:
+        c = self.c
+        template = self.x.template(text, path)
         n = c.template(template, rows, path, "this expression")
         total = float(n.sum())
         c.extent.nodes += int(total)
@@ -229,89 +250,85 @@ def game_section(expander: Expander, game: dict, base: dict[str, int]) -> Extent
                                  f"config, its stages not counted; counted before expanding it): {total:,.0f} here")
         c.extent.expression_nodes[logical + (("staged",) if staged else ())] += int(total)
 
-    def walk(value: Any, rows: Rows, logical: tuple, path: PathKey, staged: bool = False) -> None:
+    def walk(self, value: Any, rows: Rows, logical: tuple, path: PathKey, staged: bool = False) -> None:
         if not rows.n:
             return
         if isinstance(value, dict):
-            staged = staged or "stages" in value
-            if staged and logical[:1] in (("agents",), ("shared_constraints",)):
-                c.extent.staged[logical] += rows.n
-            named = logical[-1:] in (("inputs",), ("variables",)) or logical == ("dynamics", "ode") or (
-                logical == ("dynamics",) and not {"ode", "A", "B", "integrator", "dt"} & set(value))
-            for k, v in value.items():
-                if k == "for":
-                    continue
-                if k in ("lower", "upper") and not (isinstance(v, int | float) and not isinstance(v, bool)
-                                                    and math.isfinite(v)):
-                    continue  # no bound, or one the counts do not read
-                if k == "stages" and isinstance(v, str):
-                    try:
-                        lo, hi = c._range_text(v, rows)
-                    except _Unknown:
-                        continue
-                    c._add_items(int(min(float(np.maximum(hi - lo + 1, 0).sum()), 10 * MAX_ITEMS)), path + (k,),
-                                 f"stages: {v}")
-                    continue
-                key = "*" if named else k
-                c.extent.keys[logical + (key,)] += rows.n
-                if named:
-                    c.extent.copies[logical + ("*",)] += rows.n
-                if k == "ode" and logical == ("dynamics",) and isinstance(v, list):
-                    merged(v, rows, logical + ("ode",), path + (k,))
-                elif k in ("variables", "inputs") and isinstance(v, list):
-                    merged(v, rows, logical + (k,), path + (k,))
-                else:
-                    walk(v, rows, logical + (key,), path + (k,), staged)
+            self._mapping(value, rows, logical, path, staged)
         elif isinstance(value, list):
             for idx, item in enumerate(value):
                 if isinstance(item, dict) and "for" in item:
                     try:
-                        inner = c.family(item["for"], rows, path + (idx, "for"))
+                        inner = self.c.family(item["for"], rows, path + (idx, "for"))
                     except _Unknown:
                         continue
-                    emit({k: v for k, v in item.items() if k != "for"}, inner, logical, path + (idx,))
+                    self.emit({k: v for k, v in item.items() if k != "for"}, inner, logical, path + (idx,))
                 else:
-                    c.extent.copies[logical + ("*",)] += rows.n
-                    walk(item, rows, logical + ("*",), path + (idx,), staged)
+                    self.c.extent.copies[logical + ("*",)] += rows.n
+                    self.walk(item, rows, logical + ("*",), path + (idx,), staged)
         elif isinstance(value, str) and is_expression(logical) and logical[:1] != ("definitions",):
-            expression(value, rows, path, logical, staged)
+            self.expression(value, rows, path, logical, staged)
 
-    def emit(body: dict, rows: Rows, logical: tuple, path: PathKey) -> None:
+    def _mapping(self, value: dict, rows: Rows, logical: tuple, path: PathKey, staged: bool) -> None:
+        c = self.c
+        staged = staged or "stages" in value
+        if staged and logical[:1] in (("agents",), ("shared_constraints",)):
+            c.extent.staged[logical] += rows.n
+        named = logical[-1:] in (("inputs",), ("variables",)) or logical == ("dynamics", "ode") or (
+            logical == ("dynamics",) and not {"ode", "A", "B", "integrator", "dt"} & set(value))
+        for k, v in value.items():
+            if k == "for":
+                continue
+            if k in ("lower", "upper") and not (isinstance(v, int | float) and not isinstance(v, bool)
+                                                and math.isfinite(v)):
+                continue  # no bound, or one the counts do not read
+            if k == "stages" and isinstance(v, str):
+                try:
+                    lo, hi = c._range_text(v, rows)
+                except _Unknown:
+                    continue
+                c._add_items(int(min(float(np.maximum(hi - lo + 1, 0).sum()), 10 * MAX_ITEMS)), path + (k,),
+                             f"stages: {v}")
+                continue
+            key = "*" if named else k
+            c.extent.keys[logical + (key,)] += rows.n
+            if named:
+                c.extent.copies[logical + ("*",)] += rows.n
+            if k == "ode" and logical == ("dynamics",) and isinstance(v, list):
+                self.merged(v, rows, logical + ("ode",), path + (k,))
+            elif k in ("variables", "inputs") and isinstance(v, list):
+                self.merged(v, rows, logical + (k,), path + (k,))
+            else:
+                self.walk(v, rows, logical + (key,), path + (k,), staged)
+
+    def emit(self, body: dict, rows: Rows, logical: tuple, path: PathKey) -> None:
+        copies = self.c.extent.copies
         if set(body) in ({"values"}, {"names"}) and isinstance(next(iter(body.values())), list):
-            c.extent.copies[logical + ("*",)] += rows.n * len(next(iter(body.values())))
+            copies[logical + ("*",)] += rows.n * len(next(iter(body.values())))
         elif set(body) == {"expr"}:
-            c.extent.copies[logical + ("*",)] += rows.n
-            walk(body["expr"], rows, logical + ("*",), path + ("expr",))
+            copies[logical + ("*",)] += rows.n
+            self.walk(body["expr"], rows, logical + ("*",), path + ("expr",))
         elif body:
-            c.extent.copies[logical + ("*",)] += rows.n
-            walk(body, rows, logical + ("*",), path)
+            copies[logical + ("*",)] += rows.n
+            self.walk(body, rows, logical + ("*",), path)
 
-    def merged(value: list, rows: Rows, logical: tuple, path: PathKey) -> None:
+    def merged(self, value: list, rows: Rows, logical: tuple, path: PathKey) -> None:
         """The list form of dynamics and of an agent's variables or inputs: names, and mappings (families or not)."""
+        copies = self.c.extent.copies
         for idx, part in enumerate(value):
             if isinstance(part, str):
-                c.extent.copies[logical + ("*",)] += rows.n
+                copies[logical + ("*",)] += rows.n
                 continue
             if not isinstance(part, dict):
                 continue
             inner = rows
             if "for" in part:
                 try:
-                    inner = c.family(part["for"], rows, path + (idx, "for"))
+                    inner = self.c.family(part["for"], rows, path + (idx, "for"))
                 except _Unknown:
                     continue
             body = {k: v for k, v in part.items() if k != "for"}
             if set(body) == {"names"} and isinstance(body["names"], list):
-                c.extent.copies[logical + ("*",)] += inner.n * len(body["names"])
+                copies[logical + ("*",)] += inner.n * len(body["names"])
             else:
-                walk(body, inner, logical, path + (idx,))
-
-    for key, value in game.items():
-        if key in ("definitions", "parameters"):
-            continue
-        if key == "dynamics" and isinstance(value, list):
-            merged(value, one, ("dynamics",), ("game", key))
-        else:
-            walk(value, one, (key,), ("game", key))
-    c.extent.stages = stages
-    return c.extent
+                self.walk(body, inner, logical, path + (idx,))

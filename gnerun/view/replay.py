@@ -138,33 +138,45 @@ def _time_base(run: RunRecord) -> tuple[str, float] | None:
 def log_run(rec, run: RunRecord, prefix: str, contents: Contents, several: bool = False) -> None:
     """Log one run's messages into the recording ``rec`` under ``prefix`` (``several``: legends name the run).
     The log views' series are collected in ``contents`` and drawn by :func:`draw_log_views`."""
-    import rerun as rr
+    logger = _RunLogger(rec, run, prefix, contents, several)
+    logger.text()
+    logger.solve()
+    logger.closed_loops()
 
-    name, states, inputs, kind = _names(run)
 
-    def scalar(entity: str, timeline: str, time: int, value: float | None, view: str | None = None) -> None:
+class _RunLogger:
+    """:func:`log_run` of one run: its config and text log, its solve's iterates (Fig. 1) and its closed loops
+    (Fig. 2 and 3)."""
+
+    def __init__(self, rec, run: RunRecord, prefix: str, contents: Contents, several: bool):
+        import rerun as rr
+
+        self.rr, self.rec, self.run, self.prefix, self.contents, self.several = rr, rec, run, prefix, contents, several
+        self.name, self.states, self.inputs, self.kind = _names(run)
+
+    def scalar(self, entity: str, timeline: str, time: int, value: float | None, view: str | None = None) -> None:
         value = number(value)
         if not math.isfinite(value):
             return
-        rec.set_time(timeline, sequence=time)
-        contents.reach(timeline, time)
-        rec.log(entity, rr.Scalars(value))
+        self.rec.set_time(timeline, sequence=time)
+        self.contents.reach(timeline, time)
+        self.rec.log(entity, self.rr.Scalars(value))
         if view is not None:
-            contents.view(view).add(time, value)
+            self.contents.view(view).add(time, value)
 
-    def show(view: str, entity: str, label: str) -> None:
+    def show(self, view: str, entity: str, label: str) -> None:
         """Put ``entity`` into a figure view, with its legend label and a colour of its own there."""
-        series = contents.view(view)
+        series = self.contents.view(view)
         if entity in series.entities:
             return
         color = PALETTE[len(series.entities) % len(PALETTE)]
         series.entities.append(entity)
-        rec.log(entity, rr.SeriesLines(names=label, colors=color, widths=2.0), static=True)
+        self.rec.log(entity, self.rr.SeriesLines(names=label, colors=color, widths=2.0), static=True)
 
-    def trace(view: str, group: str, entity: str, label: str, timeline: str) -> Trace:
+    def trace(self, view: str, group: str, entity: str, label: str, timeline: str) -> Trace:
         """A series of a log view (drawn once every run is read)."""
-        show(view, entity, label)
-        series = contents.view(view)
+        self.show(view, entity, label)
+        series = self.contents.view(view)
         series.group = group
         found = next((tr for tr in series.traces if tr.entity == entity), None)
         if found is None:
@@ -172,98 +184,122 @@ def log_run(rec, run: RunRecord, prefix: str, contents: Contents, several: bool 
             series.traces.append(found)
         return found
 
-    if run.config_yaml:
-        rec.log(f"{prefix}/config", rr.TextDocument(run.config_yaml, media_type="text/plain"), static=True)
-        contents.configs.append(f"{prefix}/config")
-    base = _time_base(run)
-    for msg, t in zip(run.messages.get(LOG, []), run.log_times.get(LOG, []), strict=True):
-        if base is None:  # (Rerun stamps everything with the wall clock on its own timeline log_time)
-            rec.set_time("log_time", timestamp=t * 1e-9)
-        else:  # at the run's own time: the sampling time t or the iteration k, beside the figures
-            rec.set_time(base[0], sequence=round(t * 1e-9 / base[1]))
-        level = {"warning": "WARN", "error": "ERROR", "debug": "DEBUG", "fatal": "CRITICAL"}.get(level_name(msg),
-                                                                                                  "INFO")
-        rec.log(f"{prefix}/log", rr.TextLog(msg.get("message", ""), level=level))
-    if LOG in run.messages:
-        contents.logs.append(f"{prefix}/log")
-    rec.reset_time()
+    def text(self) -> None:
+        """The run's config and its text log."""
+        rec, run, prefix, contents = self.rec, self.run, self.prefix, self.contents
+        if run.config_yaml:
+            rec.log(f"{prefix}/config", self.rr.TextDocument(run.config_yaml, media_type="text/plain"), static=True)
+            contents.configs.append(f"{prefix}/config")
+        base = _time_base(run)
+        for msg, t in zip(run.messages.get(LOG, []), run.log_times.get(LOG, []), strict=True):
+            if base is None:  # (Rerun stamps everything with the wall clock on its own timeline log_time)
+                rec.set_time("log_time", timestamp=t * 1e-9)
+            else:  # at the run's own time: the sampling time t or the iteration k, beside the figures
+                rec.set_time(base[0], sequence=round(t * 1e-9 / base[1]))
+            level = {"warning": "WARN", "error": "ERROR", "debug": "DEBUG", "fatal": "CRITICAL"}.get(level_name(msg),
+                                                                                                      "INFO")
+            rec.log(f"{prefix}/log", self.rr.TextLog(msg.get("message", ""), level=level))
+        if LOG in run.messages:
+            contents.logs.append(f"{prefix}/log")
+        rec.reset_time()
 
-    iterates = run.messages.get(SOLVE_ITERATE, [])
-    solve_errors = solve_has_errors(run)  # (none without z*: Fig. 1 then shows ||Phi(z^k)||)
-    for m in iterates:
-        for key in ("error_norm", "residual_norm", "step_norm"):
-            scalar(f"{prefix}/solve/{key}", "iteration", m["k"], m.get(key))
-            if key == "residual_norm" and solve_errors:  # (else Fig. 1's series, drawn with the floor)
-                scalar(f"{prefix}/solve/log10_{key}", "iteration", m["k"], _log10(m.get(key)))
-    if iterates:
-        status = final_status(run)
-        view = f"fig1:{prefix}"
-        key, what = ("error_norm", "||z^k - z*||") if solve_errors else ("residual_norm", "||Phi(z^k)||")
-        contents.titles[view] = (f"Fig. 1: {name} ({disturbance(run) or 'solve'}"
-                                 + (f"; {status}" if status and status != "converged" else "")
-                                 + f"): log10 {what}{'' if solve_errors else ' (no z*)'} (y) against iteration k (x)")
-        tr = trace(view, "fig1", f"{prefix}/solve/log10_{key}", name if several else what, "iteration")
-        tr.points = [(m["k"], number(m.get(key))) for m in iterates]
-    rec.reset_time()
+    def solve(self) -> None:
+        """A solve's iterates, and Fig. 1."""
+        run, prefix, name = self.run, self.prefix, self.name
+        iterates = run.messages.get(SOLVE_ITERATE, [])
+        solve_errors = solve_has_errors(run)  # (none without z*: Fig. 1 then shows ||Phi(z^k)||)
+        for m in iterates:
+            for key in ("error_norm", "residual_norm", "step_norm"):
+                self.scalar(f"{prefix}/solve/{key}", "iteration", m["k"], m.get(key))
+                if key == "residual_norm" and solve_errors:  # (else Fig. 1's series, drawn with the floor)
+                    self.scalar(f"{prefix}/solve/log10_{key}", "iteration", m["k"], _log10(m.get(key)))
+        if iterates:
+            status = final_status(run)
+            view = f"fig1:{prefix}"
+            key, what = ("error_norm", "||z^k - z*||") if solve_errors else ("residual_norm", "||Phi(z^k)||")
+            self.contents.titles[view] = (f"Fig. 1: {name} ({disturbance(run) or 'solve'}"
+                                          + (f"; {status}" if status and status != "converged" else "")
+                                          + f"): log10 {what}{'' if solve_errors else ' (no z*)'} (y) against "
+                                            "iteration k (x)")
+            tr = self.trace(view, "fig1", f"{prefix}/solve/log10_{key}", name if self.several else what, "iteration")
+            tr.points = [(m["k"], number(m.get(key))) for m in iterates]
+        self.rec.reset_time()
 
-    loops = closed_loops(run)
-    with_errors = has_errors(loops)  # (none without z*: Fig. 2b then shows the residual)
-    for K, topics in loops.items():
-        base = f"{prefix}/K{K}"
-        x_view = "fig2_x" if K == max(loops) and kind != "distributed" else None
-        states_K = topics.get("state", [])
-        failed, fallback = failed_steps(states_K), fallback_steps(states_K)
-        # without z*: the residual of each sampling time's last iterate, drawn in Fig. 2b or 3 instead
-        residuals = [] if with_errors else [(t, number(v)) for t, v in
-                                            zip(*final_residuals(topics.get("iterate", [])), strict=True)]
+    def closed_loops(self) -> None:
+        """Every closed loop's states, inputs and errors, and Fig. 2 (one solver) or Fig. 3 (distributed)."""
+        loops = closed_loops(self.run)
+        with_errors = has_errors(loops)  # (none without z*: Fig. 2b then shows the residual)
+        for K, topics in loops.items():
+            base = f"{self.prefix}/K{K}"
+            x_view = "fig2_x" if K == max(loops) and self.kind != "distributed" else None
+            states_K = topics.get("state", [])
+            failed, fallback = failed_steps(states_K), fallback_steps(states_K)
+            # without z*: the residual of each sampling time's last iterate, drawn in Fig. 2b or 3 instead
+            residuals = [] if with_errors else [(t, number(v)) for t, v in
+                                                zip(*final_residuals(topics.get("iterate", [])), strict=True)]
+            self._states(K, base, states_K, x_view)
+            if x_view:
+                self.contents.titles[x_view] = f"Fig. 2a: x(t) (y) against sampling time t (x), K = {K}"
+                for t in failed + fallback:
+                    self.contents.view(x_view).span(t)
+            errors = topics.get("error", [])
+            for m in errors:
+                self.scalar(f"{base}/e_norm", "t", m["t"], m.get("e_norm"))
+                for agent, v in (m.get("e_norm_agent") or {}).items():
+                    self.scalar(f"{base}/e_agent/{agent}", "t", m["t"], v)
+            marks = (failed, fallback, base)
+            if self.kind != "distributed":
+                self._fig2_e(K, errors, residuals, with_errors, marks)
+            else:
+                self._fig3(K, errors, residuals, with_errors, marks)
+        self.rec.reset_time()
+
+    def _states(self, K: int, base: str, states_K: list, x_view: str | None) -> None:
+        states, inputs = self.states, self.inputs
         for m in states_K:
             for j, v in enumerate(m.get("x") or []):
                 entity = f"{base}/x/{states[j] if j < len(states) else f'x{j + 1}'}"
                 if x_view:
-                    show(x_view, entity, f"{entity.rsplit('/', 1)[1]} (K = {K})")
-                scalar(entity, "t", m["t"], v, x_view)
+                    self.show(x_view, entity, f"{entity.rsplit('/', 1)[1]} (K = {K})")
+                self.scalar(entity, "t", m["t"], v, x_view)
             for j, v in enumerate(m.get("u") or []):
-                scalar(f"{base}/u/{inputs[j] if j < len(inputs) else f'u{j + 1}'}", "t", m["t"], v)
+                self.scalar(f"{base}/u/{inputs[j] if j < len(inputs) else f'u{j + 1}'}", "t", m["t"], v)
             if m.get("constraint_violation") is not None:
-                scalar(f"{base}/constraint_violation", "t", m["t"], m["constraint_violation"])
-        if x_view:
-            contents.titles[x_view] = f"Fig. 2a: x(t) (y) against sampling time t (x), K = {K}"
-            for t in failed + fallback:
-                contents.view(x_view).span(t)
-        errors = topics.get("error", [])
-        for m in errors:
-            scalar(f"{base}/e_norm", "t", m["t"], m.get("e_norm"))
-            for agent, v in (m.get("e_norm_agent") or {}).items():
-                scalar(f"{base}/e_agent/{agent}", "t", m["t"], v)
-        if kind != "distributed":
-            what = "||e(t)||" if with_errors else "||Phi(z^K(t))|| (no z*)"
-            title = f"Fig. 2b: log10 {what} (y) against sampling time t (x), per K"
-            if contents.titles.get("fig2_e", title) != title:  # runs with and without z*
-                title = "Fig. 2b: log10 ||e(t)||, or ||Phi(z^K(t))|| without z* (y), against sampling time t (x), per K"
-            contents.titles["fig2_e"] = title
-            label = f"{name}: K = {K}" if several else f"K = {K}"
-            if with_errors:
-                tr = trace("fig2_e", "fig2_e", f"{base}/log10_e_norm", label, "t")
-                tr.points = [(m["t"], number(m.get("e_norm"))) for m in errors]
-            else:
-                tr = trace("fig2_e", "fig2_e", f"{base}/log10_residual_norm", label + " (||Phi||)", "t")
-                tr.points = residuals
-            tr.failed, tr.fallback, tr.marks = failed, fallback, base
+                self.scalar(f"{base}/constraint_violation", "t", m["t"], m["constraint_violation"])
+
+    def _fig2_e(self, K: int, errors: list, residuals: list, with_errors: bool, marks: tuple) -> None:
+        """Fig. 2b: the error (or, without z*, the residual) of one K."""
+        failed, fallback, base = marks
+        what = "||e(t)||" if with_errors else "||Phi(z^K(t))|| (no z*)"
+        title = f"Fig. 2b: log10 {what} (y) against sampling time t (x), per K"
+        if self.contents.titles.get("fig2_e", title) != title:  # runs with and without z*
+            title = "Fig. 2b: log10 ||e(t)||, or ||Phi(z^K(t))|| without z* (y), against sampling time t (x), per K"
+        self.contents.titles["fig2_e"] = title
+        label = f"{self.name}: K = {K}" if self.several else f"K = {K}"
+        if with_errors:
+            tr = self.trace("fig2_e", "fig2_e", f"{base}/log10_e_norm", label, "t")
+            tr.points = [(m["t"], number(m.get("e_norm"))) for m in errors]
         else:
-            view = f"fig3:{name}: K = {K}"
-            what = "||e_i(t)||" if with_errors else "||Phi(z^K(t))|| (no z*)"
-            contents.titles[view] = f"Fig. 3: log10 {what} (y) against sampling time t (x), {name}: K = {K}"
-            agents = dict.fromkeys(a for m in errors for a in (m.get("e_norm_agent") or {}))
-            for i, agent in enumerate(agents):
-                tr = trace(view, "fig3", f"{base}/log10_e_agent/{agent}", agent, "t")
-                tr.points = [(m["t"], number((m.get("e_norm_agent") or {}).get(agent))) for m in errors]
-                if i == 0:  # the K's failures, along the top of its view
-                    tr.failed, tr.fallback, tr.marks, tr.on_trace = failed, fallback, base, False
-            if not with_errors:
-                tr = trace(view, "fig3", f"{base}/log10_residual_norm", "||Phi||", "t")
-                tr.points = residuals
-                tr.failed, tr.fallback, tr.marks = failed, fallback, base
-    rec.reset_time()
+            tr = self.trace("fig2_e", "fig2_e", f"{base}/log10_residual_norm", label + " (||Phi||)", "t")
+            tr.points = residuals
+        tr.failed, tr.fallback, tr.marks = failed, fallback, base
+
+    def _fig3(self, K: int, errors: list, residuals: list, with_errors: bool, marks: tuple) -> None:
+        """Fig. 3: each agent's error (or, without z*, the residual) of one K of a distributed run."""
+        failed, fallback, base = marks
+        view = f"fig3:{self.name}: K = {K}"
+        what = "||e_i(t)||" if with_errors else "||Phi(z^K(t))|| (no z*)"
+        self.contents.titles[view] = f"Fig. 3: log10 {what} (y) against sampling time t (x), {self.name}: K = {K}"
+        agents = dict.fromkeys(a for m in errors for a in (m.get("e_norm_agent") or {}))
+        for i, agent in enumerate(agents):
+            tr = self.trace(view, "fig3", f"{base}/log10_e_agent/{agent}", agent, "t")
+            tr.points = [(m["t"], number((m.get("e_norm_agent") or {}).get(agent))) for m in errors]
+            if i == 0:  # the K's failures, along the top of its view
+                tr.failed, tr.fallback, tr.marks, tr.on_trace = failed, fallback, base, False
+        if not with_errors:
+            tr = self.trace(view, "fig3", f"{base}/log10_residual_norm", "||Phi||", "t")
+            tr.points = residuals
+            tr.failed, tr.fallback, tr.marks = failed, fallback, base
 
 
 def draw_log_views(rec, contents: Contents) -> None:

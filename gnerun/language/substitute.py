@@ -1,0 +1,276 @@
+"""Expressions of the expansion (:mod:`gnerun.language.expand`): templates parsed once, and their trees with the
+holes ``{...}``, templated names, entries ``name[i]``, indices, definitions and aggregates written in."""
+
+from __future__ import annotations
+
+import math
+import re
+from typing import Any
+
+from .expr import (
+    CONSTANTS,
+    Binary,
+    Call,
+    ExpressionError,
+    Name,
+    Node,
+    Num,
+    Unary,
+    evaluate,
+    numpy_functions,
+    unparse,
+)
+from .families import NAME, Families, Scope, quiet
+from .located import Problem
+from .templates import Aggregate, Entry, Hole, Template, Word, parse_template
+from .yaml_source import PathKey
+
+_TEMPLATE = re.compile(r"\{([^{}]*)\}")
+
+
+class Substitution:
+    """The expressions of one expansion: the vector and numeric parameters, the definitions (expanded trees) and
+    the templates parsed so far; integers and aggregate ranges are the ``families``'."""
+
+    def __init__(self, families: Families):
+        self.families = families
+        self.vectors: dict[str, list] = {}
+        self.scalars: dict[str, float] = {}  # numeric parameters (for numbers written as expressions)
+        self.definitions = families.definitions  # expanded trees (shared wherever they are used)
+        self.definition_names: dict[int, set[str]] = {}  # the names in each definition's tree, by the tree's id
+        self.templates: dict[str, Template] = {}  # parsed once per text
+        self.changed = False  # whether the expression being expanded had anything written in
+
+    def parameters(self, game: dict) -> tuple[dict[str, Any], dict[str, int]]:
+        """The game's parameters that stay (numbers: vectors and matrices are written in where used), and the
+        integers a template may use (integer parameters and T)."""
+        base: dict[str, int] = {}
+        params = game.get("parameters", {})
+        kept: dict[str, Any] = {}
+        if isinstance(params, dict):
+            for name, value in params.items():
+                if isinstance(value, list):
+                    self.vectors[name] = checked_vector(value, ("game", "parameters", name))
+                    continue
+                kept[name] = value
+                if isinstance(value, int | float) and not isinstance(value, bool):
+                    self.scalars[name] = value
+                if isinstance(value, int) and not isinstance(value, bool):
+                    base[name] = value
+        horizon = game.get("horizon")
+        if isinstance(horizon, int) and not isinstance(horizon, bool):
+            base["T"] = horizon
+        return kept, base
+
+    def template(self, text: str, path: PathKey, scope: Scope) -> str:
+        """``{...}`` in a string that is not an expression (a name, a key): the integers written in."""
+        if "{" not in text and "}" not in text:
+            return text
+        out = _TEMPLATE.sub(lambda m: str(self.families.integer(m.group(1), path, scope)), text)
+        if "{" in out or "}" in out:
+            raise Problem(path, f"unbalanced or nested braces in {text!r} (a template is {{integer expression}})",
+                           scope.indices)
+        return out
+
+    def parsed(self, text: str, path: PathKey, scope: Scope) -> Template:
+        template = self.templates.get(text)
+        if template is None:
+            try:
+                template = parse_template(text)
+            except ExpressionError as e:
+                raise Problem(path, e.describe(), scope.indices, column=e.column) from None
+            self.templates[text] = template
+        return template
+
+    def expression(self, text: str, path: PathKey, scope: Scope) -> str:
+        """An expression (or a constraint) with its indices, entries, definitions and aggregates written in: the tree
+        expanded and written back with the parentheses it needs (:func:`~gnerun.language.expr.unparse`); a text
+        without any of them is kept as it was written."""
+        return _written(*self.expanded(text, path, scope), text)
+
+    def expanded(self, text: str, path: PathKey, scope: Scope) -> tuple[Node, str | None, Node | None, bool]:
+        template = self.parsed(text, path, scope)
+        self.changed = False
+        lhs = self.substitute(template.lhs, path, scope)
+        rhs = None if template.relation is None else self.substitute(template.rhs, path, scope)
+        return lhs, template.relation, rhs, self.changed
+
+    def number(self, value: Any, path: PathKey, scope: Scope) -> Any:
+        """A number written as an expression of the indices and numeric parameters (``-0.8 - 0.2*(i - 1)``,
+        ``pi/12``), evaluated when the config is loaded; a number as it is."""
+        if not isinstance(value, str):
+            return value
+        tree, relation, _, _ = self.expanded(value, path, scope)
+        if relation is not None:
+            raise Problem(path, f"{value!r} is a comparison, not a number", scope.indices)
+        env = dict(self.scalars)
+        unknown = sorted(dag_names(tree, self.definition_names) - set(env) - set(CONSTANTS))
+        if unknown:
+            raise Problem(path, f"{unknown[0]!r} in {value!r} is not an index or a numeric parameter", scope.indices)
+        with quiet():
+            number = float(evaluate(tree, env, numpy_functions()))
+        if not math.isfinite(number):
+            raise Problem(path, f"{value!r} is {number}, not a finite number", scope.indices)
+        return number
+
+    def substitute(self, node: Any, path: PathKey, scope: Scope) -> Node:
+        """The plain tree of a template tree (an explicit stack: no recursion, whatever the length of a sum)."""
+        values: list[Node] = []
+        stack: list[tuple[Any, Scope, int]] = [(node, scope, -1)]  # -1: not visited; otherwise children to combine
+        while stack:
+            n, sc, state = stack.pop()
+            if isinstance(n, Num | Name | Word | Hole | Entry):
+                values.append(self._leaf(n, path, sc))
+            elif state < 0:
+                self.families.tick(path, sc)
+                if isinstance(n, Aggregate):
+                    self.changed = True
+                    count, lo, hi = self._aggregate_range(n, path, sc)
+                    stack.append((n, sc, count))
+                    stack.extend((n.body, sc.bind(n.index, v), -1) for v in range(hi, lo - 1, -1))
+                elif isinstance(n, Unary):
+                    stack.extend(((n, sc, 1), (n.operand, sc, -1)))
+                elif isinstance(n, Binary):
+                    stack.extend(((n, sc, 2), (n.right, sc, -1), (n.left, sc, -1)))
+                else:  # Call
+                    stack.append((n, sc, len(n.args)))
+                    stack.extend((a, sc, -1) for a in reversed(n.args))
+            else:
+                children = values[len(values) - state:] if state else []
+                del values[len(values) - state:]
+                if isinstance(n, Aggregate):
+                    values.append(_aggregate(n, children))
+                elif isinstance(n, Unary):
+                    values.append(Unary(n.op, children[0], n.column))
+                elif isinstance(n, Binary):
+                    values.append(Binary(n.op, children[0], children[1], n.column))
+                else:
+                    values.append(Call(n.function, tuple(children), n.column))
+        return values[0]
+
+    def _leaf(self, n: Num | Name | Word | Hole | Entry, path: PathKey, sc: Scope) -> Node:
+        """A leaf of a template tree with its index, definition, templated name, hole or entry written in."""
+        if isinstance(n, Num):
+            return n
+        if isinstance(n, Name):
+            return self._name(n.id, n.column, sc)
+        self.changed = True
+        if isinstance(n, Word):
+            return self._name(self._word(n, path, sc), n.column, sc)
+        if isinstance(n, Hole):
+            return Num(self.families.value(n.expr.tree, n.expr.text, path, sc), n.column)
+        return Num(self._entry(n, path, sc), n.column)
+
+    def _aggregate_range(self, n: Aggregate, path: PathKey, sc: Scope) -> tuple[int, int, int]:
+        """The number of terms of an aggregate and its range, counted (its index checked) before it is written out."""
+        if n.index in sc.base or n.index in sc.indices:
+            raise Problem(path, f"index {n.index!r} of {n.function}() is already in use here",
+                           sc.indices, column=n.column)
+        if n.index in self.definitions:
+            raise Problem(path, f"index {n.index!r} of {n.function}() is the name of a definition",
+                           sc.indices, column=n.column)
+        lo, hi = self.families.bounds(n.lo, n.hi, n.range_text, path, sc)
+        count = max(0, hi - lo + 1)
+        self.families.count(count, path, sc)
+        if not count and n.function in ("max", "min"):
+            raise Problem(path, f"{n.function}() over the empty range {n.range_text!r}", sc.indices,
+                           column=n.column)
+        return count, lo, hi
+
+    def _name(self, word: str, column: int, scope: Scope) -> Node:
+        if word in scope.indices:
+            self.changed = True
+            return Num(scope.indices[word], column)
+        tree = self.definitions.get(word)
+        if tree is not None:
+            self.changed = True
+            return tree
+        return Name(word, column)
+
+    def _word(self, word: Word, path: PathKey, scope: Scope) -> str:
+        """A templated name (``x{i}``) with its integers written in; what it makes must be a name."""
+        text = "".join(p if isinstance(p, str) else str(self.families.value(p.tree, p.text, path, scope))
+                       for p in word.pieces)
+        if NAME.fullmatch(text) is None:
+            raise Problem(path, f"{word.text!r} makes {text!r}, which is not a name (a template inside a name must "
+                                 "give a non-negative integer)", scope.indices, column=word.column)
+        return text
+
+    def _entry(self, entry: Entry, path: PathKey, scope: Scope) -> float:
+        """``name[i]``, ``name[i][j]`` of a vector or matrix parameter: the entry (1-based)."""
+        if entry.name not in self.vectors:
+            known = ", ".join(sorted(self.vectors)) or "none"
+            raise Problem(path, f"{entry.name!r} is indexed but is not a vector or matrix parameter (those here: "
+                                 f"{known})", scope.indices, column=entry.column)
+        value: Any = self.vectors[entry.name]
+        for index in entry.indices:
+            k = self.families.value(index, unparse(index), path, scope)
+            if not isinstance(value, list):
+                raise Problem(path, f"{entry.name!r} has fewer dimensions than indices", scope.indices,
+                               column=entry.column)
+            if not 1 <= k <= len(value):
+                raise Problem(path, f"index {k} of {entry.name!r} is outside 1..{len(value)}", scope.indices,
+                               column=entry.column)
+            value = value[k - 1]
+        if isinstance(value, list):
+            raise Problem(path, f"{entry.name!r} needs more indices (it is a matrix)", scope.indices,
+                           column=entry.column)
+        return value
+
+
+def checked_vector(value: list, path: PathKey) -> list:
+    """A vector or matrix parameter, its shape and entries checked."""
+    def check(v: Any, depth: int) -> None:
+        if isinstance(v, list):
+            if depth >= 2 or not v:
+                raise Problem(path, "a parameter is a number, a vector (list) or a matrix (list of lists)")
+            for x in v:
+                check(x, depth + 1)
+        elif isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+            raise Problem(path, f"the entries of a vector or matrix parameter must be finite numbers, not {v!r}")
+    check(value, 0)
+    return value
+
+
+def _written(lhs: Node, relation: str | None, rhs: Node | None, changed: bool, text: str) -> str:
+    if not changed:
+        return text
+    return unparse(lhs) if relation is None else f"{unparse(lhs)} {relation} {unparse(rhs)}"
+
+
+def _aggregate(node: Aggregate, terms: list[Node]) -> Node:
+    """The terms of an aggregate as one tree: a sum and a product left to right (as written out), max and min as a
+    call (one term: the term itself)."""
+    if not terms:
+        return Num(0 if node.function == "sum" else 1, node.column)
+    if node.function in ("sum", "prod"):
+        op = "+" if node.function == "sum" else "*"
+        out = terms[0]
+        for t in terms[1:]:
+            out = Binary(op, out, t, node.column)
+        return out
+    return Call(node.function, tuple(terms), node.column) if len(terms) > 1 else terms[0]
+
+
+def dag_names(node: Node, known: dict[int, set[str]]) -> set[str]:
+    """The names in a tree whose subtrees may be shared (definitions): each shared subtree is visited once, and a
+    subtree whose names are ``known`` (a definition's, by its id) not at all."""
+    names: set[str] = set()
+    seen: set[int] = set()
+    stack = [node]
+    while stack:
+        n = stack.pop()
+        if id(n) in seen:
+            continue
+        seen.add(id(n))
+        if id(n) in known:
+            names |= known[id(n)]
+        elif isinstance(n, Name):
+            names.add(n.id)
+        elif isinstance(n, Unary):
+            stack.append(n.operand)
+        elif isinstance(n, Binary):
+            stack.extend((n.left, n.right))
+        elif isinstance(n, Call):
+            stack.extend(n.args)
+    return names
