@@ -202,7 +202,7 @@ def compile_sparse(cfg: Config, game: CompiledGame) -> SparseKKT:
     function = ca.Function("sparse_kkt", [a, lam, x], [F_proj, J_proj, F0], ["a", "lam", "x"], ["F", "J", "F0"])
     residual = ca.Function("sparse_residual", [a, lam, x], [ca.densify(F_proj[:n]), ca.densify(F_proj[F.numel() - m:])],
                            ["a", "lam", "x"], ["L", "c"])
-    affine = not ca.depends_on(J, ca.vertcat(a, X, P, lam, x)) and not game.piecewise
+    affine = not ca.depends_on(J, ca.vertcat(a, X, P, lam, x)) and not game.lq.piecewise
     return SparseKKT(game, function, residual, function.sparsity_out(1), affine, S,
                      [slice(int(offsets[i]), int(offsets[i + 1])) for i in range(N)], own)
 

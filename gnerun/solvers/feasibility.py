@@ -57,7 +57,7 @@ def phase_one(game: CompiledGame, x: np.ndarray | None = None, starts: list[np.n
     rows = np.flatnonzero(~fixed)
     if rows.size == 0:
         return None
-    if game.linear_rows[rows].all():
+    if game.lq.linear_rows[rows].all():
         return _linear(game, x, rows)
     return _nonlinear(game, x, rows, list(starts) + [game.a_start])
 

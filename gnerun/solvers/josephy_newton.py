@@ -44,8 +44,8 @@ def check_nash_problem(game: CompiledGame) -> None:
         raise InputError(f"solver.kind 'jn' needs independent constraint sets, but {len(coupled)} constraint(s) "
                          f"involve other agents' decisions ({labels}{', ...' if len(coupled) > 3 else ''}): this is "
                          "a generalized Nash problem, use solver.kind 'ssn'")
-    if not game.linear_rows.all():
-        bad = [game.constraints[r].label for r in np.flatnonzero(~game.linear_rows)[:3]]
+    if not game.lq.linear_rows.all():
+        bad = [game.constraints[r].label for r in np.flatnonzero(~game.lq.linear_rows)[:3]]
         raise InputError(f"solver.kind 'jn' solves each step as a linear complementarity problem and needs "
                          f"polyhedral (affine) constraints; nonlinear: {', '.join(bad)}: use solver.kind 'ssn'")
 
