@@ -29,7 +29,6 @@ from typing import NamedTuple
 
 import casadi as ca
 import numpy as np
-import scipy.sparse as sp
 
 from ..language.config import (
     Config,
@@ -47,6 +46,7 @@ from .agents import AgentFunctions
 from .building import stoppable
 from .evaluator import Evaluator
 from .horizon import Horizon
+from .pattern import Pattern
 
 
 @dataclass(frozen=True)
@@ -163,24 +163,6 @@ class CompiledGame:
         return self._constraint_only(a, self._x(x))[0].reshape(-1)
 
     @functools.cached_property
-    @stoppable
-    def zero_gradient_rows(self) -> np.ndarray:
-        """Rows of c that depend on no decision variable (structurally): at a stage where the decisions cannot
-        reach a constraint (a position one step after an input that drives its second derivative), the row is a
-        condition on the plant state alone, not a Newton row."""
-        rows = np.zeros(self.m, dtype=bool)
-        if self.m:
-            sym = self._symbolic
-            # sparsity propagation through the expression graph, without building the Jacobian
-            pattern = ca.Function("c", [sym.a, sym.x], [sym.c]).jac_sparsity(0, 0)
-            r, _ = pattern.get_triplet()
-            reached = np.zeros(self.m, dtype=bool)
-            reached[np.asarray(r, dtype=int)] = True
-            rows = ~reached
-        rows.flags.writeable = False
-        return rows
-
-    @functools.cached_property
     def lq(self) -> LQStructure:
         """The affine and piecewise structure (gnerun.game.affine): an LQ game's constant map, the linear rows."""
         return LQStructure(self)
@@ -194,6 +176,11 @@ class CompiledGame:
     def agents(self) -> AgentFunctions:
         """Each agent's own functions (gnerun.game.agents): what a best-response check reads."""
         return AgentFunctions(self, self._agent_constraints, self._domain)
+
+    @functools.cached_property
+    def pattern(self) -> Pattern:
+        """The structural nonzeros (gnerun.game.pattern): of JPhi, of dc/da, the rows no decision reaches."""
+        return Pattern(self)
 
     @property
     def _sparsity(self) -> tuple[ca.Sparsity, ca.Sparsity]:
@@ -242,32 +229,6 @@ class CompiledGame:
     @property
     def equality_mask(self) -> np.ndarray:
         return np.array([c.equality for c in self.constraints], dtype=bool)
-
-    def constraint_pattern(self) -> tuple[np.ndarray, np.ndarray]:
-        """The structural nonzeros of dc/da as (rows, columns) (read-only arrays, built once)."""
-        return self._constraint_pattern
-
-    @functools.cached_property
-    def _constraint_pattern(self) -> tuple[np.ndarray, np.ndarray]:
-        rows, cols = self._sparsity[1].get_triplet()
-        pattern = np.asarray(rows, dtype=int), np.asarray(cols, dtype=int)
-        for arr in pattern:
-            arr.flags.writeable = False
-        return pattern
-
-    def coupled_rows(self) -> list[int]:
-        """Rows of c owned by one agent that involve another agent's decisions (what makes a GNE)."""
-        pattern = self._sparsity[1]
-        rows, cols = pattern.get_triplet()
-        owner_of_col = np.empty(self.n, dtype=int)
-        for i, sl in enumerate(self.agent_slices):
-            owner_of_col[sl] = i
-        coupled = set()
-        for r, col in zip(rows, cols, strict=True):
-            owner = self.constraints[r].owner
-            if owner is not None and owner_of_col[col] != owner:
-                coupled.add(int(r))
-        return sorted(coupled)
 
     @property
     def shares_constraints_generalized(self) -> bool:
@@ -329,25 +290,6 @@ class CompiledGame:
         if self._dynamics is None:
             raise ValueError("a static game has no dynamics")
         return self._dynamics(x, u)[0].reshape(-1)
-
-    def jacobian_sparsity(self) -> sp.csr_matrix:
-        """Structural nonzeros of JPhi (the union over both branches of every complementarity row)."""
-        sL, sc = self._sparsity
-        n, m = self.n, self.m
-        rows, cols = [], []
-        r, cc = sL.get_triplet()
-        rows += list(r)
-        cols += list(cc)
-        r, cc = sc.get_triplet()
-        rows += [n + i for i in r]
-        cols += list(cc)
-        rows += [n + j for j in range(m)]
-        cols += [n + j for j in range(m)]
-        data = np.ones(len(rows), dtype=bool)
-        pattern = sp.coo_matrix((data, (rows, cols)), shape=(n + m, n + m)).tocsr()
-        pattern.sum_duplicates()
-        pattern.data[:] = True
-        return pattern
 
     # solutions by name --------------------------------------------------------------------
     def solution_by_agent(self, a: np.ndarray) -> dict[str, dict[str, float | list[float]]]:
@@ -499,6 +441,7 @@ class _Expressions:
     domain: dict = field(default_factory=dict)  # per agent: (kind, margin) of each log, sqrt, asin, acos of its cost
 
 
+# long: the static and the dynamic walks share the parsed data and `constrain`; split, each would take a dozen arguments
 def _expressions(g: StaticGame | DynamicGame, lay: _Layout, a: ca.SX, x: ca.SX, agents: list[int],
                  *, shared_as_own: bool = False, states: ca.SX | None = None, smoothing: float = 0.0) -> _Expressions:
     """Costs and constraints of ``agents`` only, as CasADi expressions in (a, x).

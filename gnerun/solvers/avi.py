@@ -99,7 +99,7 @@ def _build(game: CompiledGame) -> AffineVI | None:
     dL, C = cache["dL"], cache["dc"]
     P, E = dL[:, :n], dL[:, n:]
     equality = game.equality_mask
-    reached = ~game.zero_gradient_rows
+    reached = ~game.pattern.zero_gradient_rows
     # rows with the same gradient and kind are copies of one constraint when their offsets agree too; the offsets
     # depend on x, so rows are merged only where they agree at the start state and in their (affine) dependence on x
     offset_map = game.lq.offset_map

@@ -37,7 +37,7 @@ def check_nash_problem(game: CompiledGame) -> None:
         raise InputError("solver.kind 'jn' needs independent constraint sets; this game's shared constraints are "
                          "carried by each agent with its own multiplier (a GNE): use solver.kind 'ssn', or "
                          "equilibrium: variational for the variational equilibrium")
-    coupled = game.coupled_rows()
+    coupled = game.pattern.coupled_rows()
     if coupled:
         labels = ", ".join(f"{game.agent_names[game.constraints[r].owner]}: {game.constraints[r].label}"
                            for r in coupled[:3])

@@ -53,7 +53,7 @@ class KKTSystem:
         self._fb = solver.complementarity == "fischer_burmeister"
         self._eq_rows = np.flatnonzero(self._eq)
         # rows no decision reaches: multipliers held at zero, never g-branch rows (checked at init)
-        self._fixed = game.zero_gradient_rows
+        self._fixed = game.pattern.zero_gradient_rows
         self._fixed_rows = np.flatnonzero(self._fixed)
         self._z_start = game.z_start()
         d = self.disturbance
