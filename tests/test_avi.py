@@ -19,7 +19,7 @@ from .conftest import CONFIGS
 def _point(game):
     vi = AffineVI.of(game)
     assert vi is not None
-    return vi.point(game.offsets(game.x0), game.size)
+    return vi.point(game.lq.offsets(game.x0), game.size)
 
 
 def _phi_norm(cfg, game, z) -> float:
@@ -147,7 +147,7 @@ def test_no_solution_is_none_and_the_default_goes_on() -> None:
     cfg = load_config(text=problem.config_yaml)
     game = compile_game(cfg)
     vi = AffineVI.of(game)
-    assert vi is None or vi.point(game.offsets(game.x0), game.size) is None
+    assert vi is None or vi.point(game.lq.offsets(game.x0), game.size) is None
     assert solve(cfg).status == "converged"
     # an empty feasible set
     text = """
@@ -159,9 +159,9 @@ game:
     - {name: p2, variables: {x2: {}}, cost: "(x2 - x1)**2"}
 """
     game = compile_game(load_config(text=text))
-    assert AffineVI.of(game).point(game.offsets(game.x0), game.size) is None
+    assert AffineVI.of(game).point(game.lq.offsets(game.x0), game.size) is None
     # a player whose cost is linear in its own decision (P singular): DAQP returns no finite point
     cfg = load_config(text=ROWS.replace("(x1 - 4)**2", "-x1"))
     game = compile_game(cfg)
-    assert AffineVI.of(game).point(game.offsets(game.x0), game.size) is None
+    assert AffineVI.of(game).point(game.lq.offsets(game.x0), game.size) is None
     assert solve(cfg).status == "converged"

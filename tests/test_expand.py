@@ -404,7 +404,7 @@ def test_a_variational_constraint_of_two_agents_leaves_the_third_alone() -> None
     res = solve(cfg, out=None)
     assert res.status == "converged"
     np.testing.assert_allclose(res.z, [0.5, 0.5, 5.0, 1.0], atol=1e-10)
-    assert [list(game.constraint_rows(i)) for i in range(3)] == [[0], [0], []]
+    assert [list(game.agents.constraint_rows(i)) for i in range(3)] == [[0], [0], []]
 
 
 def test_a_generalized_constraint_of_two_agents_is_their_own_constraint_each() -> None:

@@ -380,7 +380,7 @@ def test_variational_shared_constraints_have_one_common_multiplier_block() -> No
     assert not any(c.label.startswith(shared) for c in var.constraints[: sv.start])
     # each agent's own problem includes the common rows
     for i in range(2):
-        assert set(range(sv.start, sv.stop)) <= set(var.constraint_rows(i).tolist())
+        assert set(range(sv.start, sv.stop)) <= set(var.agents.constraint_rows(i).tolist())
     assert "shared" in var.multipliers_by_agent(np.zeros(var.m))
     # z_i = (a_i, lambda_i) leaves the common multipliers out
     assert not set((var.n + np.arange(sv.start, sv.stop)).tolist()) & set(np.r_[var.agent_indices(0),
@@ -442,7 +442,7 @@ def test_bounds_become_owner_constraints_with_labels() -> None:
     assert all(c.stage is None and not c.equality for c in game.constraints)
     assert game.multiplier_slices == [slice(0, 2), slice(2, 4)]
     np.testing.assert_allclose(game.kkt_parts(np.array([3.0, -4.0, 0, 0, 0, 0])).c, [-13, -7, -6, -14])
-    np.testing.assert_array_equal(game.constraint_rows(1), [2, 3])
+    np.testing.assert_array_equal(game.agents.constraint_rows(1), [2, 3])
     # dynamic bounds: one row per bound and stage, owned by the input's agent
     dyn = compile_game(nonlinear_config("variational"))
     rows = {(c.label, c.owner, c.stage) for c in dyn.constraints}
@@ -458,7 +458,7 @@ def test_bounds_become_owner_constraints_with_labels() -> None:
 @pytest.mark.parametrize("name, cfg", FD_PARAMS)
 def test_jacobian_sparsity_covers_every_numerical_nonzero(name: str, cfg) -> None:
     game = compile_game(cfg)
-    pattern = game.jacobian_sparsity()
+    pattern = game.pattern.jacobian()
     assert sp.issparse(pattern) and pattern.format == "csr" and pattern.dtype == bool
     assert pattern.shape == (game.size, game.size)
     dense = pattern.toarray().astype(bool)
@@ -475,7 +475,7 @@ def test_jacobian_sparsity_covers_every_numerical_nonzero(name: str, cfg) -> Non
 
 def test_jacobian_sparsity_of_the_paper_game_is_structural() -> None:
     game = compile_game(load_config(CONFIGS / "paper_study1.yaml"))
-    dense = game.jacobian_sparsity().toarray().astype(bool)
+    dense = game.pattern.jacobian().toarray().astype(bool)
     n = game.n
     # agent 3's cost does not involve x1, x2: its stationarity rows do not depend on a_1 or a_2
     assert not dense[22:33, 0:22].any()
@@ -517,17 +517,18 @@ def test_coupled_and_affine_rows_by_hand() -> None:
     paper = compile_game(load_config(CONFIGS / "paper_study1.yaml", {"game.horizon": 2}))
     labels = [c.label for c in paper.constraints]
     # agent 1's u1 + u2 + u3 <= 1 and agent 3's u3 >= u1 + u2 involve the others' inputs; u2 <= 0.5, u3 >= 0 do not
-    assert paper.coupled_rows() == [j for j, label in enumerate(labels)
+    assert paper.pattern.coupled_rows() == [j for j, label in enumerate(labels)
                                     if label.startswith(("u1 + u2 + u3 <= 1", "u3 >= u1 + u2"))]
-    assert paper.linear_rows.all()  # input constraints of a linear game
+    assert paper.lq.linear_rows.all()  # input constraints of a linear game
     game = compile_game(nonlinear_config("variational"))
     labels = [c.label for c in game.constraints]
-    assert game.coupled_rows() == [j for j, label in enumerate(labels) if label.startswith(("x1 + u2", "u2*u1"))]
+    coupled = [j for j, label in enumerate(labels) if label.startswith(("x1 + u2", "u2*u1"))]
+    assert game.pattern.coupled_rows() == coupled
     # bounds are affine; x1(1) = x1 + dt cos(x3) u1(0) is affine in a (x3 is the given state), x1(tau+1) for
     # tau >= 1 is not; products of inputs and the state circle are not
     affine = [label.startswith(("u1 >=", "u1 <=", "w >=", "u2 <=")) or label == "x1 + u2 <= 3 [tau=0]"
               for label in labels]
-    np.testing.assert_array_equal(game.linear_rows, affine)
+    np.testing.assert_array_equal(game.lq.linear_rows, affine)
 
 
 def test_shift_drops_stage_zero_and_repeats_the_last_stage() -> None:

@@ -190,7 +190,7 @@ game:
 def test_a_row_no_decision_reaches_is_checked_not_a_singular_newton_row(globalization: str) -> None:
     cfg = load_config(text=EULER, overrides={"solver.globalization": globalization})
     game = compile_game(cfg)
-    fixed = np.flatnonzero(game.zero_gradient_rows)
+    fixed = np.flatnonzero(game.pattern.zero_gradient_rows)
     assert [game.constraints[j].label for j in fixed] == ["p <= 1 [tau=0]"]
     res = solve(cfg)
     assert res.status == "converged", res.message
@@ -208,12 +208,11 @@ def test_a_violated_row_no_decision_reaches_is_reported_by_its_label() -> None:
 
 def test_without_that_rule_the_row_makes_the_newton_matrix_singular(monkeypatch: pytest.MonkeyPatch) -> None:
     # the same game with the rule switched off: the zero row of JPhi is singular as soon as the row is g-branch
-    from gnerun.game import compile as compile_module
+    from gnerun.game.pattern import Pattern
 
     cfg = load_config(text=EULER, overrides={"solver.globalization": "none", "game.x0": [0.8, 1.0]})
     game = compile_game(cfg)
-    monkeypatch.setattr(compile_module.CompiledGame, "zero_gradient_rows",
-                        property(lambda self: np.zeros(self.m, dtype=bool)))
+    monkeypatch.setattr(Pattern, "zero_gradient_rows", property(lambda self: np.zeros(self.game.m, dtype=bool)))
     solver = make_solver(cfg, game)
     state = iterate(solver, solver.init())
     assert state.status == Status.SINGULAR_JACOBIAN

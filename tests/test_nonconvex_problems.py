@@ -59,7 +59,7 @@ def test_rows_agree_with_the_config(game) -> None:
         a = rng.uniform(-3, 3, game.n)
         c = compiled.constraint(a)
         for i in range(len(game.players)):
-            rows = compiled.constraint_rows(i)
+            rows = compiled.agents.constraint_rows(i)
             theirs = bool(np.all(np.where(eq[rows], np.abs(c[rows]), c[rows]) <= 1e-12))
             mine = float(game.violation(i, a)) <= 1e-12
             assert mine == theirs, (a, i)

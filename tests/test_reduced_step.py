@@ -150,7 +150,7 @@ def test_the_levenberg_marquardt_step_of_an_lq_game_minimises_its_objective() ->
     assert np.abs(L).max() < 1e-9
     assert np.all(np.delete(z[n:], A) == 0.0)
 
-    dL = game.affine_cache["dL"]
+    dL = game.lq.cache["dL"]
 
     def decisions(lam_A: np.ndarray) -> np.ndarray:
         lam = np.zeros(game.m)

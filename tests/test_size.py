@@ -44,7 +44,7 @@ def test_the_estimate_takes_the_formulation_auto_takes() -> None:
         if cfg.game.kind == "dynamic":
             game = compile_game(cfg)
             dense = solving.formulation(cfg, game) == "condensed"
-            if game.linear_dynamics and not isinstance(cfg.game.dynamics, LinearDynamics):
+            if game.lq.linear_dynamics and not isinstance(cfg.game.dynamics, LinearDynamics):
                 assert estimate(cfg).dense or not dense, path.stem  # counted as nonlinear: dense or agreeing
                 continue
             assert estimate(cfg).dense == dense, path.stem

@@ -109,11 +109,11 @@ def test_a_game_with_abs_min_or_max_of_its_decisions_is_not_affine(cost: str, af
     taken as W z + w0 from z = 0 (abs(x1 - 1) + 0.1 x1^2 was 'solved' at x1 = 5)."""
     game = compile_game(load_config(text=GAME.format(cost=cost)))
     assert game.affine is affine
-    assert game.piecewise is (not affine)
+    assert game.lq.piecewise is (not affine)
 
 
 def test_rows_with_min_or_max_are_not_polyhedral() -> None:
     cfg = load_config(text=GAME.format(cost="x1**2") + '  shared_constraints: ["max(x1, x2) <= 1", "x1 + x2 <= 3"]\n')
     game = compile_game(cfg)
-    linear = {c.label: bool(ok) for c, ok in zip(game.constraints, game.linear_rows, strict=True)}
+    linear = {c.label: bool(ok) for c, ok in zip(game.constraints, game.lq.linear_rows, strict=True)}
     assert linear == {"max(x1, x2) <= 1": False, "x1 + x2 <= 3": True}

@@ -29,7 +29,6 @@ from typing import NamedTuple
 
 import casadi as ca
 import numpy as np
-import scipy.sparse as sp
 
 from ..language.config import (
     Config,
@@ -42,38 +41,12 @@ from ..language.config import (
     constraint_text,
 )
 from ..language.expr import casadi_functions, evaluate, parse_constraint, parse_expression
+from .affine import LQStructure, derivatives_affine, offset_map
+from .agents import AgentFunctions
 from .building import stoppable
+from .evaluator import Evaluator
 from .horizon import Horizon
-from .tape import kink_function, piecewise_outputs
-
-_BATCHES = (8, 64, 512)  # block sizes of CompiledGame.evaluate_many's mapped functions
-
-
-class Evaluator:
-    """A CasADi Function evaluated into preallocated numpy buffers (no per-call DM conversions).
-
-    Calling it copies the arguments into the input buffers, evaluates, and returns fresh numpy arrays
-    shaped like the Function's (dense) outputs; with ``dense=False``, the outputs' nonzeros as they are
-    stored (column by column).
-    """
-
-    def __init__(self, f: ca.Function, dense: bool = True):
-        self.function = f
-        self._args = [np.zeros(f.nnz_in(i)) for i in range(f.n_in())]
-        self._res = [np.zeros(f.nnz_out(i)) for i in range(f.n_out())]
-        self._shapes = [f.size_out(i) if dense else (f.nnz_out(i),) for i in range(f.n_out())]
-        self._buffer, self._eval = f.buffer()
-        for i, arr in enumerate(self._args):
-            self._buffer.set_arg(i, memoryview(arr))
-        for i, arr in enumerate(self._res):
-            self._buffer.set_res(i, memoryview(arr))
-
-    def __call__(self, *args: np.ndarray) -> list[np.ndarray]:
-        for buf, arg in zip(self._args, args, strict=True):
-            buf[:] = arg
-        self._eval()
-        # CasADi stores dense matrices column by column
-        return [r.reshape(shape, order="F").copy() for r, shape in zip(self._res, self._shapes, strict=True)]
+from .pattern import Pattern
 
 
 @dataclass(frozen=True)
@@ -145,26 +118,14 @@ class CompiledGame:
         a, lam, x, L, c = sym.a, sym.lam, sym.x, sym.L, sym.c
         dL = ca.jacobian(L, ca.vertcat(a, lam))
         dc = ca.jacobian(c, a) if self.m else ca.SX(0, self.n)
-        # the constraints' derivatives first: the smaller test, and nonlinear constraints end it (a quarter of the
-        # derivative set-up of the 5-car merge was the test on dL)
-        affine = not ca.depends_on(ca.vec(dc), ca.vertcat(a, x)) and not ca.depends_on(ca.vec(dL),
-                                                                                        ca.vertcat(a, lam, x))
         # abs, min, max of the decisions have a zero second derivative almost everywhere, and are not affine
-        affine = affine and not self.piecewise
+        affine = derivatives_affine(sym, dL, dc) and not self.lq.piecewise
         kkt = ca.Function("kkt", [a, lam, x], [ca.densify(v) for v in (L, c, dL, dc)], ["a", "lam", "x"],
                           ["L", "c", "dL_dz", "dc_da"])
-        offset_map = None
-        if affine:
-            # [L; c] at z = 0 as a function of the state: for LQ dynamic games it is affine in x as well
-            v = ca.vertcat(L, c)
-            dv_dx = ca.jacobian(v, x)
-            if not ca.depends_on(ca.vec(dv_dx), ca.vertcat(a, lam, x)):
-                at_zero = ca.Function("offset_map", [a, lam, x], [ca.densify(dv_dx), ca.densify(v)])
-                Wx, w00 = at_zero(np.zeros(self.n), np.zeros(self.m), np.zeros(x.numel()))
-                offset_map = (np.array(Wx, dtype=float).reshape(v.numel(), x.numel()),
-                              np.array(w00, dtype=float).reshape(-1))
+        # [L; c] at z = 0 as a function of the state: for LQ dynamic games it is affine in x as well
+        offsets = offset_map(sym, self.n, self.m) if affine else None
         return {"kkt": Evaluator(kkt), "sparsity": (dL.sparsity(), dc.sparsity()), "affine": affine,
-                "offset_map": offset_map}
+                "offset_map": offsets}
 
     @property
     def _kkt(self) -> Evaluator:
@@ -202,95 +163,33 @@ class CompiledGame:
         return self._constraint_only(a, self._x(x))[0].reshape(-1)
 
     @functools.cached_property
-    @stoppable
-    def zero_gradient_rows(self) -> np.ndarray:
-        """Rows of c that depend on no decision variable (structurally): at a stage where the decisions cannot
-        reach a constraint (a position one step after an input that drives its second derivative), the row is a
-        condition on the plant state alone, not a Newton row."""
-        rows = np.zeros(self.m, dtype=bool)
-        if self.m:
-            sym = self._symbolic
-            # sparsity propagation through the expression graph, without building the Jacobian
-            pattern = ca.Function("c", [sym.a, sym.x], [sym.c]).jac_sparsity(0, 0)
-            r, _ = pattern.get_triplet()
-            reached = np.zeros(self.m, dtype=bool)
-            reached[np.asarray(r, dtype=int)] = True
-            rows = ~reached
-        rows.flags.writeable = False
-        return rows
-
-    @functools.cached_property
-    def piecewise_parts(self) -> tuple[np.ndarray, np.ndarray]:
-        """Which costs and which constraint rows pass through a piecewise function of the decisions (abs, min, max,
-        sign, a comparison): (per agent, per row of c). Their derivatives jump at kinks, so they are never affine,
-        and a KKT point at a kink uses one branch's derivative."""
-        sym = self._symbolic
-        f = ca.Function("pieces", [sym.a, sym.x], [ca.vertcat(sym.J, sym.c)])
-        flags = piecewise_outputs(f)
-        N = len(self.agent_names)
-        costs, rows = flags[:N].copy(), flags[N:].copy()
-        costs.flags.writeable = rows.flags.writeable = False
-        return costs, rows
+    def lq(self) -> LQStructure:
+        """The affine and piecewise structure (gnerun.game.affine): an LQ game's constant map, the linear rows."""
+        return LQStructure(self)
 
     @property
     def piecewise(self) -> bool:
-        """Some cost or constraint is piecewise in the decisions (see :attr:`piecewise_parts`)."""
-        costs, rows = self.piecewise_parts
-        return bool(costs.any() or rows.any())
+        """:attr:`gnerun.game.affine.LQStructure.piecewise`."""
+        return self.lq.piecewise
+
+    @functools.cached_property
+    def agents(self) -> AgentFunctions:
+        """Each agent's own functions (gnerun.game.agents): what a best-response check reads."""
+        return AgentFunctions(self, self._agent_constraints, self._domain)
+
+    @functools.cached_property
+    def pattern(self) -> Pattern:
+        """The structural nonzeros (gnerun.game.pattern): of JPhi, of dc/da, the rows no decision reaches."""
+        return Pattern(self)
 
     @property
     def _sparsity(self) -> tuple[ca.Sparsity, ca.Sparsity]:
         return self._derivatives["sparsity"]
 
     @property
-    def _offset_map(self) -> tuple[np.ndarray, np.ndarray] | None:
-        return self._derivatives["offset_map"]
-
-    @property
     def affine(self) -> bool:
         """L affine in z and c affine in a, with constant derivatives (LQ games)."""
         return self._derivatives["affine"]
-
-    @property
-    def offset_map(self) -> tuple[np.ndarray, np.ndarray] | None:
-        """(Wx, w00) with [L(0; x); c(0; x)] = Wx x + w00 for an LQ game affine in the state x too, else None."""
-        return self._offset_map
-
-    @property
-    def affine_cache(self) -> dict:
-        """An LQ game's constant matrices (``W``, ``dL``, ``dc``: [L; c] = W z + w0(x)), and what solvers derive from
-        them once per game, kept with them (empty for other games)."""
-        return self._affine_cache
-
-    @functools.cached_property
-    def _affine_cache(self) -> dict:
-        if not self.affine:
-            return {}
-        # the constant derivatives, once; read-only, shared by every KKTParts
-        _, _, dL, dc = self._kkt(np.zeros(self.n), np.zeros(self.m), self.x0)
-        # [L; c] = W z + w0(x) in one product
-        W = np.vstack([dL, np.hstack([dc, np.zeros((self.m, self.m))])])
-        for arr in (dL, dc, W):
-            arr.flags.writeable = False
-        return {"dL": dL, "dc": dc, "W": W, "x": None}
-
-    @functools.cached_property
-    @stoppable
-    def linear_dynamics(self) -> bool:
-        """The one-step dynamics affine in (x, u) (a static game: True); tested on one stage, without the
-        condensed derivatives."""
-        if self._dynamics is None:
-            return True
-        f = self._dynamics.function
-        x, u = ca.SX.sym("x", f.nnz_in(0)), ca.SX.sym("u", f.nnz_in(1))
-        d = ca.jacobian(f(x, u), ca.vertcat(x, u))
-        return not ca.depends_on(ca.vec(d), ca.vertcat(x, u))
-
-    @functools.cached_property
-    @stoppable
-    def linear_rows(self) -> np.ndarray:
-        """Rows of c that are affine in a (polyhedral constraints): no second derivative, and no kink."""
-        return _affine_rows(self._symbolic.c, self._symbolic.a, self.m) & ~self.piecewise_parts[1]
 
     @functools.cached_property
     @stoppable
@@ -331,32 +230,6 @@ class CompiledGame:
     def equality_mask(self) -> np.ndarray:
         return np.array([c.equality for c in self.constraints], dtype=bool)
 
-    def constraint_pattern(self) -> tuple[np.ndarray, np.ndarray]:
-        """The structural nonzeros of dc/da as (rows, columns) (read-only arrays, built once)."""
-        return self._constraint_pattern
-
-    @functools.cached_property
-    def _constraint_pattern(self) -> tuple[np.ndarray, np.ndarray]:
-        rows, cols = self._sparsity[1].get_triplet()
-        pattern = np.asarray(rows, dtype=int), np.asarray(cols, dtype=int)
-        for arr in pattern:
-            arr.flags.writeable = False
-        return pattern
-
-    def coupled_rows(self) -> list[int]:
-        """Rows of c owned by one agent that involve another agent's decisions (what makes a GNE)."""
-        pattern = self._sparsity[1]
-        rows, cols = pattern.get_triplet()
-        owner_of_col = np.empty(self.n, dtype=int)
-        for i, sl in enumerate(self.agent_slices):
-            owner_of_col[sl] = i
-        coupled = set()
-        for r, col in zip(rows, cols, strict=True):
-            owner = self.constraints[r].owner
-            if owner is not None and owner_of_col[col] != owner:
-                coupled.add(int(r))
-        return sorted(coupled)
-
     @property
     def shares_constraints_generalized(self) -> bool:
         """True for a plain GNE whose shared constraints each agent carries with its own multiplier."""
@@ -381,9 +254,9 @@ class CompiledGame:
         """L(z; x), c(a; x), dL/dz and dc/da at z = (a, lambda)."""
         n = self.n
         if self.affine:
-            cache = self._affine_cache
+            cache = self.lq.cache
             v = cache["W"] @ z
-            v += self.offsets(self._x(x))
+            v += self.lq.offsets(self._x(x))
             return KKTParts(v[:n], v[n:], cache["dL"], cache["dc"])
         L, c, dL, dc = self._kkt(z[:n], z[n:], self._x(x))
         return KKTParts(L.reshape(-1), c.reshape(-1), dL, dc)
@@ -393,27 +266,11 @@ class CompiledGame:
         without best responses never needs the condensed ones)."""
         n = self.n
         if "_derivatives" in self.__dict__ and self.affine:  # an LQ game's constant map, where it is known already
-            v = self._affine_cache["W"] @ z
-            v += self.offsets(self._x(x))
+            v = self.lq.cache["W"] @ z
+            v += self.lq.offsets(self._x(x))
             return v[:n], v[n:]
         L, c = self._residual(z[:n], z[n:], self._x(x))
         return L.reshape(-1), c.reshape(-1)
-
-    def offsets(self, x: np.ndarray) -> np.ndarray:
-        """[L(0; x); c(0; x)] of an affine game, evaluated once per state x."""
-        cache = self._affine_cache
-        key = x.tobytes()
-        if key != cache["x"]:
-            if self._offset_map is not None:  # affine in x too: one product
-                Wx, w00 = self._offset_map
-                w0 = Wx @ x
-                w0 += w00
-            else:
-                L0, c0, _, _ = self._kkt(np.zeros(self.n), np.zeros(self.m), x)
-                w0 = np.concatenate([L0.reshape(-1), c0.reshape(-1)])
-            w0.flags.writeable = False
-            cache.update(x=key, w0=w0)
-        return cache["w0"]
 
     def costs(self, a: np.ndarray, x: np.ndarray | None = None) -> np.ndarray:
         """(J_1(a), ..., J_N(a)) at the state x."""
@@ -428,138 +285,11 @@ class CompiledGame:
         F, H = self._pseudo(a, self._x(x))
         return F.reshape(-1), H
 
-    def constraint_rows(self, agent: int) -> np.ndarray:
-        """Indices of c that make up agent ``agent``'s own feasible set (for its best response)."""
-        return self._agent_constraints[agent]
-
-    def outside_domain(self, a: np.ndarray, x: np.ndarray | None = None) -> np.ndarray:
-        """Per agent: some log, sqrt, asin or acos of its cost is evaluated outside its domain at a, so the cost is
-        not a number there, even where the compiled expression simplified the term away (0 * log(v) is 0 to
-        CasADi)."""
-        out = np.zeros(len(self.agent_names), dtype=bool)
-        if self._domain is not None:
-            f, strict, owner = self._domain
-            v = f(a, self._x(x))[0].reshape(-1)
-            bad = np.isnan(v) | np.where(strict, v <= 0, v < 0)
-            out[owner[bad]] = True
-        return out
-
-    def evaluate_many(self, A: np.ndarray, x: np.ndarray | None = None,
-                      V: np.ndarray | None = None) -> tuple[np.ndarray, ...]:
-        """Every cost and constraint value at many points at once: ``A`` is (k, n), one point a per row; returns
-        J (k, N) and c (k, m), and with ``V`` (k, n) also each cost's directional derivative along the row of V at
-        its point, dJ (k, N) (forward-mode AD). One mapped CasADi call per block of points (what a certificate's
-        start points, rays and probes need: hundreds of points, each as cheap as one evaluation)."""
-        A = np.atleast_2d(np.asarray(A, dtype=float))
-        k = A.shape[0]
-        N, m = len(self.agent_names), self.m
-        J, C = np.empty((k, N)), np.empty((k, m))
-        dJ = np.empty((k, N)) if V is not None else None
-        xv = self._x(x)
-        done = 0
-        while done < k:
-            size = next((s for s in _BATCHES if s >= k - done), _BATCHES[-1])
-            f = self._batch(size, V is not None)
-            rows = min(size, k - done)
-            cols = np.zeros((self.n, size))
-            cols[:, :rows] = A[done:done + rows].T
-            args = [cols.ravel(order="F"), xv]  # CasADi stores matrices column by column
-            if V is not None:
-                dirs = np.zeros((self.n, size))
-                dirs[:, :rows] = np.asarray(V, dtype=float)[done:done + rows].T
-                args.append(dirs.ravel(order="F"))
-            out = f(*args)
-            J[done:done + rows] = out[0].T[:rows]
-            if m:
-                C[done:done + rows] = out[1].T[:rows]
-            if dJ is not None:
-                dJ[done:done + rows] = out[2].T[:rows]
-            done += rows
-        return (J, C) if dJ is None else (J, C, dJ)
-
-    def _batch(self, size: int, directional: bool = False) -> Evaluator:
-        cache = self.derived.setdefault("batches", {})
-        if (size, directional) not in cache:
-            sym = self._symbolic
-            c = ca.densify(sym.c) if self.m else ca.densify(ca.SX(1, 1))
-            if directional:
-                v = ca.SX.sym("v", self.n)
-                one = ca.Function("values", [sym.a, sym.x, v],
-                                  [ca.densify(sym.J), c, ca.densify(ca.jtimes(sym.J, sym.a, v))])
-            else:
-                one = ca.Function("values", [sym.a, sym.x], [ca.densify(sym.J), c])
-            cache[(size, directional)] = Evaluator(one.map(f"values_{size}", "serial", size, [1], []))
-        return cache[(size, directional)]
-
-    def agent_kinks(self, agent: int) -> tuple[ca.Function, list[str]] | None:
-        """The distances from their kinks of the piecewise functions of the decisions in agent ``agent``'s cost and
-        rows, as one Function of (a, x), and the functions' names (gnerun.game.tape.kink_function); None if none.
-        Built once per agent."""
-        cache = self.derived.setdefault("kinks", {})
-        if agent not in cache:
-            sym = self._symbolic
-            rows = self.constraint_rows(agent).tolist()
-            parts = ca.vertcat(sym.J[agent], sym.c[rows]) if rows else sym.J[agent]
-            cache[agent] = kink_function(ca.Function("parts", [sym.a, sym.x], [parts]))
-        return cache[agent]
-
-    def agent_hessian(self, agent: int, a: np.ndarray, x: np.ndarray | None = None) -> np.ndarray:
-        """The Hessian of J_i in the agent's own decisions at a (its block of the game Hessian H; the function is
-        built once per agent)."""
-        cache = self.derived.setdefault("hessians", {})
-        if agent not in cache:
-            cache[agent] = self._agent_hessian(agent)
-        return cache[agent](a, self._x(x))[0]
-
-    @stoppable
-    def _agent_hessian(self, agent: int) -> Evaluator:
-        sym = self._symbolic
-        ai = sym.a[self.agent_slices[agent]]
-        return Evaluator(ca.Function("H_ii", [sym.a, sym.x], [ca.densify(ca.hessian(sym.J[agent], ai)[0])]))
-
-    def agent_functions(self, agent: int) -> tuple[ca.Function, ca.Function, ca.Function]:
-        """Agent ``agent``'s cost J_i(a; x), its gradient in the agent's own decisions, and the rows of its own
-        problem c_i(a; x) (``constraint_rows``), as SX Functions of (a, x): what a best response's box search reads
-        as instruction tapes (gnerun.game.tape). The rows of the agent's own bounds are left out (a search box lies
-        inside them); ``box_rows`` are the rows kept, in the order of ``c``."""
-        sym = self._symbolic
-        sl = self.agent_slices[agent]
-        Ji = sym.J[agent]
-        rows = self.box_rows(agent).tolist()
-        ci = sym.c[rows] if rows else ca.SX(0, 1)
-        return (ca.Function("J", [sym.a, sym.x], [Ji]),
-                ca.Function("dJ", [sym.a, sym.x], [ca.densify(ca.gradient(Ji, sym.a[sl]))]),
-                ca.Function("c", [sym.a, sym.x], [ca.densify(ci)]))
-
-    def box_rows(self, agent: int) -> np.ndarray:
-        """The rows of agent ``agent``'s own problem other than the bounds of its decisions."""
-        rows = self.constraint_rows(agent)
-        return rows[[not self.constraints[r].bound for r in rows]] if rows.size else rows
-
     def step_dynamics(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
         """The plant model f(x, u) (dynamic games)."""
         if self._dynamics is None:
             raise ValueError("a static game has no dynamics")
         return self._dynamics(x, u)[0].reshape(-1)
-
-    def jacobian_sparsity(self) -> sp.csr_matrix:
-        """Structural nonzeros of JPhi (the union over both branches of every complementarity row)."""
-        sL, sc = self._sparsity
-        n, m = self.n, self.m
-        rows, cols = [], []
-        r, cc = sL.get_triplet()
-        rows += list(r)
-        cols += list(cc)
-        r, cc = sc.get_triplet()
-        rows += [n + i for i in r]
-        cols += list(cc)
-        rows += [n + j for j in range(m)]
-        cols += [n + j for j in range(m)]
-        data = np.ones(len(rows), dtype=bool)
-        pattern = sp.coo_matrix((data, (rows, cols)), shape=(n + m, n + m)).tocsr()
-        pattern.sum_duplicates()
-        pattern.data[:] = True
-        return pattern
 
     # solutions by name --------------------------------------------------------------------
     def solution_by_agent(self, a: np.ndarray) -> dict[str, dict[str, float | list[float]]]:
@@ -653,18 +383,6 @@ def _constraint_rows(texts: list, env: dict, fns: dict, owner: int | None, stage
     return rows
 
 
-def _affine_rows(c: ca.SX, a: ca.SX, m: int) -> np.ndarray:
-    """Which rows of c(a) are affine in a: their second derivatives vanish structurally."""
-    linear = np.ones(m, dtype=bool)
-    if m == 0:
-        return linear
-    second = ca.jacobian(ca.vec(ca.jacobian(c, a)), a)  # rows: vec of dc/da, column-major (row index j + m*col)
-    rows, _ = second.sparsity().get_triplet()
-    for r in rows:
-        linear[r % m] = False
-    return linear
-
-
 @dataclass
 class _Layout:
     """Sizes and positions of the agents' decisions in a."""
@@ -723,6 +441,7 @@ class _Expressions:
     domain: dict = field(default_factory=dict)  # per agent: (kind, margin) of each log, sqrt, asin, acos of its cost
 
 
+# long: the static and the dynamic walks share the parsed data and `constrain`; split, each would take a dozen arguments
 def _expressions(g: StaticGame | DynamicGame, lay: _Layout, a: ca.SX, x: ca.SX, agents: list[int],
                  *, shared_as_own: bool = False, states: ca.SX | None = None, smoothing: float = 0.0) -> _Expressions:
     """Costs and constraints of ``agents`` only, as CasADi expressions in (a, x).

@@ -26,6 +26,7 @@ closed loop; only the cost of a step differs.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import NamedTuple
 
 import casadi as ca
@@ -179,11 +180,29 @@ def compile_sparse(cfg: Config, game: CompiledGame) -> SparseKKT:
     for tau in range(T + 1):
         xs.append(f(xs[-1], u_at(tau)))
     X_roll = ca.vertcat(*xs[1:])
-    xsym, usym = ca.SX.sym("xs", nx), ca.SX.sym("us", len(inputs))
+    costates = _costates(f, len(inputs), gx_only, reach, X, u_at, T)
+    adjoint = ca.Function("adjoint", [a, X, lam, x], [ca.vertcat(*costates)])
+    P_proj = adjoint(a, X_roll, lam, x)
+    F_proj, J_proj = full(a, X_roll, P_proj, lam, x)
+    F0, _ = full(a, X_roll, ca.SX.zeros(P.numel()), ca.SX.zeros(m), x)
+    function = ca.Function("sparse_kkt", [a, lam, x], [F_proj, J_proj, F0], ["a", "lam", "x"], ["F", "J", "F0"])
+    residual = ca.Function("sparse_residual", [a, lam, x], [ca.densify(F_proj[:n]), ca.densify(F_proj[F.numel() - m:])],
+                           ["a", "lam", "x"], ["L", "c"])
+    affine = not ca.depends_on(J, ca.vertcat(a, X, P, lam, x)) and not game.lq.piecewise
+    return SparseKKT(game, function, residual, function.sparsity_out(1), affine, S,
+                     [slice(int(offsets[i]), int(offsets[i + 1])) for i in range(N)], own)
+
+
+def _costates(f: ca.Function, n_inputs: int, gx_only: list[ca.SX], reach: list[np.ndarray], X: ca.SX,
+              u_at: Callable[[int], ca.SX], T: int) -> list[ca.SX]:
+    """Each agent's costates p_i over its reachable states R_i, stage-major, by the backward recursion
+    p_i(tau) = g_i(tau) + f_xi[R, R](xi(tau+1), u(tau+1))^T p_i(tau+1), p_i(T+1) = 0, with g_i = grad_xi of
+    J_i + lambda^T c (``gx_only``)."""
+    nx = f.nnz_in(0)
+    xsym, usym = ca.SX.sym("xs", nx), ca.SX.sym("us", n_inputs)
     f_xi = ca.Function("f_xi", [xsym, usym], [ca.jacobian(f(xsym, usym), xsym)])
     costates = []
-    for i in range(N):
-        gi = gx_only[i]
+    for i, gi in enumerate(gx_only):
         R = np.flatnonzero(reach[i]).tolist()
         k = len(R)
         p_next = ca.SX.zeros(k)
@@ -195,16 +214,7 @@ def compile_sparse(cfg: Config, game: CompiledGame) -> SparseKKT:
             stages[tau] = p
             p_next = p
         costates.append(ca.vertcat(*stages))
-    adjoint = ca.Function("adjoint", [a, X, lam, x], [ca.vertcat(*costates)])
-    P_proj = adjoint(a, X_roll, lam, x)
-    F_proj, J_proj = full(a, X_roll, P_proj, lam, x)
-    F0, _ = full(a, X_roll, ca.SX.zeros(P.numel()), ca.SX.zeros(m), x)
-    function = ca.Function("sparse_kkt", [a, lam, x], [F_proj, J_proj, F0], ["a", "lam", "x"], ["F", "J", "F0"])
-    residual = ca.Function("sparse_residual", [a, lam, x], [ca.densify(F_proj[:n]), ca.densify(F_proj[F.numel() - m:])],
-                           ["a", "lam", "x"], ["L", "c"])
-    affine = not ca.depends_on(J, ca.vertcat(a, X, P, lam, x)) and not game.piecewise
-    return SparseKKT(game, function, residual, function.sparsity_out(1), affine, S,
-                     [slice(int(offsets[i]), int(offsets[i + 1])) for i in range(N)], own)
+    return costates
 
 
 def reachable_states(dynamics: ca.Function, agent_inputs: list[list[int]]) -> list[np.ndarray]:

@@ -66,7 +66,7 @@ class AffineVI:
         (kept on the game: found once)."""
         if not game.affine or game.n > UP_TO:
             return None
-        cache = game.affine_cache
+        cache = game.lq.cache
         if "avi" not in cache:
             cache["avi"] = _build(game)
         return cache["avi"]
@@ -95,18 +95,18 @@ class AffineVI:
 
 def _build(game: CompiledGame) -> AffineVI | None:
     n, m = game.n, game.m
-    cache = game.affine_cache
+    cache = game.lq.cache
     dL, C = cache["dL"], cache["dc"]
     P, E = dL[:, :n], dL[:, n:]
     equality = game.equality_mask
-    reached = ~game.zero_gradient_rows
+    reached = ~game.pattern.zero_gradient_rows
     # rows with the same gradient and kind are copies of one constraint when their offsets agree too; the offsets
     # depend on x, so rows are merged only where they agree at the start state and in their (affine) dependence on x
-    offset_map = game.offset_map
+    offset_map = game.lq.offset_map
     keys: dict[bytes, int] = {}
     first: list[int] = []
     group = np.full(m, -1)
-    w0 = game.offsets(game.x0)[n:]
+    w0 = game.lq.offsets(game.x0)[n:]
     for j in np.flatnonzero(reached):
         parts = [C[j].tobytes(), bytes([bool(equality[j])]), np.float64(w0[j]).tobytes()]
         if offset_map is not None:

@@ -182,10 +182,10 @@ def _unique(points: list[np.ndarray]) -> list[np.ndarray]:
 
 def _kinks(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | None) -> list[str]:
     """The piecewise functions (abs, min, max...) at their kink in the agent's cost or rows at a."""
-    costs, rows = game.piecewise_parts
-    if not costs[agent] and not rows[game.constraint_rows(agent)].any():
+    costs, rows = game.lq.piecewise_parts
+    if not costs[agent] and not rows[game.agents.constraint_rows(agent)].any():
         return []
-    found = game.agent_kinks(agent)
+    found = game.agents.kinks(agent)
     if found is None:
         return []
     f, names = found
@@ -231,7 +231,7 @@ class NewtonResponses:
                                    "tol": min(self.cfg.solver.tol, 1e-10)})
             # the candidate's multipliers in the agent problem's row order (matched by label: the game lists an
             # agent's own rows, then the common shared rows; the agent's problem, stage by stage)
-            rows = self.game.constraint_rows(agent)
+            rows = self.game.agents.constraint_rows(agent)
             free: dict[str, list[int]] = {}
             for k, r in enumerate(rows):
                 free.setdefault(self.game.constraints[r].label, []).append(k)
@@ -303,8 +303,8 @@ def _values(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | None,
     if directions is not None:
         V = np.zeros_like(A)
         V[:, sl] = directions
-    J, C, *rest = game.evaluate_many(A, x, V)
-    rows = game.constraint_rows(agent)
+    J, C, *rest = game.agents.evaluate_many(A, x, V)
+    rows = game.agents.constraint_rows(agent)
     c = C[:, rows]
     eq = game.equality_mask[rows]
     over = np.where(eq, np.abs(c), np.maximum(c, 0.0))
@@ -332,7 +332,7 @@ def best_response(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray |
     those prices, so that violating a constraint by 1e-9 at a multiplier of 100 does not count as a gain of 1e-7."""
     a = np.asarray(a, dtype=float)
     sl = game.agent_slices[agent]
-    rows = game.constraint_rows(agent)
+    rows = game.agents.constraint_rows(agent)
     eq_rows = rows[game.equality_mask[rows]]
     in_rows = rows[~game.equality_mask[rows]]
     last: dict = {}
@@ -415,11 +415,11 @@ def check_player(game: CompiledGame, agent: int, z: np.ndarray, x: np.ndarray | 
     sl = game.agent_slices[agent]
     ni = sl.stop - sl.start
     y = a[sl]
-    rows = game.constraint_rows(agent)
+    rows = game.agents.constraint_rows(agent)
     prices = z[n + rows]
     J0 = float(game.costs(a, x)[agent])
     grad = game.cost_gradients(a, x)[agent, sl]
-    undefined = bool(game.outside_domain(a, x)[agent])
+    undefined = bool(game.agents.outside_domain(a, x)[agent])
     if not math.isfinite(J0) or not np.all(np.isfinite(grad)) or undefined:
         what = (f"J = {J0}" if not math.isfinite(J0) else "its gradient is not finite" if not undefined else
                 "a log, sqrt, asin or acos in it is evaluated outside its domain")
@@ -480,7 +480,7 @@ def check_player(game: CompiledGame, agent: int, z: np.ndarray, x: np.ndarray | 
     ray = None
     extra = list(runaway)
     if ni <= unbounded.COORDINATE_RAYS_UP_TO:  # flat and concave directions of the player's own cost
-        extra += unbounded.flat_directions(game.agent_hessian(agent, a, x))
+        extra += unbounded.flat_directions(game.agents.hessian(agent, a, x))
     if rows.size:  # the way out of its linearised rows along which the cost falls
         _, dc = game.constraint_values(a, x)
         d = unbounded.recession_direction(grad, dc[rows][:, sl], game.equality_mask[rows])
@@ -533,7 +533,7 @@ def _convex_player(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray 
         return False
     sl = game.agent_slices[agent]
     if sl.stop - sl.start <= HESSIAN_BUILT_UP_TO:
-        H = game.agent_hessian(agent, a, x)
+        H = game.agents.hessian(agent, a, x)
     else:
         # J_i is quadratic: its gradient's differences are the Hessian's columns (building the Hessian's own
         # function grows like T^3.7 at horizon T in a condensed dynamic game: 6 s at T = 400)
@@ -560,14 +560,14 @@ def _hessian_from_gradients(game: CompiledGame, agent: int, a: np.ndarray, x: np
 def _box_search(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | None, threshold: float,
                 tol: float):
     sl = game.agent_slices[agent]
-    J, dJ, c = game.agent_functions(agent)
+    J, dJ, c = game.agents.functions(agent)
     try:
         tapes = [_agent_tape(game, agent, f) for f in (J, dJ, c)]
     except UnsupportedTape:
         return None, None
     lo, hi = search_box(game, agent, a)
     xv = game.x0 if x is None else np.asarray(x, dtype=float)
-    rows = game.box_rows(agent)  # the bounds' rows hold on the whole box: they are left out of the search
+    rows = game.agents.box_rows(agent)  # the bounds' rows hold on the whole box: they are left out of the search
     eq = game.equality_mask[rows]
 
     def embed(blo: np.ndarray, bhi: np.ndarray):

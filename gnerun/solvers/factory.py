@@ -57,6 +57,6 @@ def formulation(cfg: Config, game: CompiledGame) -> str:
         return chosen
     if sparse_obstacles(cfg):
         return "condensed"
-    if game.linear_dynamics:
+    if game.lq.linear_dynamics:
         return "sparse" if game.size >= SPARSE_FROM else "condensed"
     return "sparse" if game.size * ((game.horizon or 0) + 1) >= SPARSE_WORK else "condensed"

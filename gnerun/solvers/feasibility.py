@@ -53,11 +53,12 @@ def phase_one(game: CompiledGame, x: np.ndarray | None = None, starts: list[np.n
     m = game.m
     if m == 0:
         return None
-    fixed = game.zero_gradient_rows  # rows no decision reaches: conditions on the plant state, reported elsewhere
+    # rows no decision reaches: conditions on the plant state, reported elsewhere
+    fixed = game.pattern.zero_gradient_rows
     rows = np.flatnonzero(~fixed)
     if rows.size == 0:
         return None
-    if game.linear_rows[rows].all():
+    if game.lq.linear_rows[rows].all():
         return _linear(game, x, rows)
     return _nonlinear(game, x, rows, list(starts) + [game.a_start])
 

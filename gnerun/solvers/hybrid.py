@@ -182,7 +182,7 @@ class HybridNewton:
     def _crash(self, state: SSNState, memory: Memory) -> SSNState | None:
         """The affine VI's solution as the first iterate (:mod:`gnerun.solvers.avi`), if DAQP finds one that
         reduces ||Phi||; None otherwise (the Newton step is taken instead)."""
-        z = self.avi.point(self.game.offsets(state.x), state.z.size)
+        z = self.avi.point(self.game.lq.offsets(state.x), state.z.size)
         if z is None:
             return None
         candidate = self.newton.advance(state, z)

@@ -88,7 +88,7 @@ class InteriorPoint:
         self.newton = newton
         game = newton.game
         self.n = game.n
-        fixed = game.zero_gradient_rows
+        fixed = game.pattern.zero_gradient_rows
         eq = game.equality_mask
         self.I = np.flatnonzero(~eq & ~fixed)
         self.E = np.flatnonzero(eq & ~fixed)
@@ -191,7 +191,7 @@ class DenseBarrier:
         columns), and the others."""
         if self._pattern is None:
             game, I = self.ip.newton.game, self.ip.I
-            rows, cols = game.constraint_pattern()
+            rows, cols = game.pattern.constraint_nonzeros()
             count = np.bincount(rows, minlength=game.m)
             column = np.zeros(game.m, dtype=int)
             column[rows] = cols

@@ -37,15 +37,15 @@ def check_nash_problem(game: CompiledGame) -> None:
         raise InputError("solver.kind 'jn' needs independent constraint sets; this game's shared constraints are "
                          "carried by each agent with its own multiplier (a GNE): use solver.kind 'ssn', or "
                          "equilibrium: variational for the variational equilibrium")
-    coupled = game.coupled_rows()
+    coupled = game.pattern.coupled_rows()
     if coupled:
         labels = ", ".join(f"{game.agent_names[game.constraints[r].owner]}: {game.constraints[r].label}"
                            for r in coupled[:3])
         raise InputError(f"solver.kind 'jn' needs independent constraint sets, but {len(coupled)} constraint(s) "
                          f"involve other agents' decisions ({labels}{', ...' if len(coupled) > 3 else ''}): this is "
                          "a generalized Nash problem, use solver.kind 'ssn'")
-    if not game.linear_rows.all():
-        bad = [game.constraints[r].label for r in np.flatnonzero(~game.linear_rows)[:3]]
+    if not game.lq.linear_rows.all():
+        bad = [game.constraints[r].label for r in np.flatnonzero(~game.lq.linear_rows)[:3]]
         raise InputError(f"solver.kind 'jn' solves each step as a linear complementarity problem and needs "
                          f"polyhedral (affine) constraints; nonlinear: {', '.join(bad)}: use solver.kind 'ssn'")
 

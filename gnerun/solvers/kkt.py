@@ -53,7 +53,7 @@ class KKTSystem:
         self._fb = solver.complementarity == "fischer_burmeister"
         self._eq_rows = np.flatnonzero(self._eq)
         # rows no decision reaches: multipliers held at zero, never g-branch rows (checked at init)
-        self._fixed = game.zero_gradient_rows
+        self._fixed = game.pattern.zero_gradient_rows
         self._fixed_rows = np.flatnonzero(self._fixed)
         self._z_start = game.z_start()
         d = self.disturbance
@@ -64,7 +64,7 @@ class KKTSystem:
         self._affine = (self.condensed and not self._fb and not (self._noisy and d.scale > 0) and game.affine
                         and not self._eq_rows.size and not self._fixed_rows.size)
         if self._affine:
-            cache = game.affine_cache
+            cache = game.lq.cache
             self._W, self._dL, self._dc = cache["W"], cache["dL"], cache["dc"]
 
     # ------------------------------------------------------------------------------------
@@ -102,7 +102,7 @@ class KKTSystem:
             return parts, *self.residual(parts, z)
         n = self.game.n
         v = self._W @ z
-        v += self.game.offsets(x)
+        v += self.game.lq.offsets(x)
         phi = v.copy()
         a = np.negative(v[n:], out=phi[n:])  # -c, in place in Phi's buffer
         lam = z[n:]

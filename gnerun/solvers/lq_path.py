@@ -74,7 +74,7 @@ class LQPath:
         self.game = game
         self._eq = eq
         self.min_rcond = min_rcond
-        cache = game.affine_cache
+        cache = game.lq.cache
         self.W, self.dL, self.dc = cache["W"], cache["dL"], cache["dc"]
         self._maps = FactorCache(self.CAPACITY)  # an _ActiveSet (the reduced matrix's LU factors) per active set
         self._dual_cache: _Dual | None | bool = False  # the Schur complement's data (False: not yet built)
@@ -100,7 +100,7 @@ class LQPath:
         # scaled column of P^{-1}; only the others cost a product
         Pinv, _ = lapack.dgetri(lu, piv)
         E = self.dL[:, n:]
-        cache = self.game.affine_cache
+        cache = self.game.lq.cache
         if "single" not in cache:  # the structure of the game's constant matrices: found once per game
             C = np.ascontiguousarray(self.dc)
             cache["single"] = (_single_nonzeros(E.T), C, _single_nonzeros(C))
@@ -167,7 +167,7 @@ class LQPath:
         entry = self.active_set(active)
         if entry.lu is None:
             return None, entry.rcond
-        w0 = self.game.offsets(x)
+        w0 = self.game.lq.offsets(x)
         if entry.G is not None:
             return entry.G @ w0, entry.rcond
         entry.uses += 1
@@ -193,7 +193,7 @@ class LQPath:
         min ||c_A(lambda)||^2 + mu ||lambda_A - lambda_A^k||^2; None if it cannot be solved."""
         entry = self.active_set(active)
         A = entry.A
-        y, rhs = self.dual_rhs(A, self.game.offsets(x))
+        y, rhs = self.dual_rhs(A, self.game.lq.offsets(x))
         lam_A = z[self.game.n + A]
         d = levenberg_marquardt(entry.S, rhs - entry.S @ lam_A, mu)
         return None if d is None else self.dual_point(A, lam_A + d, y)

@@ -39,7 +39,7 @@ def best_answer(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | N
     (its cost, its own rows and the shared ones; the others fixed at ``a``) from ``starts``; None if none is
     feasible."""
     sl = game.agent_slices[agent]
-    rows = game.constraint_rows(agent)
+    rows = game.agents.constraint_rows(agent)
     eq = game.equality_mask[rows]
     in_rows, eq_rows = rows[~eq], rows[eq]
     last: dict = {}

@@ -136,7 +136,7 @@ class SemismoothNewton(KKTSystem):
         z, rcond = self.lq.point(state.active, x)
         if z is None:
             return self.singular(state, rcond)
-        w0 = self.game.offsets(x)
+        w0 = self.game.lq.offsets(x)
         n = self.game.n
         v = self.lq.W @ z
         v += w0

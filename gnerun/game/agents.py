@@ -1,0 +1,141 @@
+"""One agent's functions of a compiled game: what a certificate's best-response check reads (``game.agents``).
+
+Agent i's cost J_i and the rows c_i of its own problem (its own rows and the shared rows it carries), the Hessian of
+J_i in its own decisions, the distances from their kinks of the piecewise functions in them, the domain of its cost,
+and every cost and constraint value at many points at once. Each function is built once, on first use, and kept in
+``game.derived``.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import casadi as ca
+import numpy as np
+
+from .building import stoppable
+from .evaluator import Evaluator
+from .tape import kink_function
+
+if TYPE_CHECKING:
+    from .compile import CompiledGame
+
+BATCHES = (8, 64, 512)  # block sizes of evaluate_many's mapped functions
+
+
+class AgentFunctions:
+    """The per-agent functions of one compiled game (``game.agents``)."""
+
+    def __init__(self, game: CompiledGame, rows: list[np.ndarray], domain: tuple | None):
+        self.game = game
+        self._rows = rows  # per agent: row indices of c that constrain its own problem
+        self._domain = domain  # where each cost's log, sqrt... are defined
+
+    def constraint_rows(self, agent: int) -> np.ndarray:
+        """Indices of c that make up agent ``agent``'s own feasible set (for its best response)."""
+        return self._rows[agent]
+
+    def box_rows(self, agent: int) -> np.ndarray:
+        """The rows of agent ``agent``'s own problem other than the bounds of its decisions."""
+        rows = self.constraint_rows(agent)
+        return rows[[not self.game.constraints[r].bound for r in rows]] if rows.size else rows
+
+    def functions(self, agent: int) -> tuple[ca.Function, ca.Function, ca.Function]:
+        """Agent ``agent``'s cost J_i(a; x), its gradient in the agent's own decisions, and the rows of its own
+        problem c_i(a; x) (``constraint_rows``), as SX Functions of (a, x): what a best response's box search reads
+        as instruction tapes (gnerun.game.tape). The rows of the agent's own bounds are left out (a search box lies
+        inside them); ``box_rows`` are the rows kept, in the order of ``c``."""
+        sym = self.game._symbolic
+        sl = self.game.agent_slices[agent]
+        Ji = sym.J[agent]
+        rows = self.box_rows(agent).tolist()
+        ci = sym.c[rows] if rows else ca.SX(0, 1)
+        return (ca.Function("J", [sym.a, sym.x], [Ji]),
+                ca.Function("dJ", [sym.a, sym.x], [ca.densify(ca.gradient(Ji, sym.a[sl]))]),
+                ca.Function("c", [sym.a, sym.x], [ca.densify(ci)]))
+
+    def kinks(self, agent: int) -> tuple[ca.Function, list[str]] | None:
+        """The distances from their kinks of the piecewise functions of the decisions in agent ``agent``'s cost and
+        rows, as one Function of (a, x), and the functions' names (gnerun.game.tape.kink_function); None if none.
+        Built once per agent."""
+        cache = self.game.derived.setdefault("kinks", {})
+        if agent not in cache:
+            sym = self.game._symbolic
+            rows = self.constraint_rows(agent).tolist()
+            parts = ca.vertcat(sym.J[agent], sym.c[rows]) if rows else sym.J[agent]
+            cache[agent] = kink_function(ca.Function("parts", [sym.a, sym.x], [parts]))
+        return cache[agent]
+
+    def hessian(self, agent: int, a: np.ndarray, x: np.ndarray | None = None) -> np.ndarray:
+        """The Hessian of J_i in the agent's own decisions at a (its block of the game Hessian H; the function is
+        built once per agent)."""
+        cache = self.game.derived.setdefault("hessians", {})
+        if agent not in cache:
+            cache[agent] = self._hessian(agent)
+        return cache[agent](a, self.game._x(x))[0]
+
+    @stoppable
+    def _hessian(self, agent: int) -> Evaluator:
+        sym = self.game._symbolic
+        ai = sym.a[self.game.agent_slices[agent]]
+        return Evaluator(ca.Function("H_ii", [sym.a, sym.x], [ca.densify(ca.hessian(sym.J[agent], ai)[0])]))
+
+    def outside_domain(self, a: np.ndarray, x: np.ndarray | None = None) -> np.ndarray:
+        """Per agent: some log, sqrt, asin or acos of its cost is evaluated outside its domain at a, so the cost is
+        not a number there, even where the compiled expression simplified the term away (0 * log(v) is 0 to
+        CasADi)."""
+        out = np.zeros(len(self.game.agent_names), dtype=bool)
+        if self._domain is not None:
+            f, strict, owner = self._domain
+            v = f(a, self.game._x(x))[0].reshape(-1)
+            bad = np.isnan(v) | np.where(strict, v <= 0, v < 0)
+            out[owner[bad]] = True
+        return out
+
+    def evaluate_many(self, A: np.ndarray, x: np.ndarray | None = None,
+                      V: np.ndarray | None = None) -> tuple[np.ndarray, ...]:
+        """Every cost and constraint value at many points at once: ``A`` is (k, n), one point a per row; returns
+        J (k, N) and c (k, m), and with ``V`` (k, n) also each cost's directional derivative along the row of V at
+        its point, dJ (k, N) (forward-mode AD). One mapped CasADi call per block of points (what a certificate's
+        start points, rays and probes need: hundreds of points, each as cheap as one evaluation)."""
+        game = self.game
+        A = np.atleast_2d(np.asarray(A, dtype=float))
+        k = A.shape[0]
+        N, m = len(game.agent_names), game.m
+        J, C = np.empty((k, N)), np.empty((k, m))
+        dJ = np.empty((k, N)) if V is not None else None
+        xv = game._x(x)
+        done = 0
+        while done < k:
+            size = next((s for s in BATCHES if s >= k - done), BATCHES[-1])
+            f = self._batch(size, V is not None)
+            rows = min(size, k - done)
+            cols = np.zeros((game.n, size))
+            cols[:, :rows] = A[done:done + rows].T
+            args = [cols.ravel(order="F"), xv]  # CasADi stores matrices column by column
+            if V is not None:
+                dirs = np.zeros((game.n, size))
+                dirs[:, :rows] = np.asarray(V, dtype=float)[done:done + rows].T
+                args.append(dirs.ravel(order="F"))
+            out = f(*args)
+            J[done:done + rows] = out[0].T[:rows]
+            if m:
+                C[done:done + rows] = out[1].T[:rows]
+            if dJ is not None:
+                dJ[done:done + rows] = out[2].T[:rows]
+            done += rows
+        return (J, C) if dJ is None else (J, C, dJ)
+
+    def _batch(self, size: int, directional: bool = False) -> Evaluator:
+        cache = self.game.derived.setdefault("batches", {})
+        if (size, directional) not in cache:
+            sym = self.game._symbolic
+            c = ca.densify(sym.c) if self.game.m else ca.densify(ca.SX(1, 1))
+            if directional:
+                v = ca.SX.sym("v", self.game.n)
+                one = ca.Function("values", [sym.a, sym.x, v],
+                                  [ca.densify(sym.J), c, ca.densify(ca.jtimes(sym.J, sym.a, v))])
+            else:
+                one = ca.Function("values", [sym.a, sym.x], [ca.densify(sym.J), c])
+            cache[(size, directional)] = Evaluator(one.map(f"values_{size}", "serial", size, [1], []))
+        return cache[(size, directional)]
