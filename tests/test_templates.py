@@ -12,12 +12,12 @@ import re
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 from gnerun.errors import ConfigError
 from gnerun.language.expand import Expander
-from gnerun.language.expr import evaluate, numpy_functions, parse_expression, unparse
+from gnerun.language.expr import Binary, Call, Unary, evaluate, numpy_functions, parse_expression, unparse
 from gnerun.language.templates import parse_template
 from gnerun.language.yaml_source import SourceMap
 
@@ -191,12 +191,31 @@ def test_unparse_writes_a_tree_that_parses_back_to_the_same_value(tree, i) -> No
     expanded, _, _, _ = expander._expanded(render(tree), ("game", "x"), _scope(i))
     again = parse_expression(unparse(expanded))
     assert _canonical(again.tree) == _canonical(expanded)
+    # a division by zero is left out: -(i) at i = 0 is -0.0 in the tree and the integer 0 read back, whose
+    # infinities differ in sign (max(0, x1/-(i)) is 0 or inf); a cost that divides by zero is not finite anyway
+    assume(not _divides_by_zero(expanded))
     with np.errstate(all="ignore"):
         a = evaluate(expanded, {"x1": 0.7}, numpy_functions())
         b = evaluate(again, {"x1": 0.7}, numpy_functions())
-    # an integer index folds -(0) to 0, where the direct evaluation keeps -0.0: a division by it differs in the sign
-    # of its infinity only
-    assert (math.isnan(a) and math.isnan(b)) or a == b or (math.isinf(a) and math.isinf(b))
+    assert (math.isnan(a) and math.isnan(b)) or a == b
+
+
+def _divides_by_zero(node) -> bool:
+    """Whether a division in the tree has a denominator that evaluates to zero (at x1 = 0.7)."""
+    stack = [node]
+    while stack:
+        n = stack.pop()
+        if isinstance(n, Binary):
+            if n.op == "/":
+                with np.errstate(all="ignore"):
+                    if evaluate(n.right, {"x1": 0.7}, numpy_functions()) == 0:
+                        return True
+            stack += [n.left, n.right]
+        elif isinstance(n, Unary):
+            stack.append(n.operand)
+        elif isinstance(n, Call):
+            stack += list(n.args)
+    return False
 
 
 def _canonical(node) -> tuple:
