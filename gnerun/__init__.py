@@ -10,7 +10,7 @@ _API = {
     "Config": "gnerun.language.config",
     "compile_game": "gnerun.game.compile",
     "CompiledGame": "gnerun.game.compile",
-    "make_solver": "gnerun.runs.solving",
+    "make_solver": "gnerun.solvers.factory",
     "solve": "gnerun.runs.solving",
     "SolveResult": "gnerun.runs.solving",
     "simulate": "gnerun.runs.closed_loop",
