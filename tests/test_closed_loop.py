@@ -414,3 +414,25 @@ def test_a_terminal_sees_progress_of_simulate_and_of_a_long_solve(tmp_path: Path
     code, text = _in_a_terminal("simulate", str(STUDY2), "--out", str(tmp_path / "q"), "--set", "run.steps=2",
                                 "--quiet")
     assert code == 0 and text.strip() == "", text
+
+
+def test_the_reference_solver_is_built_once_and_solves_as_a_new_one() -> None:
+    """z*(t) of a closed loop: the solvers are built at the first sampling time and kept, and each solve gives
+    bit for bit what a new solver gives (kept factorisations per active set would change z* in its last bits)."""
+    from gnerun.runs.reference import ReferenceSolver
+    from gnerun.runs.solving import reference_solution
+
+    cfg = load_config(CONFIGS / "paper_study2.yaml")
+    game = compile_game(cfg)
+    reference = ReferenceSolver(cfg, game)
+    rng = np.random.default_rng(0)
+    z0 = game.z_start()
+    built = None
+    for _ in range(15):
+        x = game.x0 + rng.standard_normal(game.x0.shape)
+        kept = reference.solve(z0, x)
+        new = reference_solution(game, cfg, z0, x)
+        assert kept.converged and np.array_equal(kept.z, new.z)
+        if built is None:
+            built = {k: id(s) for k, s in reference.solvers.items()}
+        assert {k: id(s) for k, s in reference.solvers.items()} == built

@@ -41,9 +41,11 @@ class Reference:
 
 
 def reference_solution(game: CompiledGame, cfg: Config, z0: np.ndarray, x: np.ndarray | None = None,
-                       polish: int = 3, interrupt: Interrupt | None = None) -> Reference:
+                       polish: int = 3, interrupt: Interrupt | None = None,
+                       solvers: dict[int, Solver] | None = None) -> Reference:
     """Solve undisturbed from z0 with the configured method, then by the globalized semismooth Newton method if
-    that fails, and polish.
+    that fails, and polish. ``solvers`` keeps the solvers built for the attempts from one call to the next (a
+    closed loop's z*(t)); each forgets its factorisations before it solves, so the result is a new solver's.
 
     Polishing takes up to ``polish`` further Newton steps while ||Phi|| keeps decreasing, so that z*
     is accurate to rounding, not just to ``solver.tol``. A stop request (``interrupt``) raises
@@ -55,9 +57,17 @@ def reference_solution(game: CompiledGame, cfg: Config, z0: np.ndarray, x: np.nd
     first = cfg.solver.model_copy(update={"kind": "ssn"}) if cfg.solver.kind == "distributed" else cfg.solver
     attempts = [first] + ([first.model_copy(update={"kind": "ssn", "globalization": FALLBACK})]
                           if first.kind != "ssn" or resolve(first) != FALLBACK else [])
-    for options in attempts:
+    for attempt, options in enumerate(attempts):
         opts = options.model_copy(update={"max_iter": max(options.max_iter, 100)})
-        solver = make_solver(cfg.model_copy(update={"solver": opts}), game, disturbed=False)
+        if solvers is not None and attempt in solvers:
+            solver = solvers[attempt]
+            forget = getattr(solver, "forget", None)
+            if forget is not None:
+                forget()
+        else:
+            solver = make_solver(cfg.model_copy(update={"solver": opts}), game, disturbed=False)
+            if solvers is not None:
+                solvers[attempt] = solver
         state = iterate(solver, solver.init(z0, x), on_iterate=check)
         last = state
         if state.converged:

@@ -109,6 +109,10 @@ class HybridNewton:
         # games, which pivot instead; whether the game is LQ is asked only then)
         self.answers = handover and len(self.game.agent_names) > 1
 
+    def forget(self) -> None:
+        """Drop the Newton method's factorisations kept per active set."""
+        self.newton.forget()
+
     @property
     def polisher(self) -> SemismoothNewton:
         """The method whose iterations polish a solution (the reference solution z*): the plain Newton steps."""

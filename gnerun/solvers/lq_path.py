@@ -79,6 +79,10 @@ class LQPath:
         self._maps = FactorCache(self.CAPACITY)  # an _ActiveSet (the reduced matrix's LU factors) per active set
         self._dual_cache: _Dual | None | bool = False  # the Schur complement's data (False: not yet built)
 
+    def forget(self) -> None:
+        """Drop the factors kept per active set (the Schur complement's data, the game's constants, stays)."""
+        self._maps.clear()
+
     @property
     def dual(self) -> _Dual | None:
         """P's LU factors and P^{-1} E for an LQ game (built on first use), or None when P is singular or

@@ -105,6 +105,10 @@ class SparseReduced:
         self._J = system.matrix(system.evaluate(game.z_start(), game.x0).J) if system.affine else None
         self._lus = FactorCache(64)  # LQ games: (SuperLU factors or None, rcond) per active set
 
+
+    def forget(self) -> None:
+        """Drop the factorisations kept per active set."""
+        self._lus.clear()
     def point(self, state, A: np.ndarray) -> tuple[np.ndarray | None, float]:
         """The min-map Newton step for the rows A, and SuperLU's reciprocal condition estimate."""
         system, parts, z = self.system, state.parts, state.z

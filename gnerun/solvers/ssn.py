@@ -56,6 +56,15 @@ class SemismoothNewton(KKTSystem):
         self.lq = LQPath(game, self._eq, solver.min_rcond) if self._lq else None
         self.reduced_system: DenseReduced | SparseReduced = DenseReduced(game.n, solver.min_rcond)
 
+
+    def forget(self) -> None:
+        """Drop the factorisations kept per active set, so that the next solve computes exactly what a new solver's
+        would (a kept factor reproduces a step to rounding, not bit for bit)."""
+        if self.lq is not None:
+            self.lq.forget()
+        forget = getattr(self.reduced_system, "forget", None)
+        if forget is not None:
+            forget()
     def step(self, state: SSNState) -> SSNState:
         """Exactly one (perturbed) semismooth Newton iteration; a failed or converged state is returned unchanged
         (a step at a solution keeps it: :meth:`iteration` steps on from there, as polishing does)."""
