@@ -263,3 +263,35 @@ def test_a_sparse_solve_without_best_responses_builds_no_condensed_derivatives()
     L, c = game.kkt_residual(out.state.z)
     np.testing.assert_allclose(L, parts.L, rtol=0, atol=1e-12)
     np.testing.assert_allclose(c, parts.c, rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("command", ["solve", "simulate"])
+def test_the_sparse_system_is_built_with_the_game_before_the_run(command: str, tmp_path, monkeypatch) -> None:
+    """solve and simulate build the sparse system once, with the game, before the run directory is claimed (the
+    closed loops of every K then take it as built)."""
+    import gnerun.game.sparse as sparse_module
+    from gnerun.runs import closed_loop, rundir, solving
+
+    built: list[int] = []
+    at_claim: list[int] = []
+    compile_sparse = sparse_module.compile_sparse
+    create = rundir.RunDirectory.create
+
+    def counted(*args, **kwargs):
+        built.append(1)
+        return compile_sparse(*args, **kwargs)
+
+    def claimed(*args, **kwargs):
+        at_claim.append(len(built))
+        return create(*args, **kwargs)
+
+    monkeypatch.setattr(sparse_module, "compile_sparse", counted)
+    monkeypatch.setattr(rundir.RunDirectory, "create", claimed)
+    cfg = load_config(CONFIGS / "paper_study2.yaml",
+                      {"solver.formulation": "sparse", "solver.globalization": "none", "run.steps": 3,
+                       "run.K": [1, 3], "run.reference": "none", "run.initial": "start"})
+    if command == "solve":
+        solving.solve(cfg, tmp_path / "run")
+    else:
+        closed_loop.simulate(cfg, tmp_path / "run")
+    assert at_claim == [1] and len(built) == 1

@@ -113,6 +113,15 @@ class SparseKKT:
         return z_new
 
 
+def sparse_system(cfg: Config, game: CompiledGame) -> SparseKKT:
+    """The game's sparse system, compiled once per game (kept in ``game.derived``): ``gnerun solve`` and ``gnerun
+    simulate`` build it with the game, before a run begins, wherever the solver takes the sparse formulation."""
+    system = game.derived.get("sparse")
+    if system is None:
+        system = game.derived["sparse"] = compile_sparse(cfg, game)
+    return system
+
+
 @stoppable
 def compile_sparse(cfg: Config, game: CompiledGame) -> SparseKKT:
     """The full-space system of the dynamic game of ``cfg`` (``game`` is its condensed compilation, whose

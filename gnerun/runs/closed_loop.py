@@ -527,6 +527,7 @@ def simulate(cfg: Config, out: str | Path | None = None, *, force: bool = False,
     with polled(no_check):  # built in a helper thread: a signal reaches this one at once (KeyboardInterrupt)
         game = compile_game(cfg)
         stage = compile_stage_constraints(cfg)
+        make_solver(cfg, game)  # the sparse system, where the loops take it, is built now: once, before the run
         if cfg.run.warm_start == "shift":
             game.shift_changed_rows  # noqa: B018 (found once, before the loop: it evaluates c at a test point)
     run = RunDirectory.create(out, cfg, command="simulate", force=force) if out is not None else None

@@ -361,8 +361,8 @@ def solve(cfg: Config, out: str | Path | None = None, *, force: bool = False,
     t0 = time.perf_counter()
     with polled(no_check):  # built in a helper thread: a signal reaches this one at once (KeyboardInterrupt)
         game = compile_game(cfg)
+        solver = make_solver(cfg, game)  # with the sparse system, where the solver takes that formulation
         compile_time = time.perf_counter() - t0
-        solver = make_solver(cfg, game)
         game.kkt_residual(game.z_start(), game.x0)  # built now: what an interrupted solve reports is read from it
     run = RunDirectory.create(out, cfg, command="solve", force=force) if out is not None else None
     interrupt = Interrupt()

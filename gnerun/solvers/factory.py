@@ -4,7 +4,7 @@ compiled game."""
 from __future__ import annotations
 
 from ..game.compile import CompiledGame
-from ..game.sparse import compile_sparse
+from ..game.sparse import sparse_system
 from ..language.config import Config, sparse_obstacles
 from ..threads import single_threaded_blas
 from .driver import Solver
@@ -26,10 +26,7 @@ def make_solver(cfg: Config, game: CompiledGame, *, disturbed: bool = True) -> S
     if cfg.solver.kind == "jn":
         return JosephyNewton(game, cfg.solver, disturbance)
     if formulation(cfg, game) == "sparse":
-        system = game.derived.get("sparse")
-        if system is None:
-            system = game.derived["sparse"] = compile_sparse(cfg, game)
-        newton: SemismoothNewton = SparseSemismoothNewton(game, cfg.solver, disturbance, system)
+        newton: SemismoothNewton = SparseSemismoothNewton(game, cfg.solver, disturbance, sparse_system(cfg, game))
     else:
         newton = SemismoothNewton(game, cfg.solver, disturbance)
     return globalized(newton)
