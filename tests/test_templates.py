@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 
 from gnerun.errors import ConfigError
 from gnerun.language.expand import Expander
-from gnerun.language.expr import Binary, Call, Unary, evaluate, numpy_functions, parse_expression, unparse
+from gnerun.language.expr import Binary, children, evaluate, numpy_functions, parse_expression, unparse
 from gnerun.language.templates import parse_template
 from gnerun.language.yaml_source import SourceMap
 
@@ -210,11 +210,7 @@ def _divides_by_zero(node) -> bool:
                 with np.errstate(all="ignore"):
                     if evaluate(n.right, {"x1": 0.7}, numpy_functions()) == 0:
                         return True
-            stack += [n.left, n.right]
-        elif isinstance(n, Unary):
-            stack.append(n.operand)
-        elif isinstance(n, Call):
-            stack += list(n.args)
+        stack += children(n)
     return False
 
 

@@ -134,6 +134,17 @@ class Constraint:
         return rhs - lhs if self.relation == ">=" else lhs - rhs
 
 
+def children(node: Node) -> tuple[Node, ...]:
+    """The operands of a node (none for numbers and names)."""
+    if isinstance(node, Unary):
+        return (node.operand,)
+    if isinstance(node, Binary):
+        return (node.left, node.right)
+    if isinstance(node, Call):
+        return tuple(node.args)
+    return ()
+
+
 def _names(node: Node) -> list[Name]:
     """Every Name node of the tree (explicit stack: no recursion)."""
     out: list[Name] = []
@@ -142,12 +153,8 @@ def _names(node: Node) -> list[Name]:
         n = stack.pop()
         if isinstance(n, Name):
             out.append(n)
-        elif isinstance(n, Unary):
-            stack.append(n.operand)
-        elif isinstance(n, Binary):
-            stack.extend((n.left, n.right))
-        elif isinstance(n, Call):
-            stack.extend(n.args)
+        else:
+            stack.extend(children(n))
     return out
 
 

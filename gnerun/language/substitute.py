@@ -16,6 +16,7 @@ from .expr import (
     Node,
     Num,
     Unary,
+    children,
     evaluate,
     numpy_functions,
     unparse,
@@ -267,10 +268,6 @@ def dag_names(node: Node, known: dict[int, set[str]]) -> set[str]:
             names |= known[id(n)]
         elif isinstance(n, Name):
             names.add(n.id)
-        elif isinstance(n, Unary):
-            stack.append(n.operand)
-        elif isinstance(n, Binary):
-            stack.extend((n.left, n.right))
-        elif isinstance(n, Call):
-            stack.extend(n.args)
+        else:
+            stack.extend(children(n))
     return names
