@@ -91,7 +91,7 @@ class LQStructure:
         if not game.affine:
             return {}
         # the constant derivatives, once; read-only, shared by every KKTParts
-        _, _, dL, dc = game._kkt(np.zeros(game.n), np.zeros(game.m), game.x0)
+        _, _, dL, dc = game._kkt(np.zeros(game.n), np.zeros(game.m), game._x(None))
         # [L; c] = W z + w0(x) in one product
         W = np.vstack([dL, np.hstack([dc, np.zeros((game.m, game.m))])])
         for arr in (dL, dc, W):

@@ -47,6 +47,7 @@ from .building import stoppable
 from .evaluator import Evaluator
 from .horizon import Horizon
 from .pattern import Pattern
+from .runtime import RuntimeLayout, runtime_layout
 
 
 @dataclass(frozen=True)
@@ -105,6 +106,8 @@ class CompiledGame:
     _symbolic: _Symbolic = field(repr=False)
     _costs: Evaluator = field(repr=False)
     _agent_constraints: list[np.ndarray]  # per agent: row indices of c that constrain its own problem
+    runtime: RuntimeLayout | None = field(default=None, repr=False)  # the runtime parameters' layout (None: none)
+    p: np.ndarray = field(default_factory=lambda: np.zeros(0))  # the runtime values now in force
     _dynamics: Evaluator | None = field(default=None, repr=False)
     _domain: tuple | None = field(default=None, repr=False)  # where each cost's log, sqrt... are defined
     derived: dict = field(default_factory=dict, repr=False)  # what is built from this game once (sparse system)
@@ -240,14 +243,33 @@ class CompiledGame:
         return np.concatenate([self.a_start, np.zeros(self.m)])
 
     def _x(self, x: np.ndarray | None) -> np.ndarray:
+        """What the compiled functions take for the state x: x and the runtime values in force (:attr:`p`); an x that
+        carries its runtime values already is taken as it is."""
         if x is None:
-            return self.x0
-        if type(x) is np.ndarray and x.ndim == 1 and x.size == self.nx and x.dtype == np.float64:
-            return x
-        x = np.asarray(x, dtype=float).reshape(-1)
-        if x.size != self.nx:
+            x = self.x0
+        elif not (type(x) is np.ndarray and x.ndim == 1 and x.dtype == np.float64):
+            x = np.asarray(x, dtype=float).reshape(-1)
+        if x.size == self.nx:
+            return np.concatenate([x, self.p]) if self.p.size else x
+        if x.size != self.nx + self.p.size:
             raise ValueError(f"state x has {x.size} entries, the game has {self.nx} states")
         return x
+
+    def set_parameters(self, values: dict | None = None, t: float = 0.0) -> np.ndarray:
+        """Put runtime values in force: the declared ones at time ``t`` (data files interpolated at the stages'
+        times, ``t`` the time of stage 0), except those ``values`` gives ({name: number, list or array}). Nothing
+        is recompiled. Returns p."""
+        if self.runtime is None:
+            if values:
+                raise ValueError(f"runtime values for {', '.join(values)}: this game has no runtime parameters")
+            return self.p
+        self.p = self.runtime.vector(t, values)
+        return self.p
+
+    @property
+    def parameters(self) -> dict:
+        """The runtime values in force, by name (``t``: the time of stage 0, where the game uses the time)."""
+        return {} if self.runtime is None else self.runtime.record(self.p)
 
     # evaluation ---------------------------------------------------------------------------
     def kkt_parts(self, z: np.ndarray, x: np.ndarray | None = None) -> KKTParts:
@@ -286,7 +308,7 @@ class CompiledGame:
         return F.reshape(-1), H
 
     def step_dynamics(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
-        """The plant model f(x, u) (dynamic games)."""
+        """The plant model f(x, u) (dynamic games; runtime parameters do not enter it)."""
         if self._dynamics is None:
             raise ValueError("a static game has no dynamics")
         return self._dynamics(x, u)[0].reshape(-1)
@@ -396,6 +418,12 @@ class _Layout:
     x0: np.ndarray
     a_lower: np.ndarray  # the variables' bounds (-inf/inf: none), as declared
     a_upper: np.ndarray
+    runtime: RuntimeLayout | None = None
+
+    @property
+    def np(self) -> int:
+        """The number of runtime values (appended to the state in every compiled function)."""
+        return 0 if self.runtime is None else self.runtime.size
 
 
 def _bounds(variables) -> tuple[list[float], list[float]]:
@@ -404,14 +432,14 @@ def _bounds(variables) -> tuple[list[float], list[float]]:
     return lo, hi
 
 
-def _layout(g: StaticGame | DynamicGame) -> _Layout:
+def _layout(g: StaticGame | DynamicGame, runtime: RuntimeLayout | None = None) -> _Layout:
     if isinstance(g, StaticGame):
         names = [list(a.variables) for a in g.agents]
         sizes = [len(v) for v in names]
         starts = [var.start for a in g.agents for var in a.variables.values()]
         lo, hi = _bounds([var for a in g.agents for var in a.variables.values()])
         return _Layout(names, _slices(sizes), sum(sizes), 0, None, np.asarray(starts, dtype=float), np.zeros(0),
-                       np.asarray(lo), np.asarray(hi))
+                       np.asarray(lo), np.asarray(hi), runtime)
     T = g.horizon
     names = [list(a.inputs) for a in g.agents]
     sizes = [len(v) * (T + 1) for v in names]
@@ -423,7 +451,7 @@ def _layout(g: StaticGame | DynamicGame) -> _Layout:
         lo += l_a * (T + 1)
         hi += h_a * (T + 1)
     return _Layout(names, _slices(sizes), sum(sizes), len(g.states), T, np.asarray(starts, dtype=float),
-                   np.asarray(g.x0, dtype=float), np.asarray(lo, dtype=float), np.asarray(hi, dtype=float))
+                   np.asarray(g.x0, dtype=float), np.asarray(lo, dtype=float), np.asarray(hi, dtype=float), runtime)
 
 
 def _slices(sizes: list[int]) -> list[slice]:
@@ -444,7 +472,8 @@ class _Expressions:
 # long: the static and the dynamic walks share the parsed data and `constrain`; split, each would take a dozen arguments
 def _expressions(g: StaticGame | DynamicGame, lay: _Layout, a: ca.SX, x: ca.SX, agents: list[int],
                  *, shared_as_own: bool = False, states: ca.SX | None = None, smoothing: float = 0.0) -> _Expressions:
-    """Costs and constraints of ``agents`` only, as CasADi expressions in (a, x).
+    """Costs and constraints of ``agents`` only, as CasADi expressions in (a, x); x holds the plant state and then
+    the runtime values (``lay.runtime``), if any.
 
     Other agents' costs and constraints are not even parsed: what is built from here can reach only
     the chosen agents' own data, the common dynamics and parameters. Shared constraints go to each
@@ -460,6 +489,14 @@ def _expressions(g: StaticGame | DynamicGame, lay: _Layout, a: ca.SX, x: ca.SX, 
     cost_fns = {i: casadi_functions(domain[i], smoothing) for i in agents}
     fns = fns_f = casadi_functions(smoothing=smoothing)
     params = dict(g.parameters)
+    rt = lay.runtime
+    p = x[lay.nx:]
+    x = x[:lay.nx] if rt is not None else x
+    per_stage: dict = {}
+    dyn_params = dict(params)  # the dynamics see the compile-time parameters only
+    if rt is not None:
+        common, per_stage = rt.symbols(p)
+        params.update(common)
     slices, names = lay.agent_slices, lay.variable_names
     own_shared = g.equilibrium == "generalized" or shared_as_own
     names_of_agents = [ag.name for ag in g.agents]
@@ -494,7 +531,7 @@ def _expressions(g: StaticGame | DynamicGame, lay: _Layout, a: ca.SX, x: ca.SX, 
     dyn = None if isinstance(g.dynamics, LinearDynamics) else {s: parse_expression(equations[s]) for s in g.states}
 
     def rhs(xi: ca.SX, u: ca.SX) -> ca.SX:
-        env_f = dict(params)
+        env_f = dict(dyn_params)
         env_f.update({s: xi[k] for k, s in enumerate(g.states)})
         env_f.update({name: u[k] for k, (_, _, name) in enumerate(inputs)})
         return ca.vertcat(*[ca.SX(evaluate(dyn[s], env_f, fns_f)) for s in g.states])
@@ -523,12 +560,16 @@ def _expressions(g: StaticGame | DynamicGame, lay: _Layout, a: ca.SX, x: ca.SX, 
             xi = nxt
         env = dict(params)
         env["tau"] = float(tau)
+        if rt is not None:
+            rt.at_stage(env, p, per_stage, tau)
         env.update({s: xi[k] for k, s in enumerate(g.states)})
         env.update({name: u[k] for k, (_, _, name) in enumerate(inputs)})
         for i in agents:
             total[i] += evaluate(stage_cost[i], env, cost_fns[i])
         constrain(env, tau)
     env_T = dict(params)
+    if rt is not None:
+        rt.at_stage(env_T, p, per_stage, lay.horizon + 1)
     env_T.update({s: xi[k] for k, s in enumerate(g.states)})
     for i in agents:
         costs[i] = ca.SX(total[i] + evaluate(terminal_cost[i], env_T, cost_fns[i]))
@@ -608,6 +649,8 @@ def _assemble(*, kind: str, a: ca.SX, x: ca.SX, costs: list[ca.SX], own_rows: li
         state_names=state_names,
         equilibrium=equilibrium,
         n_shared=n_shared,
+        runtime=lay.runtime,
+        p=np.zeros(0) if lay.runtime is None else lay.runtime.vector(),
         _symbolic=_Symbolic(a, lam, x, L, c, F, J),
         _costs=Evaluator(costs_fn),
         _agent_constraints=agent_rows,
@@ -632,10 +675,10 @@ def compile_game(cfg: Config, smoothing: float = 0.0) -> CompiledGame:
     """Parse, condense (dynamic games) and differentiate the game of ``cfg`` once. With ``smoothing`` mu > 0, abs, min
     and max are replaced by smooth functions within mu of them (gnerun.language.expr.casadi_functions)."""
     g = cfg.game
-    lay = _layout(g)
+    lay = _layout(g, runtime_layout(cfg))
     N = len(g.agents)
     a = ca.SX.sym("a", lay.n)
-    x = ca.SX.sym("x", lay.nx)
+    x = ca.SX.sym("x", lay.nx + lay.np)  # the plant state, then the runtime values
     ex = _expressions(g, lay, a, x, list(range(N)), smoothing=smoothing)
     return _assemble(kind=g.kind, a=a, x=x, costs=[ex.costs[i] for i in range(N)],
                      own_rows=[ex.own_rows[i] for i in range(N)], shared_common=ex.shared_common,
@@ -650,15 +693,19 @@ class StageConstraints:
     """The constraint rows of the first stage (tau = 0) as functions of the inputs u applied and the state x_next
     they produce: what a closed loop's applied step must satisfy. Built by :func:`compile_stage_constraints`."""
 
-    function: Evaluator  # (x_next, u) -> c
+    function: Evaluator  # (x_next, u[, (x, p)]) -> c
     equality: np.ndarray
     labels: list[str]
+    game: CompiledGame | None = None  # where the runtime values in force are read (a game with runtime parameters)
 
     def violations(self, x_next: np.ndarray, u: np.ndarray) -> np.ndarray:
         """Each row's violation: max(c_j, 0), |c_j| for an equality (0 where it holds)."""
         if not self.labels:
             return np.zeros(0)
-        c = self.function(x_next, u)[0].reshape(-1)
+        if self.game is not None:
+            c = self.function(x_next, u, self.game._x(np.zeros(self.game.nx)))[0].reshape(-1)
+        else:
+            c = self.function(x_next, u)[0].reshape(-1)
         return np.where(self.equality, np.abs(c), np.maximum(c, 0.0))
 
     def violation(self, x_next: np.ndarray, u: np.ndarray) -> tuple[float, str | None]:
@@ -673,28 +720,34 @@ class StageConstraints:
 
 
 @stoppable
-def compile_stage_constraints(cfg: Config) -> StageConstraints:
+def compile_stage_constraints(cfg: Config, game: CompiledGame | None = None) -> StageConstraints:
     """Every agent's and every shared constraint row at tau = 0, in terms of (x_next, u): the stage's rows of the
     game, written with the state as a variable instead of f(x, u), so that they can be checked on the state the
-    plant actually reached (with its disturbance)."""
+    plant actually reached (with its disturbance). With runtime parameters, the values in force in ``game``."""
     g = cfg.game
     if not isinstance(g, DynamicGame):
         raise ValueError("a static game has no stages")
-    lay = _layout(g)
+    lay = _layout(g, runtime_layout(cfg))
     sizes = [len(v) for v in lay.variable_names]
     first = np.concatenate([np.arange(sl.start, sl.start + k) for sl, k in zip(lay.agent_slices, sizes, strict=True)])
     one = _Layout(lay.variable_names, _slices(sizes), sum(sizes), lay.nx, 0, lay.a_start[first], lay.x0,
-                  lay.a_lower[first], lay.a_upper[first])
+                  lay.a_lower[first], lay.a_upper[first], lay.runtime)
     u = ca.SX.sym("u", one.n)
-    x, x_next = ca.SX.sym("x", lay.nx), ca.SX.sym("x_next", lay.nx)
+    x, x_next = ca.SX.sym("x", lay.nx + lay.np), ca.SX.sym("x_next", lay.nx)
     ex = _expressions(g, one, u, x, list(range(len(g.agents))), states=x_next)
     rows = [replace(r, info=replace(r.info, label=f"{g.agents[r.info.owner].name}: {r.info.label}"))
             for i in range(len(g.agents)) for r in ex.own_rows[i]]
     rows += [replace(r, info=replace(r.info, label=f"shared: {r.info.label}")) for r in ex.shared_common]
     c = ca.vertcat(*[r.expr for r in rows]) if rows else ca.SX(0, 1)
-    fn = ca.Function("stage_constraints", [x_next, u], [ca.densify(c)], ["x_next", "u"], ["c"])
+    if lay.runtime is not None:
+        fn = ca.Function("stage_constraints", [x_next, u, x], [ca.densify(c)], ["x_next", "u", "x"], ["c"])
+        if game is None:
+            game = compile_game(cfg)
+    else:
+        fn = ca.Function("stage_constraints", [x_next, u], [ca.densify(c)], ["x_next", "u"], ["c"])
+        game = None
     return StageConstraints(Evaluator(fn), np.array([r.info.equality for r in rows], dtype=bool),
-                            [r.info.label for r in rows])
+                            [r.info.label for r in rows], game)
 
 
 @stoppable
@@ -703,25 +756,27 @@ def compile_agent_problem(cfg: Config, agent: int, tau: float) -> CompiledGame:
 
         min_{a_i} J_i(a_i, abar_-i) + tau/2 ||a_i - abar_i||^2  s.t.  g_i(a_i, abar_-i) <= 0,
 
-    compiled as a one-agent problem whose parameter vector is p = (x, abar_-i, abar_i): the plant state,
-    the other agents' last decisions (a without agent i's block) and the proximal centre. It is built
+    compiled as a one-agent problem whose parameter vector is p = (x, abar_-i, abar_i): the plant state (with the
+    game's runtime values: ``game._x(x)``), the other agents' last decisions (a without agent i's block) and the
+    proximal centre. It is built
     from agent i's own cost and constraints only (shared constraints count as its own).
     """
     g = cfg.game
-    lay = _layout(g)
+    lay = _layout(g, runtime_layout(cfg))
     sl = lay.agent_slices[agent]
     ni = sl.stop - sl.start
     ai = ca.SX.sym("a_i", ni)
     others = ca.SX.sym("abar_others", lay.n - ni)
     centre = ca.SX.sym("abar_i", ni)
-    xs = ca.SX.sym("x", lay.nx)
+    xs = ca.SX.sym("x", lay.nx + lay.np)  # the plant state and the runtime values
     # row and column slices: a one-element vector sliced by rows alone is 1 x 1, and its empty slice 1 x 0, which
     # vertcat would turn into a structural zero row
     a_full = ca.vertcat(others[: sl.start, :], ai, others[sl.start :, :])
     ex = _expressions(g, lay, a_full, xs, [agent], shared_as_own=True)
     cost = ex.costs[agent] + 0.5 * tau * ca.sumsqr(ai - centre)
-    own_lay = _Layout([lay.variable_names[agent]], [slice(0, ni)], ni, lay.nx + lay.n, None,
-                      lay.a_start[sl].copy(), np.concatenate([lay.x0, np.zeros(lay.n)]), lay.a_lower[sl].copy(),
+    p0 = np.zeros(0) if lay.runtime is None else lay.runtime.vector()
+    own_lay = _Layout([lay.variable_names[agent]], [slice(0, ni)], ni, lay.nx + lay.np + lay.n, None,
+                      lay.a_start[sl].copy(), np.concatenate([lay.x0, p0, np.zeros(lay.n)]), lay.a_lower[sl].copy(),
                       lay.a_upper[sl].copy())
     return _assemble(kind="static", a=ai, x=ca.vertcat(xs, others, centre), costs=[cost],
                      own_rows=[[_Row(r.expr, replace(r.info, owner=0)) for r in ex.own_rows[agent]]],

@@ -79,12 +79,12 @@ class SparseKKT:
 
     def residual(self, z: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The condensed L(z) and c(a) alone (states rolled out, costates solved; no Jacobian)."""
-        L, c = self._residual(z[: self.n], z[self.n :], x)
+        L, c = self._residual(z[: self.n], z[self.n :], self.game._x(x))
         return L.reshape(-1), c.reshape(-1)
 
     def evaluate(self, z: np.ndarray, x: np.ndarray) -> SparseParts:
         n = self.n
-        F, J, F0 = self._eval(z[:n], z[n:], x)
+        F, J, F0 = self._eval(z[:n], z[n:], self.game._x(x))
         return SparseParts(F[:n], F[self._lam0:], None, None, F, J, F0)
 
     def matrix(self, J: np.ndarray) -> sp.csc_matrix:
@@ -129,11 +129,11 @@ def compile_sparse(cfg: Config, game: CompiledGame) -> SparseKKT:
     g = cfg.game
     if not isinstance(g, DynamicGame):
         raise ValueError("the sparse formulation is for dynamic games")
-    lay = _layout(g)
+    lay = _layout(g, game.runtime)
     N, n, nx, T = len(g.agents), lay.n, lay.nx, lay.horizon
     S = nx * (T + 1)
     a = ca.SX.sym("a", n)
-    x = ca.SX.sym("x", nx)
+    x = ca.SX.sym("x", nx + lay.np)  # the plant state, then the runtime values
     X = ca.SX.sym("xi", S)
     ex = _expressions(g, lay, a, x, list(range(N)), states=X)
     rows = [r for i in range(N) for r in ex.own_rows[i]] + ex.shared_common
@@ -185,7 +185,7 @@ def compile_sparse(cfg: Config, game: CompiledGame) -> SparseKKT:
         return ca.vertcat(*[a[lay.agent_slices[i].start + tau * len(lay.variable_names[i]) + j] for i, j in inputs])
 
     f = ex.dynamics
-    xs = [x]
+    xs = [x[:nx]]
     for tau in range(T + 1):
         xs.append(f(xs[-1], u_at(tau)))
     X_roll = ca.vertcat(*xs[1:])

@@ -35,8 +35,15 @@ from .expand import Expander, expands
 from .expr import (
     CONSTANTS,
     FUNCTIONS,
+    Constraint,
+    Expression,
     ExpressionError,
+    Index,
+    Name,
     check_names,
+    children,
+    evaluate,
+    numpy_functions,
     parse_cache,
     parse_constraint,
     parse_expression,
@@ -199,9 +206,34 @@ Dynamics = Annotated[
 ]
 
 
+def _runtime_shorthand(v: Any) -> Any:
+    # `r: 0.5` and `goal: [1, 2]` are runtime parameters with that value
+    return {"value": v} if not isinstance(v, dict) else v
+
+
+class RuntimeParameter(Strict):
+    """A runtime parameter: an input of the compiled functions, like the plant state (gnerun.game.runtime). Its
+    value changes without recompiling: from ``value``, a data file, the Python API or a sweep."""
+
+    value: float | list[float] | list[list[float]] | None = Field(
+        None, description="a number, a vector (name[i]), a matrix (name[i][j]); per_stage: one number for every "
+                          "stage, or a list over the stages 0..T (or 0..T+1, T+1 being the terminal cost's)")
+    per_stage: bool = Field(False, description="a value for every stage tau: `name` is this stage's, name[tau + 1] "
+                                               "the next one's (stage indices from 0, like tau)")
+    file: str | None = Field(None, description="a data table (CSV with a header row, or .npy): the value at each "
+                                               "stage's time t_k + tau * dt, interpolated (relative to the config)")
+    column: str | int | None = Field(None, description="the file's column (default: the parameter's name)")
+    time: str | int = Field("t", description="the file's time column")
+    interpolation: Literal["linear", "hold"] = Field("linear", description="linear, or zero-order hold")
+
+
+Runtime = dict[str, Annotated[RuntimeParameter, BeforeValidator(_runtime_shorthand)]]
+
+
 class StaticGame(Strict):
     kind: Literal["static"]
     parameters: dict[str, float] = Field(default_factory=dict)
+    runtime: Runtime = Field(default_factory=dict)
     agents: list[StaticAgent] = Field(min_length=1)
     shared_constraints: list[SharedSpec] = Field(default_factory=list)
     equilibrium: Literal["generalized", "variational"] = "generalized"
@@ -214,6 +246,7 @@ class DynamicGame(Strict):
     dynamics: Dynamics
     x0: list[float]
     parameters: dict[str, float] = Field(default_factory=dict)
+    runtime: Runtime = Field(default_factory=dict)
     agents: list[DynamicAgent] = Field(min_length=1)
     shared_constraints: list[SharedSpec] = Field(default_factory=list)
     equilibrium: Literal["generalized", "variational"] = "generalized"
@@ -392,8 +425,12 @@ class Config(Strict):
         return [w for w in warnings if w]
 
     def resolved_yaml(self) -> str:
-        """The config with every default filled in, as YAML (what runs write to config.yaml)."""
-        return dump_yaml(self.model_dump(mode="json"))
+        """The config with every default filled in, as YAML (what runs write to config.yaml); a game without
+        runtime parameters is written without the empty section."""
+        data = self.model_dump(mode="json")
+        if not data["game"].get("runtime"):
+            data["game"].pop("runtime", None)
+        return dump_yaml(data)
 
     def config_hash(self) -> str:
         return hashlib.sha256(self.resolved_yaml().encode()).hexdigest()
@@ -526,6 +563,7 @@ def load_config(
         cfg = Config.model_validate(data)
     except ValidationError as e:
         raise ConfigError(one_per_template(_validation_problems(e, data, smap))) from None
+    cfg._source = str(path) if path is not None else None  # data files are found relative to it
     with parse_cache():  # every expression parsed once, for the checks and the estimate
         problems = check_semantics(cfg, smap)
         if problems:
@@ -701,6 +739,13 @@ def _field_model(model: Any, part: Any, node: Any) -> Any:
 # ---------------------------------------------------------------------------------------------
 
 
+def _names_of(text: str) -> set[str]:
+    try:
+        return parse_expression(text).names
+    except ExpressionError:
+        return set()  # reported by the check
+
+
 def is_sweep_spec(data: Any) -> bool:
     """A document with a base config and a grid (and no game of its own): a sweep spec, not a config."""
     return isinstance(data, dict) and "grid" in data and "base" in data and "game" not in data
@@ -710,6 +755,7 @@ def check_semantics(cfg: Config, smap: SourceMap) -> list[str]:
     """Every problem a schema cannot see, as ``file:line:column: path: message`` lines."""
     checks = _SemanticChecks(cfg, smap)
     checks.names()
+    checks.runtime()
     checks.expressions()
     checks.disturbance()
     checks.solver()
@@ -726,6 +772,8 @@ class _SemanticChecks:
         self.problems: list[str] = []
         self.seen: dict[str, str] = {}  # every name declared so far, and what it is
         self.agent_names: set[str] = set()
+        self.tables: dict[str, str] = {}  # runtime parameters that are indexed, and their kind (vector ...)
+        self.scalars: set[str] = set()  # runtime parameters used by name alone
 
     def report(self, path: PathKey, message: str, *, key: bool = False, column: int | None = None) -> None:
         where = self.smap.locate_in_text(path, column) if column is not None else self.smap.locate(path, key=key)
@@ -785,11 +833,124 @@ class _SemanticChecks:
             elif lo > hi:
                 self.report(path, f"lower bound {lo} exceeds upper bound {hi}")
 
+    # runtime parameters ----------------------------------------------------------------------------
+    def runtime(self) -> None:
+        """Runtime parameters: names, values of a consistent shape, data files that can be read and cover the run."""
+        g = self.g
+        for name, spec in g.runtime.items():
+            path = ("game", "runtime", name)
+            self.declare(name, path, "runtime parameter", key=True)
+            if self.static and (spec.per_stage or spec.file is not None):
+                self.report(path, "a static game has no stages or time: a runtime parameter here is a number, "
+                                  "a vector or a matrix")
+                continue
+            if spec.file is not None:
+                if spec.value is not None or spec.per_stage:
+                    self.report(path, "a data file gives the values at every stage: leave out value and per_stage")
+                self._table(name, spec, path)
+                self.tables[name] = "stages"
+                self.scalars.add(name)
+                continue
+            kind = self._runtime_value(spec, path)
+            if kind is None:
+                continue
+            if kind in ("scalar", "stages"):
+                self.scalars.add(name)
+            if kind != "scalar":
+                self.tables[name] = kind
+
+    def _runtime_value(self, spec: Any, path: PathKey) -> str | None:
+        value = spec.value
+        if spec.per_stage:
+            if isinstance(value, list):
+                n = self.g.horizon + 1
+                if any(isinstance(v, list) for v in value) or len(value) not in (n, n + 1):
+                    self.report(path + ("value",), f"a per-stage value is one number or a list of {n} (stages 0..T) "
+                                                   f"or {n + 1} numbers (and the terminal cost's T + 1)")
+                    return None
+            return "stages"
+        if isinstance(value, list):
+            if not value:
+                self.report(path + ("value",), "is empty")
+                return None
+            if isinstance(value[0], list):
+                if any(len(row) != len(value[0]) for row in value) or not value[0]:
+                    self.report(path + ("value",), "a matrix's rows must have the same number of entries")
+                    return None
+                return "matrix"
+            return "vector"
+        return "scalar"
+
+    def _table(self, name: str, spec: Any, path: PathKey) -> None:
+        from ..game.runtime import TableError, data_path, needed_span, read_table
+
+        try:
+            table = read_table(data_path(self.cfg.source, spec.file), spec.column if spec.column is not None else name,
+                               spec.time, spec.interpolation)
+        except TableError as e:
+            self.report(path + ("file",), str(e))
+            return
+        self.cfg.__dict__.setdefault("_runtime_tables", {})[name] = table
+        start, end = needed_span(self.cfg)
+        if table.times[0] > start or table.times[-1] < end - 1e-9 * max(1.0, abs(end)):
+            cfg = self.cfg
+            self.report(path + ("file",), f"{spec.file}: the table spans t = {table.times[0]:g} .. "
+                                          f"{table.times[-1]:g} s; the run needs t = {start:g} .. {end:g} s "
+                                          f"(run.steps = {cfg.run.steps} sampling times of {cfg.run.sampling_time:g} "
+                                          f"s and the horizon's {self.g.horizon + 1} stages after the last)")
+
+    def indices(self, parsed: Expression | Constraint, path: PathKey, taus: list[int] | None) -> None:
+        """The runtime parameters' entries in one expression: each names a vector, matrix or per-stage table with
+        as many indices as it has, every index an exact integer in its range at every stage ``taus`` it is used at
+        (None: no stage index here); a vector or matrix is never used without its indices."""
+        from ..game.runtime import SymbolTable, runtime_layout
+
+        roots = [parsed.tree] if isinstance(parsed, Expression) else [parsed.lhs, parsed.rhs]
+        stack = list(roots)
+        found: list[Index] = []
+        while stack:
+            n = stack.pop()
+            if isinstance(n, Index):
+                found.append(n)
+            elif isinstance(n, Name) and n.id in self.tables and n.id not in self.scalars:
+                self.report(path, f"{n.id!r} is a runtime {self.tables[n.id]}: use its entries ({n.id}[1]"
+                                  f"{'[1]' if self.tables[n.id] == 'matrix' else ''})", column=n.column)
+                return
+            stack.extend(children(n))
+        if not found:
+            return
+        layout = runtime_layout(self.cfg)
+        ints = {k: v for k, v in self.g.parameters.items() if float(v).is_integer()}
+        for node in found:
+            if node.name not in self.tables:
+                what = "a runtime number" if node.name in self.g.runtime else "not a runtime parameter"
+                self.report(path, f"{node.name!r} is indexed but is {what} (indexed here: runtime vectors, matrices "
+                                  "and per-stage parameters)", column=node.column)
+                return
+            entry = layout.entries[node.name]
+            table = SymbolTable(entry, list(range(entry.size)))
+            for tau in (taus if taus is not None else [None]):
+                env = dict(ints) if tau is None else {**ints, "tau": float(tau)}
+                env[node.name + "[]"] = table
+                try:
+                    evaluate(node, env, numpy_functions())
+                except KeyError as e:
+                    self.report(path, f"{e.args[0]!r} in an index of {node.name!r} is not an integer parameter or "
+                                      "tau", column=node.column)
+                    return
+                except ValueError as e:
+                    self.report(path, f"{e}" + (f" (at tau = {tau})" if tau is not None else ""), column=node.column)
+                    return
+
     # expressions ------------------------------------------------------------------------------------
-    def check(self, text: StageConstraint | SharedSpec, path: PathKey, names: set[str], constraint: bool) -> None:
-        """One expression or constraint (with its stages and agents): it parses and uses only ``names``."""
+    def check(self, text: StageConstraint | SharedSpec, path: PathKey, names: set[str], constraint: bool,
+              taus: list[int] | None = None) -> None:
+        """One expression or constraint (with its stages and agents): it parses and uses only ``names``; its runtime
+        parameters' entries are checked at the stages ``taus``."""
         g = self.g
         if not isinstance(text, str):
+            if taus is not None and text.stages is not None:
+                taus = [t for t in text.stages if 0 <= t <= g.horizon]
             if text.stages is not None and self.static:
                 self.report(path + ("stages",), "a static game has no stages")
             elif text.stages is not None:
@@ -809,11 +970,16 @@ class _SemanticChecks:
             check_names(parsed, names)
         except ExpressionError as e:
             self.report(path, e.describe(), column=e.column)
+            return
+        if g.runtime:
+            self.indices(parsed, path, taus)
 
     def expressions(self) -> None:
         """Costs, constraints, x0 and dynamics, and the shared constraints."""
         g, static = self.g, self.static
-        params = set(g.parameters)
+        params = set(g.parameters) | set(g.runtime)
+        if not static and "t" not in self.seen:
+            params.add("t")  # the absolute time of a stage
         decisions = {v for a in g.agents for v in (a.variables if static else a.inputs)}
         if static:
             scope = decisions | params
@@ -824,14 +990,15 @@ class _SemanticChecks:
         else:
             states = set(g.states)
             scope = states | decisions | params | {"tau"}  # tau: the stage index, 0..T
+            taus = list(range(g.horizon + 1))
             for i, agent in enumerate(g.agents):
-                self.check(agent.stage_cost, ("game", "agents", i, "stage_cost"), scope, False)
+                self.check(agent.stage_cost, ("game", "agents", i, "stage_cost"), scope, False, taus)
                 self.check(agent.terminal_cost, ("game", "agents", i, "terminal_cost"), states | params, False)
                 for j, c in enumerate(agent.constraints):
-                    self.check(c, ("game", "agents", i, "constraints", j), scope, True)
-            self._dynamics(scope)
+                    self.check(c, ("game", "agents", i, "constraints", j), scope, True, taus)
+            self._dynamics(scope - (params - set(g.parameters)))
         for j, c in enumerate(g.shared_constraints):
-            self.check(c, ("game", "shared_constraints", j), scope, True)
+            self.check(c, ("game", "shared_constraints", j), scope, True, None if static else taus)
 
     def _dynamics(self, scope: set[str]) -> None:
         """x0 and the dynamics of a dynamic game: shapes, finite numbers, one equation per state."""
@@ -861,6 +1028,11 @@ class _SemanticChecks:
             if s not in g.states:
                 self.report(where + (s,), f"{s!r} is not a declared state (states: {', '.join(g.states)})", key=True)
             else:  # the dynamics are the same at every stage (no tau)
+                runtime = sorted(_names_of(text) & (set(g.runtime) | ({"t"} if "t" not in self.seen else set())))
+                if runtime:
+                    self.report(where + (s,), f"{runtime[0]!r} is a runtime value: the dynamics are compiled with "
+                                              "constants (parameters), the same at every stage and sampling time")
+                    continue
                 self.check(text, where + (s,), scope - {"tau"}, False)
 
     # the other sections -----------------------------------------------------------------------------

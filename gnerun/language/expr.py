@@ -95,7 +95,17 @@ class Call:
     column: int
 
 
-Node = Num | Name | Unary | Binary | Call
+@dataclass(frozen=True)
+class Index:
+    """``name[i]`` or ``name[i][j]``: an entry of a runtime parameter (gnerun.game.runtime), looked up when the game
+    is compiled; the indices are integer expressions of numbers, integer parameters and the stage index tau."""
+
+    name: str
+    indices: tuple[Node, ...]
+    column: int
+
+
+Node = Num | Name | Unary | Binary | Call | Index
 
 
 @dataclass(frozen=True)
@@ -142,6 +152,8 @@ def children(node: Node) -> tuple[Node, ...]:
         return (node.left, node.right)
     if isinstance(node, Call):
         return tuple(node.args)
+    if isinstance(node, Index):
+        return tuple(node.indices)
     return ()
 
 
@@ -154,6 +166,8 @@ def _names(node: Node) -> list[Name]:
         if isinstance(n, Name):
             out.append(n)
         else:
+            if isinstance(n, Index):  # the table's name is used too
+                out.append(Name(n.name, n.column))
             stack.extend(children(n))
     return out
 
@@ -176,7 +190,7 @@ _TOKEN = re.compile(
     (?P<ws>[ \t]+)
   | (?P<number>(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?)
   | (?P<name>[A-Za-z_][A-Za-z0-9_]*)
-  | (?P<op>\*\*|<=|>=|==|[-+*/^(),])
+  | (?P<op>\*\*|<=|>=|==|[-+*/^(),\[\]])
     """,
     re.VERBOSE,
 )
@@ -207,8 +221,6 @@ def _tokenize(text: str) -> list[_Token]:
             hint = " (strings are not part of the language)"
         elif ch in "<>=!":
             hint = " (comparisons are <=, >= and ==, and only in constraints)"
-        elif ch == "[" or ch == "]":
-            hint = " (indexing is not part of the language)"
         raise ExpressionError(f"unexpected character {ch!r}{hint}", text, pos + 1)
     tokens.append(_Token("end", "", len(text) + 1))
     return tokens
@@ -304,6 +316,8 @@ class _Parser:
             nxt = self.peek()
             if nxt.kind == "op" and nxt.text == "(":
                 return self.call(tok)
+            if nxt.kind == "op" and nxt.text == "[" and nxt.column == tok.column + len(tok.text):
+                return self.index(tok)
             if nxt.kind in ("name", "number"):
                 raise self.error(f"unexpected {nxt.text!r} after {tok.text!r} (missing operator?)", nxt)
             return Name(tok.text, tok.column)
@@ -336,6 +350,14 @@ class _Parser:
         if fn in VARIADIC_FUNCTIONS and len(args) < 2:
             raise self.error(f"{fn}() takes two or more arguments, got {len(args)}", name)
         return Call(fn, tuple(args), name.column)
+
+    def index(self, name: _Token) -> Node:
+        indices = []
+        while len(indices) < 2 and self.peek().kind == "op" and self.peek().text == "[":
+            self.advance()
+            indices.append(self.expr())
+            self.expect("]")
+        return Index(name.text, tuple(indices), name.column)
 
     def finish(self) -> None:
         tok = self.peek()
@@ -542,9 +564,18 @@ def evaluate(node: Node | Expression, env: Mapping[str, Any], functions: Mapping
             elif isinstance(n, Binary):
                 stack.append((n.right, False))
                 stack.append((n.left, False))
-            else:  # Call
-                for arg in reversed(n.args):
+            else:  # Call, Index
+                for arg in reversed(children(n)):
                     stack.append((arg, False))
+        elif isinstance(n, Index):
+            k = len(n.indices)
+            where = [_integer_index(v, n) for v in values[len(values) - k:]]
+            del values[len(values) - k:]
+            try:
+                table = env[n.name + "[]"]
+            except KeyError:
+                raise KeyError(n.name) from None
+            values.append(table.at(where))
         elif isinstance(n, Unary):
             v = values.pop()
             values.append(-v if n.op == "-" else v)
@@ -557,6 +588,14 @@ def evaluate(node: Node | Expression, env: Mapping[str, Any], functions: Mapping
             del values[len(values) - len(n.args) :]
             values.append(fns[n.function](*args))
     return values[0]
+
+
+def _integer_index(value: Any, node: Index) -> int:
+    """An index's value as an int: it must be an exact integer (never rounded)."""
+    v = float(value)
+    if not v.is_integer():
+        raise ValueError(f"the index of {node.name!r} is {v:g}, not an integer")
+    return int(v)
 
 
 def _ieee(op: Callable[[Any, Any], Any]) -> Callable[[Any, Any], Any]:
@@ -630,7 +669,7 @@ def number_text(value: float) -> str:
 def _precedence(node: Node) -> int:
     if isinstance(node, Num):
         return _UNARY if _negative(node.value) else _ATOM
-    if isinstance(node, Name | Call):
+    if isinstance(node, Name | Call | Index):
         return _ATOM
     if isinstance(node, Unary):
         return _UNARY
@@ -661,6 +700,10 @@ def unparse(node: Node) -> str:
             parts.append("-" + number_text(-n.value) if _negative(n.value) else number_text(n.value))
         elif isinstance(n, Name):
             parts.append(n.id)
+        elif isinstance(n, Index):
+            for k in range(len(n.indices) - 1, -1, -1):
+                stack.extend(("]", n.indices[k], "["))
+            stack.append(n.name)
         elif isinstance(n, Call):
             stack.append(")")
             for k in range(len(n.args) - 1, -1, -1):

@@ -40,6 +40,7 @@ class Families:
 
     def __init__(self, definitions: dict[str, Node]):
         self.definitions = definitions
+        self.runtime: set[str] = set()  # runtime parameters: not integers known at expansion
         self.items = 0
         self.integers: dict[str, Any] = {}  # integer expressions, parsed once per text
         self.ticks = 0
@@ -138,6 +139,10 @@ class Families:
         """An integer expression of the indices in scope, the integer parameters and T."""
         env = scope.env()
         for name in names_in(tree):
+            if name in self.runtime and name not in env:
+                raise Problem(path, f"{name!r} in {text.strip()!r} is a runtime parameter; ranges, templates and "
+                                     "indices need integers known when the game is compiled (declare it under "
+                                     "parameters)", scope.indices)
             if name not in env:
                 known = ", ".join(sorted(env)) or "none"
                 raise Problem(path, f"{name!r} in {text.strip()!r} is not an index, an integer parameter or T "

@@ -14,7 +14,7 @@ import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from .expr import Binary, Call, Expression, ExpressionError, Node, Unary, parse_constraint, parse_expression
+from .expr import Binary, Call, Expression, ExpressionError, Index, Node, Unary, parse_constraint, parse_expression
 from .parts import constraint_agents, constraint_stages, constraint_text, dynamics_kind, obstacles, sparse_obstacles
 
 if TYPE_CHECKING:
@@ -113,6 +113,8 @@ def _nodes(node: Node) -> int:
             stack.append(n.operand)
         elif isinstance(n, Call):
             stack.extend(n.args)
+        elif isinstance(n, Index):
+            stack.extend(n.indices)
     return count
 
 

@@ -12,12 +12,14 @@ from .expr import (
     Binary,
     Call,
     ExpressionError,
+    Index,
     Name,
     Node,
     Num,
     Unary,
     children,
     evaluate,
+    names_in,
     numpy_functions,
     unparse,
 )
@@ -37,6 +39,7 @@ class Substitution:
         self.families = families
         self.vectors: dict[str, list] = {}
         self.scalars: dict[str, float] = {}  # numeric parameters (for numbers written as expressions)
+        self.runtime: set[str] = set()  # the names of runtime parameters (their entries stay indices)
         self.definitions = families.definitions  # expanded trees (shared wherever they are used)
         self.definition_names: dict[int, set[str]] = {}  # the names in each definition's tree, by the tree's id
         self.templates: dict[str, Template] = {}  # parsed once per text
@@ -58,6 +61,9 @@ class Substitution:
                     self.scalars[name] = value
                 if isinstance(value, int) and not isinstance(value, bool):
                     base[name] = value
+        runtime = game.get("runtime")
+        if isinstance(runtime, dict):
+            self.runtime = self.families.runtime = {k for k in runtime if isinstance(k, str)}
         horizon = game.get("horizon")
         if isinstance(horizon, int) and not isinstance(horizon, bool):
             base["T"] = horizon
@@ -160,7 +166,20 @@ class Substitution:
             return self._name(self._word(n, path, sc), n.column, sc)
         if isinstance(n, Hole):
             return Num(self.families.value(n.expr.tree, n.expr.text, path, sc), n.column)
+        if n.name in self.runtime:
+            return self._runtime_entry(n, path, sc)
         return Num(self._entry(n, path, sc), n.column)
+
+    def _runtime_entry(self, entry: Entry, path: PathKey, scope: Scope) -> Index:
+        """``name[i]`` of a runtime parameter stays an index (looked up when the game is compiled): an index that
+        uses the stage index tau is kept as an expression, any other is written in as its integer."""
+        indices = []
+        for index in entry.indices:
+            if "tau" in names_in(index) and "tau" not in scope.indices:
+                indices.append(self.substitute(index, path, scope))
+            else:
+                indices.append(Num(self.families.value(index, unparse(index), path, scope), entry.column))
+        return Index(entry.name, tuple(indices), entry.column)
 
     def _aggregate_range(self, n: Aggregate, path: PathKey, sc: Scope) -> tuple[int, int, int]:
         """The number of terms of an aggregate and its range, counted (its index checked) before it is written out."""

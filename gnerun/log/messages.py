@@ -222,8 +222,26 @@ class MpcError(Message):
     e_norm_agent: dict[str, float | None] = Field(default_factory=dict, description="||e_i(t)|| by agent name")
 
 
+class RuntimeValues(Message):
+    """The runtime parameters' values in force at sampling time t (/K<k>/mpc/parameters; /solve/parameters for a
+    solve, t = 0), by name, each flattened: a number as one entry, a vector, a matrix row by row, per-stage values
+    over the stages 0..T + 1; ``t`` the time of stage 0 where the game uses the time."""
+
+    t: int
+    values: dict[str, list[float]] = Field(default_factory=dict, description="the runtime values by name")
+
+    @classmethod
+    def of(cls, t: int, record: dict) -> RuntimeValues:
+        """From a game's record of its runtime values (``CompiledGame.parameters``)."""
+        import numpy as np
+
+        return cls(t=t, values={k: np.asarray(v, dtype=float).reshape(-1).tolist() for k, v in record.items()})
+
+
 TOPICS: dict[str, type[Message]] = {
     "/solve/iterate": SolveIterate,
+    "/solve/parameters": RuntimeValues,
+    "/mpc/parameters": RuntimeValues,
     "/mpc/state": MpcState,
     "/mpc/iterate": MpcIterate,
     "/mpc/error": MpcError,

@@ -2,7 +2,8 @@
 
 - ``/log``: the run's log entries (foxglove.Log);
 - ``/solve/iterate``: the iterates of a solve;
-- ``/K<k>/mpc/state``, ``/K<k>/mpc/iterate``, ``/K<k>/mpc/error``: the closed loop of budget K, per sampling time.
+- ``/K<k>/mpc/state``, ``/K<k>/mpc/iterate``, ``/K<k>/mpc/error``: the closed loop of budget K, per sampling time;
+  ``/K<k>/mpc/parameters`` (and ``/solve/parameters``): the runtime values in force, where the game has any.
 """
 
 from __future__ import annotations
@@ -11,9 +12,11 @@ import re
 
 LOG = "/log"
 SOLVE_ITERATE = "/solve/iterate"
-MPC_KINDS = ("state", "iterate", "error")
+SOLVE_PARAMETERS = "/solve/parameters"
+MPC_KINDS = ("state", "iterate", "error")  # every closed loop's
+MPC_PARAMETERS = "parameters"  # a game with runtime parameters: their values per sampling time
 
-_MPC = re.compile(r"^/K(\d+)/mpc/(state|error|iterate)$")
+_MPC = re.compile(r"^/K(\d+)/mpc/(state|error|iterate|parameters)$")
 
 
 def mpc(K: int, kind: str) -> str:

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -28,7 +28,7 @@ from ..game.compile import CompiledGame, StageConstraints, compile_game, compile
 from ..language.config import Config, PlantDisturbance
 from ..log import topics
 from ..log.mcap_log import json_ready
-from ..log.messages import MpcError, MpcIterate, MpcState
+from ..log.messages import MpcError, MpcIterate, MpcState, RuntimeValues
 from ..solvers.driver import iterate
 from ..solvers.factory import make_solver
 from ..solvers.status import FAILURES, Status
@@ -64,6 +64,7 @@ class ClosedLoopResult:
     ended: str = "completed"  # completed | stopped (on_failure: stop) | diverged (the plant) | interrupted | error
     planned: int | None = None  # run.steps
     message: str = ""  # why a loop ended early (diverged, error)
+    parameters: list[dict] = field(default_factory=list)  # per t: the runtime values in force (games with any)
 
     @property
     def steps(self) -> int:
@@ -120,7 +121,13 @@ class ClosedLoopResult:
             "final_e_norm": self.final_e_norm,
             "median_solve_time_s": float(np.median(self.solve_time_s[:done])) if done else math.nan,
             "max_solve_time_s": float(np.max(self.solve_time_s[:done])) if done else math.nan,
+            **({"parameters": _by_name(self.parameters[:done])} if self.parameters else {}),
         })
+
+
+def _by_name(values: list[dict]) -> dict[str, list]:
+    """Per-sampling-time records {name: value} as {name: [value per t]}."""
+    return {name: [v[name] for v in values] for name in (values[0] if values else {})}
 
 
 def _nanmax(v: np.ndarray) -> float:
@@ -204,6 +211,8 @@ class StepReport:
 
 # progress(report) is called after every sampling time
 Progress = Callable[[StepReport], None]
+# parameters(t, x) -> {name: value}: the runtime values at the sampling time of time t (seconds) and plant state x
+RuntimeCallback = Callable[[float, np.ndarray], "Mapping[str, object] | None"]
 
 
 @dataclass(frozen=True)
@@ -238,6 +247,7 @@ class LoopRecord:
         self.agents = game.agent_names
         self.xs: list[np.ndarray] = []  # x(t) of every sampling time begun, then the state the loop ended in
         self.samples: list[Sample] = []
+        self.parameters: list[dict] = []  # the runtime values of every sampling time begun
         self.reached: np.ndarray | None = np.array(game.x0, dtype=float)  # the state after the last time done
 
     def add(self, sample: Sample, reached: np.ndarray | None) -> None:
@@ -273,7 +283,8 @@ class LoopRecord:
             constraint_violation=column("constraint_violation"),
             worst_constraint=[s.worst_constraint for s in samples], fallback=column("fallback", bool),
             z=rows([s.z for s in samples], self.size), z_star=rows([s.z_star for s in samples], self.size),
-            completed=per_step, ended=ended, planned=self.steps, message=message)
+            completed=per_step, ended=ended, planned=self.steps, message=message,
+            parameters=self.parameters[:per_step])
 
 
 class LoopLog:
@@ -302,6 +313,9 @@ class LoopLog:
                                                               e_norm_agent=dict(sample.e_norm_agent)))
         self.run.flush()
 
+    def parameters(self, t: int, values: dict) -> None:
+        self.run.write(topics.mpc(self.K, "parameters"), RuntimeValues.of(t, values))
+
     def last_state(self, t: int, x: np.ndarray, status: str) -> None:
         """The state the loop ended in, which no solver step produced (status: '' or diverged)."""
         self.run.write(topics.mpc(self.K, "state"), MpcState(t=t, x=x.tolist(), u=None, status=status,
@@ -318,10 +332,12 @@ class ClosedLoop:
 
     def __init__(self, cfg: Config, game: CompiledGame, K: int, run: RunDirectory | None = None,
                  progress: Progress | None = None, interrupt: Interrupt | None = None,
-                 stage: StageConstraints | None = None, record: LoopRecord | None = None):
+                 stage: StageConstraints | None = None, record: LoopRecord | None = None,
+                 parameters: RuntimeCallback | None = None):
         self.cfg, self.game, self.K = cfg, game, K
+        self.parameters = parameters
         self.solver = make_solver(cfg, game)
-        self.stage = stage if stage is not None else compile_stage_constraints(cfg)
+        self.stage = stage if stage is not None else compile_stage_constraints(cfg, game)
         self.reference = ReferenceSolver(cfg, game) if cfg.run.reference == "exact" else None
         self.safeguard = (Fallback(game, self.solver, self.stage) if cfg.run.safeguard == "fallback"
                           else PaperRule())
@@ -376,6 +392,32 @@ class ClosedLoop:
         self.rng = state.rng
         return state, trace, elapsed + stepping
 
+    def _runtime_values(self, t: int, x: np.ndarray) -> None:
+        """The runtime values of sampling time t in force (the declared ones at its time, data files interpolated at
+        its stages' times, and what the ``parameters`` callback gives), recorded and logged."""
+        game = self.game
+        if game.runtime is None and self.parameters is None:
+            return
+        now = t * self.cfg.run.sampling_time
+        values = None
+        if self.parameters is not None:
+            try:
+                values = self.parameters(now, x.copy())
+            except Exception as exc:
+                raise InputError(f"the parameters callback failed at t = {now:g} s: {type(exc).__name__}: "
+                                 f"{exc}") from exc
+            if values is not None and not isinstance(values, Mapping):
+                raise InputError(f"the parameters callback returned {type(values).__name__} at t = {now:g} s; it "
+                                 "returns {name: value} (or None)")
+        try:
+            game.set_parameters(dict(values or {}), now)
+        except (InputError, ValueError) as exc:
+            raise InputError(f"the parameters callback at t = {now:g} s: {exc}") from None
+        record = game.parameters
+        self.record.parameters.append(record)
+        if self.log is not None:
+            self.log.parameters(t, record)
+
     def _diverged(self, t: int, size_of_x: float) -> str:
         limit, plant = self.cfg.solver.divergence_limit, self.cfg.disturbance.plant
         return (f"K={self.K} t={t}: the plant's state x(t + 1) "
@@ -401,6 +443,7 @@ class ClosedLoop:
                 self._interrupted(t)
                 break
             rec.xs.append(x)
+            self._runtime_values(t, x)
             try:
                 z_star, ref_status = self._z_star(t, x, z_warm)
             except Stopped:  # a stop request during z*(t): this sampling time is not run
@@ -500,7 +543,8 @@ class ClosedLoop:
 
 def closed_loop(cfg: Config, game: CompiledGame, K: int, run: RunDirectory | None = None,
                 progress: Progress | None = None, interrupt: Interrupt | None = None,
-                stage: StageConstraints | None = None, record: LoopRecord | None = None) -> ClosedLoopResult:
+                stage: StageConstraints | None = None, record: LoopRecord | None = None,
+                parameters: RuntimeCallback | None = None) -> ClosedLoopResult:
     """One closed loop of ``cfg.run.steps`` sampling times with at most K solver steps each.
 
     ``run.initial`` says whether the first sampling time is solved without a budget, ``run.safeguard`` which plan
@@ -513,20 +557,25 @@ def closed_loop(cfg: Config, game: CompiledGame, K: int, run: RunDirectory | Non
     Nothing is allocated by the number of steps planned: the result's arrays hold the sampling times run.
     A plant state that is not finite, or beyond ``solver.divergence_limit``, ends the loop there (``ended``: diverged),
     with the state it reached. ``record`` (a :class:`LoopRecord`) receives the loop's progress as it is made.
+    At every sampling time the game's runtime values are put in force (``parameters(t, x)`` gives any of them).
     """
-    return ClosedLoop(cfg, game, K, run, progress, interrupt, stage, record).run()
+    return ClosedLoop(cfg, game, K, run, progress, interrupt, stage, record, parameters).run()
 
 
 def simulate(cfg: Config, out: str | Path | None = None, *, force: bool = False,
-             progress: Progress | None = None) -> Simulation:
-    """One closed loop per K in ``cfg.run.K``; ``out`` as in :func:`gnerun.solve`."""
+             progress: Progress | None = None, parameters: RuntimeCallback | None = None) -> Simulation:
+    """One closed loop per K in ``cfg.run.K``; ``out`` as in :func:`gnerun.solve`. ``parameters(t, x)``, called at
+    every sampling time with its time t (seconds) and the plant state x, returns runtime values {name: value} (a
+    number, a vector, a matrix, or per-stage values) that replace the declared ones there; nothing is recompiled.
+    A callback that raises, or returns a value of the wrong shape, ends the run with an InputError (the log and
+    summary.json of the sampling times done are written)."""
     if cfg.game.kind != "dynamic":
         raise InputError(f"{cfg.source or cfg.name}: simulate needs a dynamic game (game.kind: dynamic); "
                          "solve a static game with gnerun.solve", cli=f"{cfg.source or cfg.name}: simulate needs a "
                          "dynamic game (game.kind: dynamic); use `gnerun solve` for a static game")
     with polled(no_check):  # built in a helper thread: a signal reaches this one at once (KeyboardInterrupt)
         game = compile_game(cfg)
-        stage = compile_stage_constraints(cfg)
+        stage = compile_stage_constraints(cfg, game)
         make_solver(cfg, game)  # the sparse system, where the loops take it, is built now: once, before the run
         if cfg.run.warm_start == "shift":
             game.shift_changed_rows  # noqa: B018 (found once, before the loop: it evaluates c at a test point)
@@ -560,7 +609,7 @@ def simulate(cfg: Config, out: str | Path | None = None, *, force: bool = False,
                 break
             record = LoopRecord(K, cfg.run.steps, game)
             try:
-                sim[K] = r = closed_loop(cfg, game, K, run, progress, interrupt, stage, record)
+                sim[K] = r = closed_loop(cfg, game, K, run, progress, interrupt, stage, record, parameters)
             except Stopped:  # a stop request while something was built: the loop as far as it went
                 sim[K] = record.result("interrupted")
                 break

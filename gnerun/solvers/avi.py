@@ -106,7 +106,7 @@ def _build(game: CompiledGame) -> AffineVI | None:
     keys: dict[bytes, int] = {}
     first: list[int] = []
     group = np.full(m, -1)
-    w0 = game.lq.offsets(game.x0)[n:]
+    w0 = game.lq.offsets(game._x(None))[n:]
     for j in np.flatnonzero(reached):
         parts = [C[j].tobytes(), bytes([bool(equality[j])]), np.float64(w0[j]).tobytes()]
         if offset_map is not None:

@@ -189,7 +189,7 @@ def _kinks(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | None) 
     if found is None:
         return []
     f, names = found
-    xv = game.x0 if x is None else np.asarray(x, dtype=float)
+    xv = game._x(x)
     d = np.asarray(f(a, xv), dtype=float).reshape(-1)
     return list(dict.fromkeys(name for name, v in zip(names, d, strict=True) if v <= KINK_TOL))
 
@@ -250,7 +250,7 @@ class NewtonResponses:
         problem, solver, order = self._solver(agent)
         game = self.game
         sl = game.agent_slices[agent]
-        xv = game.x0 if x is None else np.asarray(x, dtype=float)
+        xv = game._x(x)
         p = np.concatenate([xv, a[: sl.start], a[sl.stop:], a[sl]])
         ends = []
         check = self.check  # a stop request raises there, before every step
@@ -566,7 +566,7 @@ def _box_search(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | N
     except UnsupportedTape:
         return None, None
     lo, hi = search_box(game, agent, a)
-    xv = game.x0 if x is None else np.asarray(x, dtype=float)
+    xv = game._x(x)
     rows = game.agents.box_rows(agent)  # the bounds' rows hold on the whole box: they are left out of the search
     eq = game.equality_mask[rows]
 

@@ -156,7 +156,7 @@ class KKTSystem:
             z = np.array(z0, dtype=float).reshape(-1)
         if z.size != game.size:
             raise ValueError(f"z0 has {z.size} entries; the KKT system has {game.size} unknowns")
-        xv = game.x0 if x is None else game._x(x)
+        xv = game._x(x)
         if rng is None and self._noisy:
             rng = np.random.default_rng(self.disturbance.seed)
         if self._fixed_rows.size:

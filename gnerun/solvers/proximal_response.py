@@ -114,7 +114,7 @@ class ProximalResponse:
         for agent, sl, ms in zip(self.agents, game.agent_slices, game.multiplier_slices, strict=True):
             seen = new_a if self.gauss_seidel else a
             others = np.concatenate([seen[: sl.start], seen[sl.stop :]])
-            response = agent.respond(state.x, others, a[sl], lam[ms])
+            response = agent.respond(self.game._x(state.x), others, a[sl], lam[ms])
             if response.status in FAILURES:
                 return replace(state, status=response.status,
                                message=f"{agent.name}'s proximal response failed in round {state.k + 1}: "
