@@ -396,7 +396,8 @@ def sweep(
             stop_resource_tracker()  # the pool is gone: no process of the sweep outlives it
     if not quiet:
         typer.echo(f"{result.ran} run, {result.skipped} already finished (skipped), {result.failed} failed; "
-                   f"{result.wall_s:.1f} s with {executor}")
+                   f"{result.wall_s:.1f} s with {executor}; the game compiled {result.games_compiled} "
+                   f"time{'s' * (result.games_compiled != 1)} for the {result.ran} points run")
         typer.echo("index: " + ", ".join(str(p) for p in result.index_files))
 
 

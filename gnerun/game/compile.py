@@ -266,6 +266,17 @@ class CompiledGame:
         self.p = self.runtime.vector(t, values)
         return self.p
 
+    def adopt(self, cfg: Config) -> CompiledGame:
+        """This compiled game for ``cfg``, a config that compiles to the same functions (:func:`compile_key`): its
+        declared runtime values, data files and x0 replace this game's. Nothing is recompiled."""
+        compiled_from = self.derived.get("config")
+        if compiled_from is None or compile_key(cfg) != compile_key(compiled_from):
+            raise ValueError("the config compiles to another game (it differs in more than runtime values and x0)")
+        self.runtime = runtime_layout(cfg)
+        self.p = np.zeros(0) if self.runtime is None else self.runtime.vector()
+        self.x0 = np.asarray(cfg.game.x0, dtype=float) if cfg.game.kind == "dynamic" else self.x0
+        return self
+
     @property
     def parameters(self) -> dict:
         """The runtime values in force, by name (``t``: the time of stage 0, where the game uses the time)."""
@@ -670,6 +681,21 @@ def _domain_function(a: ca.SX, x: ca.SX, domain: list) -> tuple[Evaluator, np.nd
     return Evaluator(ca.Function("domain", [a, x], [ca.densify(margins)])), strict, owner
 
 
+def compile_key(cfg: Config) -> str:
+    """What a compiled game depends on: the game without its runtime values (their shapes stay) and x0, and the
+    sampling time. Configs of equal keys share one compilation (:meth:`CompiledGame.adopt`)."""
+    import hashlib
+    import json
+
+    data = cfg.model_dump(mode="json")
+    game = data["game"]
+    game.pop("x0", None)
+    for spec in (game.get("runtime") or {}).values():
+        spec["value"] = list(np.shape(spec["value"])) if spec.get("value") is not None else None
+        spec.pop("file", None)  # a data file's column: T + 2 values whatever file
+    return hashlib.sha256(json.dumps([game, cfg.run.sampling_time], sort_keys=True).encode()).hexdigest()
+
+
 @stoppable
 def compile_game(cfg: Config, smoothing: float = 0.0) -> CompiledGame:
     """Parse, condense (dynamic games) and differentiate the game of ``cfg`` once. With ``smoothing`` mu > 0, abs, min
@@ -680,12 +706,15 @@ def compile_game(cfg: Config, smoothing: float = 0.0) -> CompiledGame:
     a = ca.SX.sym("a", lay.n)
     x = ca.SX.sym("x", lay.nx + lay.np)  # the plant state, then the runtime values
     ex = _expressions(g, lay, a, x, list(range(N)), smoothing=smoothing)
-    return _assemble(kind=g.kind, a=a, x=x, costs=[ex.costs[i] for i in range(N)],
+    game = _assemble(kind=g.kind, a=a, x=x, costs=[ex.costs[i] for i in range(N)],
                      own_rows=[ex.own_rows[i] for i in range(N)], shared_common=ex.shared_common,
                      agent_names=[ag.name for ag in g.agents], lay=lay, equilibrium=g.equilibrium,
                      n_shared=len(g.shared_constraints),
                      state_names=list(g.states) if isinstance(g, DynamicGame) else [], dynamics=ex.dynamics,
                      domain=ex.domain)
+    if not smoothing:
+        game.derived["config"] = cfg  # what it was compiled from (adopt)
+    return game
 
 
 @dataclass(frozen=True)

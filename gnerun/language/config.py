@@ -424,12 +424,15 @@ class Config(Strict):
             warnings.append(self.size.certificate_warning())
         return [w for w in warnings if w]
 
-    def resolved_yaml(self) -> str:
+    def resolved_yaml(self, files: dict[str, str] | None = None) -> str:
         """The config with every default filled in, as YAML (what runs write to config.yaml); a game without
-        runtime parameters is written without the empty section."""
+        runtime parameters is written without the empty section. ``files`` gives runtime parameters' data files
+        new paths (a run directory's copies)."""
         data = self.model_dump(mode="json")
         if not data["game"].get("runtime"):
             data["game"].pop("runtime", None)
+        for name, file in (files or {}).items():
+            data["game"]["runtime"][name]["file"] = file
         return dump_yaml(data)
 
     def config_hash(self) -> str:

@@ -563,19 +563,25 @@ def closed_loop(cfg: Config, game: CompiledGame, K: int, run: RunDirectory | Non
 
 
 def simulate(cfg: Config, out: str | Path | None = None, *, force: bool = False,
-             progress: Progress | None = None, parameters: RuntimeCallback | None = None) -> Simulation:
+             progress: Progress | None = None, parameters: RuntimeCallback | None = None,
+             game: CompiledGame | None = None) -> Simulation:
     """One closed loop per K in ``cfg.run.K``; ``out`` as in :func:`gnerun.solve`. ``parameters(t, x)``, called at
     every sampling time with its time t (seconds) and the plant state x, returns runtime values {name: value} (a
     number, a vector, a matrix, or per-stage values) that replace the declared ones there; nothing is recompiled.
     A callback that raises, or returns a value of the wrong shape, ends the run with an InputError (the log and
-    summary.json of the sampling times done are written)."""
+    summary.json of the sampling times done are written). ``game``: as in :func:`gnerun.solve`."""
     if cfg.game.kind != "dynamic":
         raise InputError(f"{cfg.source or cfg.name}: simulate needs a dynamic game (game.kind: dynamic); "
                          "solve a static game with gnerun.solve", cli=f"{cfg.source or cfg.name}: simulate needs a "
                          "dynamic game (game.kind: dynamic); use `gnerun solve` for a static game")
     with polled(no_check):  # built in a helper thread: a signal reaches this one at once (KeyboardInterrupt)
-        game = compile_game(cfg)
-        stage = compile_stage_constraints(cfg, game)
+        if game is None:
+            game = compile_game(cfg)
+        else:
+            game.adopt(cfg)
+        stage = game.derived.get("stage")
+        if stage is None:
+            stage = game.derived["stage"] = compile_stage_constraints(cfg, game)
         make_solver(cfg, game)  # the sparse system, where the loops take it, is built now: once, before the run
         if cfg.run.warm_start == "shift":
             game.shift_changed_rows  # noqa: B018 (found once, before the loop: it evaluates c at a test point)

@@ -7,6 +7,7 @@ import datetime as dt
 import functools
 import json
 import math
+import shutil
 import subprocess
 import warnings
 from collections.abc import Callable, Iterator
@@ -63,6 +64,25 @@ def git_describe() -> str:
     return out.stdout.strip() if out.returncode == 0 and out.stdout.strip() else "unknown"
 
 
+def data_copies(cfg: Config) -> dict[str, tuple[Path, str]]:
+    """The data files of a config's runtime parameters and where a run directory keeps their copies (data/<file>,
+    relative to it: the config.yaml written there names the copies, so that the run can be run again from it)."""
+    from ..game.runtime import data_path
+
+    out: dict[str, tuple[Path, str]] = {}
+    taken: dict[str, Path] = {}
+    for name, spec in cfg.game.runtime.items():
+        if spec.file is None:
+            continue
+        source = data_path(cfg.source, spec.file).resolve()
+        target = f"data/{source.name}"
+        if taken.get(target, source) != source:
+            target = f"data/{name}-{source.name}"
+        taken[target] = source
+        out[name] = (source, target)
+    return out
+
+
 class RunDirectory:
     """An open run directory and its MCAP log; it holds the directory's lock until :meth:`close`."""
 
@@ -88,7 +108,12 @@ class RunDirectory:
             if contents(path) and not force:
                 raise InputError(f"{path}: the run directory exists and is not empty (force=True overwrites it)",
                                  cli=f"{path}: the run directory exists and is not empty (use --force to overwrite)")
-            config_yaml = cfg.resolved_yaml()
+            copies = data_copies(cfg)
+            for source, target in copies.values():
+                made.append(path / target)
+                (path / target).parent.mkdir(exist_ok=True)
+                shutil.copyfile(source, path / target)  # the data file is only read
+            config_yaml = cfg.resolved_yaml({name: target for name, (_, target) in copies.items()})
             for stale in ("summary.json", "summary.json.tmp"):  # unlink never follows a link
                 (path / stale).unlink(missing_ok=True)
             made.append(path / "config.yaml")

@@ -16,7 +16,9 @@ import numpy as np
 from ..game.building import no_check, polled
 from ..game.compile import CompiledGame, compile_game
 from ..language.config import Config
+from ..log import topics
 from ..log.mcap_log import json_ready
+from ..log.messages import RuntimeValues
 from ..solvers.driver import Solver, iterate
 from ..solvers.factory import SPARSE_FROM, SPARSE_WORK, formulation, make_solver  # noqa: F401 - the API's names
 from ..solvers.globalization import FALLBACK, resolve
@@ -303,6 +305,7 @@ class SolveResult:
     x: np.ndarray
     game: CompiledGame = field(repr=False)
     run_dir: Path | None = None
+    parameters: dict = field(default_factory=dict)  # the runtime values the game was solved with
 
     @property
     def success(self) -> bool:
@@ -345,24 +348,30 @@ class SolveResult:
             "z_star": None if self.z_star is None else self.z_star.tolist(),
             "time_s": self.time_s,
             "compile_time_s": self.compile_time_s,
+            **({"parameters": self.parameters} if self.parameters else {}),
         })
 
 
 def solve(cfg: Config, out: str | Path | None = None, *, force: bool = False,
           on_iterate: Callable[[SSNState, float | None], None] | None = None,
-          on_stage: Callable[[str], None] | None = None) -> SolveResult:
+          on_stage: Callable[[str], None] | None = None, parameters: dict | None = None,
+          game: CompiledGame | None = None) -> SolveResult:
     """Solve the config's game (a static game, or a dynamic game at its x0).
 
     ``out=None`` writes nothing; otherwise ``out`` becomes a run directory with
     ``config.yaml``, ``run.mcap`` (every iterate, flushed as it is made) and ``summary.json``.
     ``on_iterate(state, error_norm)`` sees every iterate as it is made (error_norm = ||z^k - z*||);
     ``on_stage(text)`` is told what a long solve is doing besides iterating (the exact solution, the certificate).
+    ``parameters`` ({name: value}) gives runtime values in place of the declared ones (at time t = 0). ``game``: a
+    game compiled from a config that differs from ``cfg`` in runtime values and x0 at most, used for ``cfg`` without
+    compiling again (:meth:`~gnerun.game.compile.CompiledGame.adopt`).
     """
     t0 = time.perf_counter()
     with polled(no_check):  # built in a helper thread: a signal reaches this one at once (KeyboardInterrupt)
-        game = compile_game(cfg)
+        game = compile_game(cfg) if game is None else game.adopt(cfg)
         solver = make_solver(cfg, game)  # with the sparse system, where the solver takes that formulation
         compile_time = time.perf_counter() - t0
+        game.set_parameters(parameters)
         game.kkt_residual(game.z_start(), game.x0)  # built now: what an interrupted solve reports is read from it
     run = RunDirectory.create(out, cfg, command="solve", force=force) if out is not None else None
     interrupt = Interrupt()
@@ -487,6 +496,8 @@ def _announce(cfg: Config, game: CompiledGame, run: RunDirectory) -> None:
                     f"({cfg.solver.complementarity}), disturbance {cfg.disturbance.kind}")
     for warning in cfg.size_warnings("solve"):
         run.log("warning", warning)
+    if game.runtime is not None:
+        run.write(topics.SOLVE_PARAMETERS, RuntimeValues.of(0, game.parameters))
 
 
 def _result(game: CompiledGame, outcome, history: list[SSNState], z_star: np.ndarray | None, ref, cert: dict,
@@ -514,6 +525,7 @@ def _result(game: CompiledGame, outcome, history: list[SSNState], z_star: np.nda
         x=np.asarray(x, dtype=float),
         game=game,
         run_dir=run.path if run is not None else None,
+        parameters=game.parameters,
     )
 
 

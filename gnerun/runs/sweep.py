@@ -287,20 +287,32 @@ def _abandon(code: int) -> None:
 
 
 def _run_point(task: dict[str, Any], out: Path, t0: float) -> list[dict[str, Any]]:
+    from ..game.compile import compile_game, compile_key
     from .closed_loop import simulate
     from .solving import solve
 
     try:
         cfg = load_config(task["base"], task["overrides"])
+        # points that differ in runtime values and x0 only share one compiled game per worker
+        key = compile_key(cfg)
+        compiled = key not in _compiled
+        if compiled:
+            _compiled.clear()  # one game kept: a sweep over compiled parameters does not accumulate them
+            _compiled[key] = compile_game(cfg)
+        game = _compiled[key]
         if task["command"] == "simulate":
-            simulate(cfg, out=out, force=True)
+            simulate(cfg, out=out, force=True, game=game)
         else:
-            solve(cfg, out=out, force=True)
+            solve(cfg, out=out, force=True, game=game)
         wall = time.perf_counter() - t0
         replace_text(out / POINT_JSON, json.dumps({"index": task["index"], "params": task["params"],
-                                                   "config_hash": task["config_hash"], "wall_s": wall}) + "\n")
+                                                   "config_hash": task["config_hash"], "wall_s": wall,
+                                                   "compiled": compiled, "worker": os.getpid()}) + "\n")
         # from the written summary, as for a point skipped on resume: the same rows either way
-        return rows_from_summary(task, read_json_object(out / "summary.json"), wall)
+        rows = rows_from_summary(task, read_json_object(out / "summary.json"), wall)
+        for r in rows:
+            r["compiled"] = compiled
+        return rows
     except Exception as e:  # noqa: BLE001 - a failed point is a row, never the end of the sweep
         message = f"{type(e).__name__}: {e}" if not isinstance(e, InputError | Unavailable) else str(e)
         try:
@@ -367,6 +379,7 @@ Completed = Iterator[tuple[dict[str, Any], list[dict[str, Any]]]]
 
 
 _point_in_progress = False  # in a worker: run_point is running
+_compiled: dict[str, Any] = {}  # in a worker: the game compiled last, by its compile key
 STOP_GRACE_S = 5.0  # a stopped worker closes its point within this time, or exits without closing it
 
 
@@ -565,6 +578,7 @@ class SweepResult(BaseModel):
     wall_s: float
     executor: str
     index_files: list[Path]
+    games_compiled: int = 0  # games the points that ran compiled: points differing in runtime values share one
 
 
 def _finished(sweep_dir: Path, point: Point) -> tuple[dict[str, Any], dict[str, Any]] | None:
@@ -644,12 +658,14 @@ def _run_sweep(sweep: Sweep, sweep_dir: Path, executor: str, workers: int, addre
         tasks.append(task)
     skipped = len(rows)
     failed = 0
+    compiled = 0  # the games the points that ran compiled (points sharing a compiled game count none)
     done = skipped
     completed = _local(tasks, workers) if executor == "local" else _dask(tasks, workers, address)
     try:
         for task, task_rows in completed if tasks else ():
             rows[task["index"]] = task_rows
             failed += any(r["status"] == "error" for r in task_rows)
+            compiled += any(r.get("compiled") for r in task_rows)
             done += 1
             if done < len(sweep.points):  # the last one is written below, with the parquet table
                 write_index(sweep, sweep_dir, rows, parquet=False)
@@ -662,9 +678,11 @@ def _run_sweep(sweep: Sweep, sweep_dir: Path, executor: str, workers: int, addre
             "name": sweep.spec.name, "source": sweep.source, "base": str(sweep.base), "axes": sweep.axes,
             "mode": sweep.spec.mode, "command": sweep.spec.command, "points": len(sweep.points),
             "finished": len(rows), "ran": len(rows) - skipped, "skipped": skipped, "failed": failed,
-            "executor": executor, "workers": workers, "address": address, "wall_s": wall}, indent=2) + "\n")
+            "executor": executor, "workers": workers, "address": address, "wall_s": wall,
+            "games_compiled": compiled}, indent=2) + "\n")
     return SweepResult(directory=sweep_dir, rows=[r for i in sorted(rows) for r in rows[i]], ran=len(rows) - skipped,
-                       skipped=skipped, failed=failed, wall_s=wall, executor=executor, index_files=files)
+                       skipped=skipped, failed=failed, wall_s=wall, executor=executor, index_files=files,
+                       games_compiled=compiled)
 
 
 def columns(sweep: Sweep) -> list[str]:

@@ -225,7 +225,10 @@ class NewtonResponses:
             from .globalization import globalized
             from .ssn import SemismoothNewton
 
-            problem = compile_agent_problem(self.cfg, agent, 0.0)
+            built = self.game.derived.setdefault("agent_problems", {})  # once per game (a sweep's points share it)
+            if agent not in built:
+                built[agent] = compile_agent_problem(self.cfg, agent, 0.0)
+            problem = built[agent]
             opts = SolverConfig(**{**self.cfg.solver.model_dump(), "kind": "ssn", "globalization": "interior_point",
                                    "formulation": "condensed", "max_iter": self.MAX_ITER,
                                    "tol": min(self.cfg.solver.tol, 1e-10)})
