@@ -277,6 +277,19 @@ class CompiledGame:
         self.x0 = np.asarray(cfg.game.x0, dtype=float) if cfg.game.kind == "dynamic" else self.x0
         return self
 
+    def with_parameters(self, x: np.ndarray | None = None, values: dict | None = None, t: float = 0.0) -> np.ndarray:
+        """The state x with runtime values appended, (x, p), for a solver that embeds the game:
+        ``solver.init(z0, game.with_parameters(x, {"r": 0.3}, t))`` solves with those values (every step of that
+        solve uses them), whatever values are in force in the game. Nothing is recompiled."""
+        x = self.x0 if x is None else np.asarray(x, dtype=float).reshape(-1)
+        if x.size != self.nx:
+            raise ValueError(f"state x has {x.size} entries, the game has {self.nx} states")
+        if self.runtime is None:
+            if values:
+                raise ValueError(f"runtime values for {', '.join(values)}: this game has no runtime parameters")
+            return x
+        return np.concatenate([x, self.runtime.vector(t, values)])
+
     @property
     def parameters(self) -> dict:
         """The runtime values in force, by name (``t``: the time of stage 0, where the game uses the time)."""

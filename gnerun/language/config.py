@@ -777,6 +777,7 @@ class _SemanticChecks:
         self.agent_names: set[str] = set()
         self.tables: dict[str, str] = {}  # runtime parameters that are indexed, and their kind (vector ...)
         self.scalars: set[str] = set()  # runtime parameters used by name alone
+        self.runtime_ok = True
 
     def report(self, path: PathKey, message: str, *, key: bool = False, column: int | None = None) -> None:
         where = self.smap.locate_in_text(path, column) if column is not None else self.smap.locate(path, key=key)
@@ -840,6 +841,7 @@ class _SemanticChecks:
     def runtime(self) -> None:
         """Runtime parameters: names, values of a consistent shape, data files that can be read and cover the run."""
         g = self.g
+        reported = len(self.problems)
         for name, spec in g.runtime.items():
             path = ("game", "runtime", name)
             self.declare(name, path, "runtime parameter", key=True)
@@ -861,6 +863,7 @@ class _SemanticChecks:
                 self.scalars.add(name)
             if kind != "scalar":
                 self.tables[name] = kind
+        self.runtime_ok = len(self.problems) == reported  # the layout can be built (the entries' checks need it)
 
     def _runtime_value(self, spec: Any, path: PathKey) -> str | None:
         value = spec.value
@@ -899,8 +902,9 @@ class _SemanticChecks:
             cfg = self.cfg
             self.report(path + ("file",), f"{spec.file}: the table spans t = {table.times[0]:g} .. "
                                           f"{table.times[-1]:g} s; the run needs t = {start:g} .. {end:g} s "
-                                          f"(run.steps = {cfg.run.steps} sampling times of {cfg.run.sampling_time:g} "
-                                          f"s and the horizon's {self.g.horizon + 1} stages after the last)")
+                                          f"(run.steps = {cfg.run.steps} sampling times of "
+                                          f"{cfg.run.sampling_time:g} s, "
+                                          f"the last one looking {self.g.horizon + 1} stages ahead)")
 
     def indices(self, parsed: Expression | Constraint, path: PathKey, taus: list[int] | None) -> None:
         """The runtime parameters' entries in one expression: each names a vector, matrix or per-stage table with
@@ -974,7 +978,7 @@ class _SemanticChecks:
         except ExpressionError as e:
             self.report(path, e.describe(), column=e.column)
             return
-        if g.runtime:
+        if g.runtime and self.runtime_ok:
             self.indices(parsed, path, taus)
 
     def expressions(self) -> None:
@@ -999,7 +1003,8 @@ class _SemanticChecks:
                 self.check(agent.terminal_cost, ("game", "agents", i, "terminal_cost"), states | params, False)
                 for j, c in enumerate(agent.constraints):
                     self.check(c, ("game", "agents", i, "constraints", j), scope, True, taus)
-            self._dynamics(scope - (params - set(g.parameters)))
+            runtime = {n for n, what in self.seen.items() if what == "runtime parameter"}
+            self._dynamics(scope - runtime - ({"t"} if "t" not in self.seen else set()))
         for j, c in enumerate(g.shared_constraints):
             self.check(c, ("game", "shared_constraints", j), scope, True, None if static else taus)
 
@@ -1031,7 +1036,8 @@ class _SemanticChecks:
             if s not in g.states:
                 self.report(where + (s,), f"{s!r} is not a declared state (states: {', '.join(g.states)})", key=True)
             else:  # the dynamics are the same at every stage (no tau)
-                runtime = sorted(_names_of(text) & (set(g.runtime) | ({"t"} if "t" not in self.seen else set())))
+                declared = {n for n, what in self.seen.items() if what == "runtime parameter"}
+                runtime = sorted(_names_of(text) & (declared | ({"t"} if "t" not in self.seen else set())))
                 if runtime:
                     self.report(where + (s,), f"{runtime[0]!r} is a runtime value: the dynamics are compiled with "
                                               "constants (parameters), the same at every stage and sampling time")
