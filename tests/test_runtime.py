@@ -269,3 +269,25 @@ def test_games_without_runtime_values_compile_as_before() -> None:
         game = compile_game(cfg)
         assert game.runtime is None and game.p.size == 0
         assert "runtime" not in cfg.resolved_yaml()
+
+
+def test_a_declared_reference_is_logged_with_the_tracking_error_and_drawn(tmp_path) -> None:
+    cfg = load_config(CONFIGS / "tracking.yaml", ["run.K=[1, 3]", "run.steps=30"])
+    gnerun.simulate(cfg, tmp_path / "run")
+    summary = json.loads((tmp_path / "run" / "summary.json").read_text())
+    times = 0.1 * np.arange(30)
+    for K in ("1", "3"):
+        loop = summary["by_K"][K]
+        x = np.array(loop["x"])[:30, 0]
+        np.testing.assert_allclose(loop["reference"]["p1"], np.sin(0.8 * times), rtol=0, atol=1e-15)
+        np.testing.assert_allclose(loop["tracking_error"]["p1"], x - np.sin(0.8 * times), rtol=0, atol=1e-15)
+        logged = read_run(tmp_path / "run").messages[f"/K{K}/mpc/parameters"]
+        assert [m["references"]["p1"] for m in logged] == loop["reference"]["p1"]
+    from gnerun.view.figures import make_figures
+
+    fig = make_figures([tmp_path / "run"])["tracking-study2"]
+    titles = [ax.get_title() for ax in fig.axes if ax.get_visible()]
+    assert titles[1] == "(b) tracking error to the reference (p1)" and titles[2] == "(c) solver error to z*(t)"
+    ax_r = fig.axes[1]
+    for K, line in zip(("1", "3"), ax_r.get_lines(), strict=True):  # |x - r| per K, as the summary has it
+        np.testing.assert_allclose(line.get_ydata(), np.abs(summary["by_K"][K]["tracking_error"]["p1"]), atol=1e-15)

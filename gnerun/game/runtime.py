@@ -349,3 +349,39 @@ def needed_span(cfg: Any) -> tuple[float, float]:
     """The times a run of ``cfg`` reads its data files at: from 0 to the last stage of the last sampling time."""
     g = cfg.game
     return 0.0, (cfg.run.steps + g.horizon) * cfg.run.sampling_time
+
+
+class References:
+    """The references a game declares for its states (``game.references``): each an expression of parameters,
+    runtime values and the time t, evaluated at a sampling time from the values in force (per-stage values at stage
+    0). What the log records with the runtime values, and the figures draw with the tracking error x - r."""
+
+    def __init__(self, cfg: Any, layout: RuntimeLayout | None):
+        from ..language.expr import parse_expression
+
+        g = cfg.game
+        self.layout = layout
+        self.parameters = dict(g.parameters)
+        self.trees = {state: parse_expression(text) for state, text in getattr(g, "references", {}).items()}
+        self.index = {s: k for k, s in enumerate(getattr(g, "states", []))}
+
+    def __bool__(self) -> bool:
+        return bool(self.trees)
+
+    def at(self, t_k: float, p: np.ndarray) -> dict[str, float]:
+        """r(t_k) of every referenced state."""
+        from ..language.expr import evaluate, numpy_functions
+
+        env: dict[str, Any] = dict(self.parameters)
+        if self.layout is not None:
+            common, stages = self.layout.symbols(p)
+            env.update(common)
+            env.update({name: values[0] for name, values in stages.items()})
+        env.setdefault("t", t_k)
+        fns = numpy_functions()
+        with np.errstate(all="ignore"):
+            return {state: float(evaluate(tree, env, fns)) for state, tree in self.trees.items()}
+
+    def errors(self, x: np.ndarray, values: dict[str, float]) -> dict[str, float]:
+        """x_s - r_s of every referenced state s."""
+        return {state: float(x[self.index[state]] - r) for state, r in values.items()}

@@ -247,6 +247,9 @@ class DynamicGame(Strict):
     x0: list[float]
     parameters: dict[str, float] = Field(default_factory=dict)
     runtime: Runtime = Field(default_factory=dict)
+    references: dict[str, Expr] = Field(default_factory=dict, description="state: the reference it tracks, an "
+                                        "expression of parameters, runtime values and t (logged, and drawn by the "
+                                        "figures with the tracking error)")
     agents: list[DynamicAgent] = Field(min_length=1)
     shared_constraints: list[SharedSpec] = Field(default_factory=list)
     equilibrium: Literal["generalized", "variational"] = "generalized"
@@ -429,8 +432,9 @@ class Config(Strict):
         runtime parameters is written without the empty section. ``files`` gives runtime parameters' data files
         new paths (a run directory's copies)."""
         data = self.model_dump(mode="json")
-        if not data["game"].get("runtime"):
-            data["game"].pop("runtime", None)
+        for optional in ("runtime", "references"):
+            if not data["game"].get(optional) and optional in data["game"]:
+                data["game"].pop(optional)
         for name, file in (files or {}).items():
             data["game"]["runtime"][name]["file"] = file
         return dump_yaml(data)
@@ -1007,6 +1011,13 @@ class _SemanticChecks:
             self._dynamics(scope - runtime - ({"t"} if "t" not in self.seen else set()))
         for j, c in enumerate(g.shared_constraints):
             self.check(c, ("game", "shared_constraints", j), scope, True, None if static else taus)
+        if not static:
+            for state, text in g.references.items():
+                if state not in g.states:
+                    self.report(("game", "references", state), f"{state!r} is not a state (states: "
+                                f"{', '.join(g.states)})", key=True)
+                else:  # what the plant's state is compared with: no decision, no state, no stage
+                    self.check(text, ("game", "references", state), params, False)
 
     def _dynamics(self, scope: set[str]) -> None:
         """x0 and the dynamics of a dynamic game: shapes, finite numbers, one equation per state."""

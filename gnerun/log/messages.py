@@ -229,13 +229,16 @@ class RuntimeValues(Message):
 
     t: int
     values: dict[str, list[float]] = Field(default_factory=dict, description="the runtime values by name")
+    references: dict[str, float] = Field(default_factory=dict, description="r(t) of the states with a reference "
+                                                                           "(game.references), by state")
 
     @classmethod
-    def of(cls, t: int, record: dict) -> RuntimeValues:
-        """From a game's record of its runtime values (``CompiledGame.parameters``)."""
+    def of(cls, t: int, record: dict, references: dict | None = None) -> RuntimeValues:
+        """From a game's record of its runtime values (``CompiledGame.parameters``) and its references at t."""
         import numpy as np
 
-        return cls(t=t, values={k: np.asarray(v, dtype=float).reshape(-1).tolist() for k, v in record.items()})
+        return cls(t=t, values={k: np.asarray(v, dtype=float).reshape(-1).tolist() for k, v in record.items()},
+                   references=references or {})
 
 
 TOPICS: dict[str, type[Message]] = {

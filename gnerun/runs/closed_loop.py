@@ -25,6 +25,7 @@ import numpy as np
 from ..errors import InputError
 from ..game.building import no_check, polled
 from ..game.compile import CompiledGame, StageConstraints, compile_game, compile_stage_constraints
+from ..game.runtime import References
 from ..language.config import Config, PlantDisturbance
 from ..log import topics
 from ..log.mcap_log import json_ready
@@ -65,6 +66,7 @@ class ClosedLoopResult:
     planned: int | None = None  # run.steps
     message: str = ""  # why a loop ended early (diverged, error)
     parameters: list[dict] = field(default_factory=list)  # per t: the runtime values in force (games with any)
+    references: list[dict] = field(default_factory=list)  # per t: r(t) of the states with a reference
 
     @property
     def steps(self) -> int:
@@ -121,7 +123,11 @@ class ClosedLoopResult:
             "final_e_norm": self.final_e_norm,
             "median_solve_time_s": float(np.median(self.solve_time_s[:done])) if done else math.nan,
             "max_solve_time_s": float(np.max(self.solve_time_s[:done])) if done else math.nan,
-            **({"parameters": _by_name(self.parameters[:done])} if self.parameters else {}),
+            **({"parameters": _by_name(self.parameters[:done])} if any(self.parameters) else {}),
+            **({"reference": _by_name(self.references[:done]),
+                "tracking_error": {s: [float(self.x[k, game.state_names.index(s)] - r[s])
+                                       for k, r in enumerate(self.references[:done])]
+                                   for s in self.references[0]}} if self.references and self.references[0] else {}),
         })
 
 
@@ -248,6 +254,7 @@ class LoopRecord:
         self.xs: list[np.ndarray] = []  # x(t) of every sampling time begun, then the state the loop ended in
         self.samples: list[Sample] = []
         self.parameters: list[dict] = []  # the runtime values of every sampling time begun
+        self.references: list[dict] = []  # r(t) of the states with a reference, every sampling time begun
         self.reached: np.ndarray | None = np.array(game.x0, dtype=float)  # the state after the last time done
 
     def add(self, sample: Sample, reached: np.ndarray | None) -> None:
@@ -284,7 +291,7 @@ class LoopRecord:
             worst_constraint=[s.worst_constraint for s in samples], fallback=column("fallback", bool),
             z=rows([s.z for s in samples], self.size), z_star=rows([s.z_star for s in samples], self.size),
             completed=per_step, ended=ended, planned=self.steps, message=message,
-            parameters=self.parameters[:per_step])
+            parameters=self.parameters[:per_step], references=self.references[:per_step])
 
 
 class LoopLog:
@@ -313,8 +320,8 @@ class LoopLog:
                                                               e_norm_agent=dict(sample.e_norm_agent)))
         self.run.flush()
 
-    def parameters(self, t: int, values: dict) -> None:
-        self.run.write(topics.mpc(self.K, "parameters"), RuntimeValues.of(t, values))
+    def parameters(self, t: int, values: dict, references: dict) -> None:
+        self.run.write(topics.mpc(self.K, "parameters"), RuntimeValues.of(t, values, references))
 
     def last_state(self, t: int, x: np.ndarray, status: str) -> None:
         """The state the loop ended in, which no solver step produced (status: '' or diverged)."""
@@ -336,6 +343,7 @@ class ClosedLoop:
                  parameters: RuntimeCallback | None = None):
         self.cfg, self.game, self.K = cfg, game, K
         self.parameters = parameters
+        self.references = References(cfg, game.runtime)
         self.solver = make_solver(cfg, game)
         self.stage = stage if stage is not None else compile_stage_constraints(cfg, game)
         self.reference = ReferenceSolver(cfg, game) if cfg.run.reference == "exact" else None
@@ -396,7 +404,7 @@ class ClosedLoop:
         """The runtime values of sampling time t in force (the declared ones at its time, data files interpolated at
         its stages' times, and what the ``parameters`` callback gives), recorded and logged."""
         game = self.game
-        if game.runtime is None and self.parameters is None:
+        if game.runtime is None and self.parameters is None and not self.references:
             return
         now = t * self.cfg.run.sampling_time
         values = None
@@ -414,9 +422,11 @@ class ClosedLoop:
         except (InputError, ValueError) as exc:
             raise InputError(f"the parameters callback at t = {now:g} s: {exc}") from None
         record = game.parameters
+        references = self.references.at(now, game.p) if self.references else {}
         self.record.parameters.append(record)
+        self.record.references.append(references)
         if self.log is not None:
-            self.log.parameters(t, record)
+            self.log.parameters(t, record, references)
 
     def _diverged(self, t: int, size_of_x: float) -> str:
         limit, plant = self.cfg.solver.divergence_limit, self.cfg.disturbance.plant

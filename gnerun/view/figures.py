@@ -321,20 +321,61 @@ def study1_figure(runs: list[RunRecord]):
     return fig
 
 
+def references(topics: dict[str, list[dict]]) -> dict[str, tuple[list[int], list[float]]]:
+    """r(t) of the states with a reference (game.references), from a loop's /K<k>/mpc/parameters: {state: (t, r)}."""
+    out: dict[str, tuple[list[int], list[float]]] = {}
+    for m in topics.get("parameters", []):
+        for state, r in (m.get("references") or {}).items():
+            ts, rs = out.setdefault(state, ([], []))
+            ts.append(m["t"])
+            rs.append(number(r))
+    return out
+
+
+def tracking_errors(topics: dict[str, list[dict]], names: list[str]) -> tuple[list[int], list[float]]:
+    """|x(t) - r(t)| over the referenced states (the 2-norm), per sampling time."""
+    refs = references(topics)
+    x_at = {m["t"]: m.get("x") for m in topics.get("state", []) if m.get("x")}
+    by_t: dict[int, float] = {}
+    for state, (ts, rs) in refs.items():
+        j = names.index(state) if state in names else None
+        for t, r in zip(ts, rs, strict=True):
+            if j is not None and t in x_at:
+                by_t[t] = by_t.get(t, 0.0) + (number(x_at[t][j]) - r) ** 2
+    ts = sorted(by_t)
+    return ts, [math.sqrt(by_t[t]) for t in ts]
+
+
 def study2_figure(run: RunRecord):
     """x(t) of the loop with the largest K, and ||e(t)|| per K (a loop without z*, run.reference none, has no
-    e(t): its residual ||Phi(z^K(t))|| per K instead)."""
+    e(t): its residual ||Phi(z^K(t))|| per K instead). A game with references (game.references) draws r(t) dashed
+    over its states, and a panel of the tracking error |x(t) - r(t)| per K before the solver's error."""
     loops = closed_loops(run)
-    fig, (ax_x, ax_e), width = panels(2)
     K_max = max(loops)
-    states = loops[K_max].get("state", [])
     names = (run.config.get("game") or {}).get("states") or []
+    tracked = references(loops[K_max])
+    if tracked:
+        fig, (ax_x, ax_r, ax_e), width = panels(3)
+    else:
+        fig, (ax_x, ax_e), width = panels(2)
+    states = loops[K_max].get("state", [])
     nx = max((len(m.get("x") or []) for m in states), default=0)
     t = [m["t"] for m in states]
     for j in range(nx):
-        ax_x.plot(t, [number((m.get("x") or [math.nan] * nx)[j]) for m in states],
-                  label=names[j] if j < len(names) else f"x{j + 1}", ls=("-", "--", ":")[j // 10 % 3])
+        line, = ax_x.plot(t, [number((m.get("x") or [math.nan] * nx)[j]) for m in states],
+                          label=names[j] if j < len(names) else f"x{j + 1}", ls=("-", "--", ":")[j // 10 % 3])
+        if j < len(names) and names[j] in tracked:
+            ax_x.plot(*tracked[names[j]], color=line.get_color(), ls=(0, (4, 2)), lw=1.0,
+                      label=f"reference of {names[j]}")
     _mark_steps(ax_x, failed_steps(states), fallback_steps(states))
+    if tracked:
+        for i, (K, topics) in enumerate(loops.items()):
+            ax_r.plot(*tracking_errors(topics, names), label=f"K = {K}", color=f"C{i % 10}")
+        ax_r.set_xlabel("t")
+        ax_r.set_ylabel(r"$|x(t) - r(t)|$")
+        ax_r.set_title(f"(b) tracking error to the reference ({', '.join(tracked)})")
+        _integer_ticks(ax_r)
+        legend(ax_r, width)
     ax_x.set_xlabel("t")
     ax_x.set_ylabel("x(t)")
     ax_x.set_title(f"(a) x(t), K = {K_max}")
@@ -353,7 +394,9 @@ def study2_figure(run: RunRecord):
     floor.draw()
     ax_e.set_xlabel("t")
     ax_e.set_ylabel(r"$\|e(t)\|$" if errors_logged else r"$\|\Phi(z^K(t))\|$")
-    ax_e.set_title("(b) tracking error" if errors_logged else "(b) residual (no z*)")
+    letter = "c" if tracked else "b"
+    ax_e.set_title((f"({letter}) solver error to z*(t)" if tracked else "(b) tracking error") if errors_logged
+                   else f"({letter}) residual (no z*)")
     _integer_ticks(ax_e)
     legend(ax_x, width)
     legend(ax_e, width, floor.notes())
