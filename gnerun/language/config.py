@@ -35,11 +35,15 @@ from .expand import Expander, expands
 from .expr import (
     CONSTANTS,
     FUNCTIONS,
+    INTEGER_OPERATORS,
+    Binary,
     ExpressionError,
     check_names,
+    nodes,
     parse_cache,
     parse_constraint,
     parse_expression,
+    unparse,
 )
 from .parts import constraint_agents as constraint_agents  # (the compiler reads these three from here)
 from .parts import constraint_stages as constraint_stages
@@ -727,8 +731,10 @@ class _SemanticChecks:
         self.seen: dict[str, str] = {}  # every name declared so far, and what it is
         self.agent_names: set[str] = set()
 
-    def report(self, path: PathKey, message: str, *, key: bool = False, column: int | None = None) -> None:
-        where = self.smap.locate_in_text(path, column) if column is not None else self.smap.locate(path, key=key)
+    def report(self, path: PathKey, message: str, *, key: bool = False, column: int | None = None,
+               text: str | None = None) -> None:
+        where = (self.smap.locate_in_text(path, column, text=text) if column is not None
+                 else self.smap.locate(path, key=key))
         self.problems.append(f"{where}: {show_path(path)}: {message}")
 
     def declare(self, name: str, path: PathKey, what: str, *, key: bool = False) -> None:
@@ -807,8 +813,14 @@ class _SemanticChecks:
         try:
             parsed = parse_constraint(text) if constraint else parse_expression(text)
             check_names(parsed, names)
+            roots = [parsed.lhs, parsed.rhs] if constraint else [parsed.tree]
+            integer = next((n for root in roots for n in nodes(root) if isinstance(n, Binary)
+                            and n.op in INTEGER_OPERATORS), None) if "%" in text or "//" in text else None
+            if integer is not None:  # the expansion writes out those of integers (gnerun.language.substitute)
+                raise ExpressionError(f"'{integer.op}' is integer arithmetic (indices, integer parameters, T): "
+                                      f"{unparse(integer)!r} is not", text, integer.column)
         except ExpressionError as e:
-            self.report(path, e.describe(), column=e.column)
+            self.report(path, e.describe(), column=e.column, text=text)
 
     def expressions(self) -> None:
         """Costs, constraints, x0 and dynamics, and the shared constraints."""

@@ -60,7 +60,8 @@ def _uses(value: Any) -> bool:
     if isinstance(value, list):
         return any(_uses(v) for v in value)
     if isinstance(value, str):
-        return "{" in value or "[" in value or _AGGREGATE.search(value) is not None and " for " in value
+        return ("{" in value or "[" in value or "%" in value or "//" in value
+                or _AGGREGATE.search(value) is not None and " for " in value)
     return False
 
 
@@ -96,7 +97,9 @@ class Expander:
             out = self._document(data)
         except Problem as p:
             if p.column is not None:
-                where = self.src.locate_in_text(p.path, p.column)
+                text = p.path[-1] if p.key else _value_at(data, p.path)
+                where = self.src.locate_in_text(p.path, p.column, key=p.key,
+                                                text=text if isinstance(text, str) else None)
             else:
                 where = self.src.locate(p.path, key=p.key)
             if p.bindings:
@@ -195,7 +198,7 @@ class Expander:
                 if k == "for":
                     raise Problem(src + (k,), "for: belongs to an item of a list (agents, states, constraints, "
                                                "shared constraints, dynamics)", scope.indices)
-                nk = self.subst.template(k, src + (k,), scope) if isinstance(k, str) else k
+                nk = self.subst.template(k, src + (k,), scope, key=True) if isinstance(k, str) else k
                 if nk in out:
                     raise Problem(src + (k,), f"key {nk!r} appears twice after expansion", scope.indices)
                 self.positions.copy(src + (k,), dst + (nk,), key=True, scope=scope)
@@ -289,7 +292,7 @@ class Expander:
                 scopes = self.families.family(part["for"], src + (idx, "for"), scope)
             for inner in scopes:
                 for k, v in body.items():
-                    name = self.subst.template(k, src + (idx, k), inner) if isinstance(k, str) else k
+                    name = self.subst.template(k, src + (idx, k), inner, key=True) if isinstance(k, str) else k
                     if name in merged:
                         raise Problem(src + (idx, k), f"{name!r} is given twice in {what}", inner.indices)
                     self.positions.copy(src + (idx, k), dst + (name,), key=True, scope=inner)
@@ -297,7 +300,23 @@ class Expander:
         return merged
 
 
-def _reserved(name: str, parameters: dict, vectors: dict) -> str | None:
+def _value_at(data: Any, path: PathKey) -> Any:
+    """The value at ``path`` of a document (None if there is none)."""
+    for part in path:
+        if (isinstance(data, dict) and part in data
+                or isinstance(data, list) and isinstance(part, int) and 0 <= part < len(data)):
+            data = data[part]
+        else:
+            return None
+    return data
+
+
+def _has_ode(game: dict) -> bool:
+    dynamics = game.get("dynamics")
+    return isinstance(dynamics, dict) and "ode" in dynamics
+
+
+def _reserved(name: str, parameters: dict, vectors: dict, ode: bool = False) -> str | None:
     """What a definition named ``name`` would shadow among the names known before the game is expanded."""
     if name in FUNCTIONS or name in AGGREGATES:
         return "a function"
