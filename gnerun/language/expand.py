@@ -32,7 +32,7 @@ from ..errors import ConfigError
 from .expr import CONSTANTS, FUNCTIONS, Node
 from .extent import MAX_ITEMS, Extent, game_section
 from .families import EXPANSION_SECONDS, NAME, Families, Scope
-from .located import Problem, is_expression
+from .located import Problem, is_expression, is_number
 from .positions import Positions
 from .substitute import Substitution, dag_names
 from .templates import AGGREGATES, Template
@@ -45,12 +45,31 @@ _AGGREGATE = re.compile(r"(?<![\w.])(sum|prod|max|min)\s*\(")
 
 def expands(data: Any) -> bool:
     """Whether a config document uses anything this module expands (its game section has ``for``, ``{``,
-    ``definitions``, list parameters, indexing or aggregates)."""
+    ``definitions``, list parameters, indexing, aggregates, ``//`` or ``%``, or numbers written as expressions)."""
     game = data.get("game") if isinstance(data, dict) else None
     if not isinstance(game, dict):
         return False
     x0 = game.get("x0")
-    return _uses(game) or (isinstance(x0, list) and any(isinstance(v, str | dict) for v in x0))
+    return (_uses(game) or (isinstance(x0, list) and any(isinstance(v, str | dict) for v in x0))
+            or _numbers_as_text(game))
+
+
+def _numbers_as_text(game: dict) -> bool:
+    """Whether a bound, a start value or the ode's dt is written as an expression (``lower: -umax``)."""
+    dynamics = game.get("dynamics")
+    if isinstance(dynamics, dict) and "ode" in dynamics and isinstance(dynamics.get("dt"), str):
+        return True
+    agents = game.get("agents")
+    for agent in agents if isinstance(agents, list) else []:
+        for field_ in ("variables", "inputs"):
+            variables = agent.get(field_) if isinstance(agent, dict) else None
+            parts = [variables] if isinstance(variables, dict) else variables if isinstance(variables, list) else []
+            for spec in (s for part in parts if isinstance(part, dict) for s in part.values()):
+                numbers = [spec.get(k) for k in ("lower", "upper", "start")] if isinstance(spec, dict) else []
+                numbers += [v for n in numbers if isinstance(n, list) for v in n]  # a start value per stage
+                if any(isinstance(v, str) for v in numbers):
+                    return True
+    return False
 
 
 def _uses(value: Any) -> bool:
@@ -215,7 +234,8 @@ class Expander:
                         isinstance(x, dict) and set(x) - {"for", "names"} for x in v):
                     out[nk] = self._merged(v, src + (k,), dst + (nk,), scope, logical + (k,), nk)
                     continue
-                out[nk] = self._walk(v, src + (k,), dst + (nk,), scope, logical + (k,))
+                discrete = logical == ("dynamics",) and "ode" not in value  # x(t+1) of every state, dt a state
+                out[nk] = self._walk(v, src + (k,), dst + (nk,), scope, logical + ("*" if discrete else k,))
             return out
         if isinstance(value, list):
             items: list[Any] = []
@@ -232,7 +252,7 @@ class Expander:
                     items.append(self._walk(item, src + (idx,), dst + (len(items),), scope, logical + ("*",)))
             return items
         if isinstance(value, str):
-            if logical == ("x0", "*"):
+            if is_number(logical):
                 return self.subst.number(value, src, scope)
             if is_expression(logical):
                 return self.subst.expression(value, src, scope)

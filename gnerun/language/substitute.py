@@ -19,6 +19,7 @@ from .expr import (
     Unary,
     children,
     evaluate,
+    first_column_of,
     numpy_functions,
     unparse,
 )
@@ -104,7 +105,7 @@ class Substitution:
 
     def number(self, value: Any, path: PathKey, scope: Scope) -> Any:
         """A number written as an expression of the indices and numeric parameters (``-0.8 - 0.2*(i - 1)``,
-        ``pi/12``), evaluated when the config is loaded; a number as it is."""
+        ``pi/12``, ``-umax``, ``2*v[i]``), evaluated when the config is loaded; a number as it is."""
         if not isinstance(value, str):
             return value
         tree, relation, _, _ = self.expanded(value, path, scope)
@@ -113,7 +114,11 @@ class Substitution:
         env = dict(self.scalars)
         unknown = sorted(dag_names(tree, self.definition_names) - set(env) - set(CONSTANTS))
         if unknown:
-            raise Problem(path, f"{unknown[0]!r} in {value!r} is not an index or a numeric parameter", scope.indices)
+            what = {"lower": "a bound", "upper": "a bound", "start": "a start value", "dt": "dynamics.dt"}.get(
+                next((p for p in reversed(path) if isinstance(p, str)), ""), "an entry of x0")
+            raise Problem(path, f"{unknown[0]!r} in {value!r} is not a number known when the config is loaded: "
+                                 f"{what} is an expression of numbers, numeric parameters (and entries name[i]), "
+                                 "indices and pi", scope.indices, column=first_column_of(tree, unknown[0]))
         with quiet():
             number = float(evaluate(tree, env, numpy_functions()))
         if not math.isfinite(number):
