@@ -460,6 +460,8 @@ def _expressions(g: StaticGame | DynamicGame, lay: _Layout, a: ca.SX, x: ca.SX, 
     cost_fns = {i: casadi_functions(domain[i], smoothing) for i in agents}
     fns = fns_f = casadi_functions(smoothing=smoothing)
     params = dict(g.parameters)
+    if isinstance(getattr(g, "dynamics", None), ContinuousDynamics):
+        params.setdefault("dt", g.dynamics.dt)  # the sampling time, a name of the expressions (a parameter dt: equal)
     slices, names = lay.agent_slices, lay.variable_names
     own_shared = g.equilibrium == "generalized" or shared_as_own
     names_of_agents = [ag.name for ag in g.agents]

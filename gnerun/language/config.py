@@ -727,6 +727,7 @@ class _SemanticChecks:
     def __init__(self, cfg: Config, smap: SourceMap):
         self.cfg, self.smap, self.g = cfg, smap, cfg.game
         self.static = isinstance(self.g, StaticGame)
+        self.ode = isinstance(getattr(self.g, "dynamics", None), ContinuousDynamics)  # dt is a name of its expressions
         self.problems: list[str] = []
         self.seen: dict[str, str] = {}  # every name declared so far, and what it is
         self.agent_names: set[str] = set()
@@ -747,6 +748,9 @@ class _SemanticChecks:
             self.report(path, f"{what} {name!r} is the name of a constant", key=key)
         elif name == "tau" and not self.static:
             self.report(path, f"{what} 'tau' is the name of the stage index", key=key)
+        elif name == "dt" and self.ode and what != "parameter":
+            self.report(path, f"{what} 'dt' is the name of the sampling time (dynamics.dt) in a game with an ode",
+                        key=key)
         elif name in self.seen:
             self.report(path, f"{what} {name!r} is already declared as {self.seen[name]}", key=key)
         else:
@@ -835,6 +839,8 @@ class _SemanticChecks:
                     self.check(c, ("game", "agents", i, "constraints", j), scope, True)
         else:
             states = set(g.states)
+            if self.ode:  # dt: the sampling time, dynamics.dt (or the parameter dt, which must equal it)
+                params = params | {"dt"}
             scope = states | decisions | params | {"tau"}  # tau: the stage index, 0..T
             for i, agent in enumerate(g.agents):
                 self.check(agent.stage_cost, ("game", "agents", i, "stage_cost"), scope, False)
@@ -864,6 +870,10 @@ class _SemanticChecks:
             if not all(math.isfinite(v) for row in A + B for v in row):
                 self.report(("game", "dynamics"), "A and B must be finite")
             return
+        if self.ode and "dt" in g.parameters and g.parameters["dt"] != g.dynamics.dt:
+            self.report(("game", "dynamics", "dt"), f"is {g.dynamics.dt!r}, but the parameter dt is "
+                        f"{g.parameters['dt']!r} ({self.smap.locate(('game', 'parameters', 'dt'))}): in a game with "
+                        "an ode, dt names the sampling time; make the two equal, or leave the parameter out")
         equations, where = (g.dynamics.ode, ("game", "dynamics", "ode")) if isinstance(
             g.dynamics, ContinuousDynamics) else (g.dynamics, ("game", "dynamics"))
         for s in g.states:

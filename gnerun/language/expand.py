@@ -170,7 +170,7 @@ class Expander:
             path = ("game", "definitions", name)
             if not isinstance(name, str) or NAME.fullmatch(name) is None:
                 raise Problem(path, f"a definition's name must be a name, not {name!r}")
-            shadowed = _reserved(name, kept, self.vectors)
+            shadowed = _reserved(name, kept, self.vectors, _has_ode(game))
             if shadowed:
                 raise Problem(path, f"definition {name!r} has the name of {shadowed}; a definition may not shadow a "
                                      "variable, state, input, parameter or constant", key=True)
@@ -348,6 +348,8 @@ def _reserved(name: str, parameters: dict, vectors: dict, ode: bool = False) -> 
         return "the horizon T"
     if name in parameters or name in vectors:
         return "a parameter"
+    if name == "dt" and ode:
+        return "the sampling time dt"
     return None
 
 
