@@ -20,6 +20,8 @@ hold numpy arrays, one entry per copy of a family, to evaluate an expression for
 
 from __future__ import annotations
 
+import functools
+import math
 from collections.abc import Mapping
 from typing import Any
 
@@ -52,55 +54,65 @@ def _show(v: float) -> str:
     return number_text(float(v)) if np.isfinite(v) else str(float(v))
 
 
-def _checked(v: Any, node: Node, what: str) -> Any:
-    """``v`` if every entry is an integer within range."""
-    v = np.asarray(v, dtype=float)
-    bad = ~np.isfinite(v) | (v != np.round(v)) if v.size else np.zeros(v.shape, bool)
-    if np.any(bad):
+def _any(mask: Any) -> bool:
+    return mask if isinstance(mask, bool) else bool(np.any(mask))
+
+
+def _checked(v: Any, node: Node, what: Any) -> Any:
+    """``v`` if every entry is an integer within range (``what()``: how the value is named in a message)."""
+    if isinstance(v, float | int):  # one value (the expansion): plain floats, no arrays
+        v = float(v)
+        bad, big = not (math.isfinite(v) and v.is_integer()), abs(v) > LIMIT
+    else:  # every copy of a family at once (the counts before expanding)
+        v = np.asarray(v, dtype=float)
+        bad = ~np.isfinite(v) | (v != np.round(v))
+        big = ~bad & (np.abs(v) > LIMIT)
+    if _any(bad):
         (x,) = _first(bad, v)
-        raise IntegerError(f"{what} is {_show(x)}, not an integer", node.column)
-    big = np.abs(v) > LIMIT
-    if np.any(big):
+        raise IntegerError(f"{what()} is {_show(x)}, not an integer", node.column)
+    if _any(big):
         (x,) = _first(big, v)
-        raise IntegerError(f"{what} = {x:.6g} is out of range (an integer expression stays within 2**53)",
+        raise IntegerError(f"{what()} = {x:.6g} is out of range (an integer expression stays within 2**53)",
                            node.column)
     return v + 0.0  # no negative zero
 
 
 def _binary(n: Binary, a: Any, b: Any) -> Any:
-    shown = unparse(n)
+    scalar = isinstance(a, float) and isinstance(b, float)
     if n.op in ("/", "//", "%"):
         zero = b == 0
-        if np.any(zero):
+        if _any(zero):
             x, y = _first(zero, a, b)
-            raise IntegerError(f"{shown} is {_show(x)} {n.op} {_show(y)}, a division by zero", n.column)
+            raise IntegerError(f"{unparse(n)} is {_show(x)} {n.op} {_show(y)}, a division by zero", n.column)
         if n.op == "/":
-            inexact = np.mod(a, b) != 0
-            if np.any(inexact):
+            inexact = (a % b if scalar else np.mod(a, b)) != 0
+            if _any(inexact):
                 x, y = _first(inexact, a, b)
-                raise IntegerError(f"{shown} is {_show(x)}/{_show(y)} = {_show(x / y)}, not an integer; {_HINT}",
+                raise IntegerError(f"{unparse(n)} is {_show(x)}/{_show(y)} = {_show(x / y)}, not an integer; {_HINT}",
                                    n.column)
-            return np.floor_divide(a, b)
-        return np.floor_divide(a, b) if n.op == "//" else np.mod(a, b)
+        if scalar:
+            return (a % b if n.op == "%" else a // b) + 0.0
+        return (np.mod(a, b) if n.op == "%" else np.floor_divide(a, b)) + 0.0
     if n.op == "**":
-        negative = (b < 0) & (np.abs(a) != 1)
-        if np.any(negative):
+        negative = (b < 0) & (abs(a) != 1)
+        if _any(negative):
             x, y = _first(negative, a, b)
-            raise IntegerError(f"{shown} is {_show(x)}**{_show(y)}, not an integer", n.column)
-        big = (np.abs(a) > 1) & (b * np.log2(np.maximum(np.abs(a), 1)) > 53)
-        if np.any(big):
+            raise IntegerError(f"{unparse(n)} is {_show(x)}**{_show(y)}, not an integer", n.column)
+        big = (abs(a) > 1) & (b * np.log2(np.maximum(abs(a), 1)) > 53)
+        if _any(big):
             x, y = _first(big, a, b)
-            raise IntegerError(f"{shown} is {_show(x)}**{_show(y)}, out of range (an integer expression stays "
+            raise IntegerError(f"{unparse(n)} is {_show(x)}**{_show(y)}, out of range (an integer expression stays "
                                "within 2**53)", n.column)
-        return _checked(np.power(a, b), n, shown)
-    out = a + b if n.op == "+" else a - b if n.op == "-" else a * b
-    return _checked(out, n, shown)
+        out = a**b if scalar else np.power(a, b)
+    else:
+        out = a + b if n.op == "+" else a - b if n.op == "-" else a * b
+    return _checked(out, n, lambda: unparse(n))
 
 
 def integer_value(node: Node, env: Mapping[str, Any]) -> Any:
     """The value of an integer expression (a double holding an integer, or an array of them), names bound by ``env``;
     :class:`IntegerError` at the first node whose value is not an integer. Every name must be in ``env``."""
-    functions = numpy_functions()
+    functions = _functions()
     values: list[Any] = []
     stack: list[tuple[Node, bool]] = [(node, False)]
     with np.errstate(all="ignore"):
@@ -109,9 +121,9 @@ def integer_value(node: Node, env: Mapping[str, Any]) -> Any:
             if isinstance(n, Num):
                 if not float(n.value).is_integer():
                     raise IntegerError(f"the number {number_text(n.value)} is not an integer", n.column)
-                values.append(_checked(n.value, n, number_text(n.value)))
+                values.append(_checked(n.value, n, lambda n=n: number_text(n.value)))
             elif isinstance(n, Name):
-                values.append(_checked(env[n.id], n, n.id))
+                values.append(_checked(env[n.id], n, lambda n=n: n.id))
             elif not visited:
                 stack.append((n, True))
                 if isinstance(n, Unary):
@@ -130,8 +142,13 @@ def integer_value(node: Node, env: Mapping[str, Any]) -> Any:
             else:
                 args = values[len(values) - len(n.args):]
                 del values[len(values) - len(n.args):]
-                values.append(_checked(functions[n.function](*args), n, unparse(n)))
+                values.append(_checked(functions[n.function](*args), n, lambda n=n: unparse(n)))
     return values[0]
+
+
+@functools.cache
+def _functions() -> dict:
+    return numpy_functions()
 
 
 def is_integer_expression(node: Node, integers: Mapping[str, Any]) -> str | None:
