@@ -113,6 +113,19 @@ def test_a_multi_line_expression_is_the_one_line_expression() -> None:
     assert load_config(text=text).game.shared_constraints == load_config(text=RING).game.shared_constraints
 
 
+@pytest.mark.parametrize("text", ["(px1 - 1)**2 + 0.1*u1**2", "-x**2 // 3 % 2 + max(a, b, 2)", "a <= b + 1"])
+def test_newlines_tabs_and_carriage_returns_are_whitespace_between_tokens(text: str) -> None:
+    from gnerun.language.expr import parse_constraint, unparse
+
+    spread = text.replace(" ", "\n\t ").replace("(", "(\r\n  ").replace(",", "\n,")
+    assert spread != text
+    if "<=" in text:
+        a, b = parse_constraint(text), parse_constraint(spread)
+        assert (unparse(a.lhs), unparse(a.rhs)) == (unparse(b.lhs), unparse(b.rhs))
+    else:
+        assert unparse(parse_expression(spread).tree) == unparse(parse_expression(text).tree)
+
+
 # bounds, start values and dt written as expressions -----------------------------------------------------------------
 
 

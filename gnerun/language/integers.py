@@ -5,7 +5,8 @@ An integer expression is an expression of :mod:`gnerun.language.expr` whose name
 loaded (the indices in scope, the integer parameters and ``T``). Every value in it is an integer, checked node by node
 and never rounded:
 
-- ``+ - *``, ``**`` with a non-negative exponent, ``abs``, ``min`` and ``max`` of integers are integers;
+- ``+ - *``, ``**`` with a non-negative exponent (or a base of 1 or -1), ``abs``, ``min`` and ``max`` of integers
+  are integers;
 - ``//`` is floor division and ``%`` its remainder, with the sign of the divisor as in Python
   (``-1 // 4 == -1``, ``-1 % 4 == 3``): a ring's next neighbour is ``i % N + 1``;
 - ``/`` divides exactly or is an error: ``i/N`` with i = 1 and N = 4 is 1/4, not an index (write ``i // N`` or
