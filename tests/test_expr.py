@@ -145,8 +145,6 @@ HOSTILE = [
     "a\nimport os",
     'f"{x}"',
     "x @ y",
-    "x % y",
-    "x // y",
     "not x",
     "x and y",
     "x \\ y",

@@ -24,7 +24,8 @@ from gnerun.language.yaml_source import SourceMap
 CASES = 3000  # drawn templates per run of the property test
 
 # a template tree of the test's own: (kind, ...) tuples
-#   ("num", v >= 0), ("x",), ("index", name), ("hole", text, offset), ("entry", k), ("def", name),
+#   ("num", v >= 0), ("x",), ("index", name), ("hole", text, index, offset, op, k): {(index + offset) op k} with op
+#   None, % or //, ("entry", k), ("def", name),
 #   ("neg", t), ("bin", op, l, r), ("call", fn, args), ("agg", fn, index, lo, hi, body)
 ATOM, POWER, UNARY, PRODUCT, SUM = 5, 4, 3, 2, 1
 VECTOR = [1.5, -2.5, 0.0, -0.75]
@@ -86,8 +87,9 @@ def value(t: tuple, env: dict) -> float:
             return np.float64(env[t[1]])
         if kind == "def":
             return env[t[1]]
-        if kind == "hole":
-            return np.float64(env[t[2]] + t[3])
+        if kind == "hole":  # Python's integers: % and // with the sign of the divisor
+            v = env[t[2]] + t[3]
+            return np.float64(v if t[4] is None else v % t[5] if t[4] == "%" else v // t[5])
         if kind == "entry":
             return np.float64(VECTOR[(t[1] if isinstance(t[1], int) else env[t[1]]) - 1])
         if kind == "neg":
@@ -115,6 +117,14 @@ def value(t: tuple, env: dict) -> float:
         return {"+": np.add, "-": np.subtract, "*": np.multiply, "/": np.divide, "**": lambda p, q: p**q}[op](a, b)
 
 
+def _hole(h: tuple) -> tuple:
+    index, off, op, k = h
+    text = index + (f" + {off}" if off > 0 else f" - {-off}" if off else "")
+    if op is not None:
+        text = f"({text}) {op} {k}" if off else f"{text} {op} {k}"
+    return ("hole", text, index, off, op, k)
+
+
 @functools.cache
 def trees(indices: tuple[str, ...], definitions: tuple[str, ...], depth: int) -> st.SearchStrategy:
     """Random template trees using the ``indices`` in scope and the ``definitions``."""
@@ -122,9 +132,8 @@ def trees(indices: tuple[str, ...], definitions: tuple[str, ...], depth: int) ->
               st.tuples(st.just("entry"), st.integers(1, len(VECTOR)))]
     if indices:
         leaves.append(st.tuples(st.just("index"), st.sampled_from(indices)))
-        leaves.append(st.tuples(st.just("hole"), st.sampled_from(indices)).flatmap(
-            lambda h: st.sampled_from([0, 1, -2]).map(
-                lambda off: ("hole", h[1] + (f" + {off}" if off > 0 else f" - {-off}" if off else ""), h[1], off))))
+        leaves.append(st.tuples(st.sampled_from(indices), st.sampled_from([0, 1, -2]),
+                                st.sampled_from([None, None, "%", "//"]), st.sampled_from([2, 3, -2])).map(_hole))
     if definitions:
         leaves.append(st.tuples(st.just("def"), st.sampled_from(definitions)))
     leaf = st.one_of(leaves)

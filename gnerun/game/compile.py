@@ -513,6 +513,8 @@ def _expressions(g: StaticGame | DynamicGame, lay: _Layout, a: ca.SX, x: ca.SX, 
     cost_fns = {i: casadi_functions(domain[i], smoothing) for i in agents}
     fns = fns_f = casadi_functions(smoothing=smoothing)
     params = dict(g.parameters)
+    if isinstance(getattr(g, "dynamics", None), ContinuousDynamics):
+        params.setdefault("dt", g.dynamics.dt)  # the sampling time, a name of the expressions (a parameter dt: equal)
     rt = lay.runtime
     p = x[lay.nx:]
     x = x[:lay.nx] if rt is not None else x

@@ -35,6 +35,8 @@ from .expand import Expander, expands
 from .expr import (
     CONSTANTS,
     FUNCTIONS,
+    INTEGER_OPERATORS,
+    Binary,
     Constraint,
     Expression,
     ExpressionError,
@@ -43,10 +45,12 @@ from .expr import (
     check_names,
     children,
     evaluate,
+    nodes,
     numpy_functions,
     parse_cache,
     parse_constraint,
     parse_expression,
+    unparse,
 )
 from .parts import constraint_agents as constraint_agents  # (the compiler reads these three from here)
 from .parts import constraint_stages as constraint_stages
@@ -776,6 +780,7 @@ class _SemanticChecks:
     def __init__(self, cfg: Config, smap: SourceMap):
         self.cfg, self.smap, self.g = cfg, smap, cfg.game
         self.static = isinstance(self.g, StaticGame)
+        self.ode = isinstance(getattr(self.g, "dynamics", None), ContinuousDynamics)  # dt is a name of its expressions
         self.problems: list[str] = []
         self.seen: dict[str, str] = {}  # every name declared so far, and what it is
         self.agent_names: set[str] = set()
@@ -783,8 +788,10 @@ class _SemanticChecks:
         self.scalars: set[str] = set()  # runtime parameters used by name alone
         self.runtime_ok = True
 
-    def report(self, path: PathKey, message: str, *, key: bool = False, column: int | None = None) -> None:
-        where = self.smap.locate_in_text(path, column) if column is not None else self.smap.locate(path, key=key)
+    def report(self, path: PathKey, message: str, *, key: bool = False, column: int | None = None,
+               text: str | None = None) -> None:
+        where = (self.smap.locate_in_text(path, column, text=text) if column is not None
+                 else self.smap.locate(path, key=key))
         self.problems.append(f"{where}: {show_path(path)}: {message}")
 
     def declare(self, name: str, path: PathKey, what: str, *, key: bool = False) -> None:
@@ -797,6 +804,9 @@ class _SemanticChecks:
             self.report(path, f"{what} {name!r} is the name of a constant", key=key)
         elif name == "tau" and not self.static:
             self.report(path, f"{what} 'tau' is the name of the stage index", key=key)
+        elif name == "dt" and self.ode and what != "parameter":
+            self.report(path, f"{what} 'dt' is the name of the sampling time (dynamics.dt) in a game with an ode",
+                        key=key)
         elif name in self.seen:
             self.report(path, f"{what} {name!r} is already declared as {self.seen[name]}", key=key)
         else:
@@ -979,8 +989,14 @@ class _SemanticChecks:
         try:
             parsed = parse_constraint(text) if constraint else parse_expression(text)
             check_names(parsed, names)
+            roots = [parsed.lhs, parsed.rhs] if constraint else [parsed.tree]
+            integer = next((n for root in roots for n in nodes(root) if isinstance(n, Binary)
+                            and n.op in INTEGER_OPERATORS), None) if "%" in text or "//" in text else None
+            if integer is not None:  # the expansion writes out those of integers (gnerun.language.substitute)
+                raise ExpressionError(f"'{integer.op}' is integer arithmetic (indices, integer parameters, T): "
+                                      f"{unparse(integer)!r} is not", text, integer.column)
         except ExpressionError as e:
-            self.report(path, e.describe(), column=e.column)
+            self.report(path, e.describe(), column=e.column, text=text)
             return
         if g.runtime and self.runtime_ok:
             self.indices(parsed, path, taus)
@@ -1000,6 +1016,8 @@ class _SemanticChecks:
                     self.check(c, ("game", "agents", i, "constraints", j), scope, True)
         else:
             states = set(g.states)
+            if self.ode:  # dt: the sampling time, dynamics.dt (or the parameter dt, which must equal it)
+                params = params | {"dt"}
             scope = states | decisions | params | {"tau"}  # tau: the stage index, 0..T
             taus = list(range(g.horizon + 1))
             for i, agent in enumerate(g.agents):
@@ -1038,6 +1056,10 @@ class _SemanticChecks:
             if not all(math.isfinite(v) for row in A + B for v in row):
                 self.report(("game", "dynamics"), "A and B must be finite")
             return
+        if self.ode and "dt" in g.parameters and g.parameters["dt"] != g.dynamics.dt:
+            self.report(("game", "dynamics", "dt"), f"is {g.dynamics.dt!r}, but the parameter dt is "
+                        f"{g.parameters['dt']!r} ({self.smap.locate(('game', 'parameters', 'dt'))}): in a game with "
+                        "an ode, dt names the sampling time; make the two equal, or leave the parameter out")
         equations, where = (g.dynamics.ode, ("game", "dynamics", "ode")) if isinstance(
             g.dynamics, ContinuousDynamics) else (g.dynamics, ("game", "dynamics"))
         for s in g.states:

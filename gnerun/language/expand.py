@@ -32,7 +32,7 @@ from ..errors import ConfigError
 from .expr import CONSTANTS, FUNCTIONS, Node
 from .extent import MAX_ITEMS, Extent, game_section
 from .families import EXPANSION_SECONDS, NAME, Families, Scope
-from .located import Problem, is_expression
+from .located import Problem, is_expression, is_number
 from .positions import Positions
 from .substitute import Substitution, dag_names
 from .templates import AGGREGATES, Template
@@ -45,12 +45,31 @@ _AGGREGATE = re.compile(r"(?<![\w.])(sum|prod|max|min)\s*\(")
 
 def expands(data: Any) -> bool:
     """Whether a config document uses anything this module expands (its game section has ``for``, ``{``,
-    ``definitions``, list parameters, indexing or aggregates)."""
+    ``definitions``, list parameters, indexing, aggregates, ``//`` or ``%``, or numbers written as expressions)."""
     game = data.get("game") if isinstance(data, dict) else None
     if not isinstance(game, dict):
         return False
     x0 = game.get("x0")
-    return _uses(game) or (isinstance(x0, list) and any(isinstance(v, str | dict) for v in x0))
+    return (_uses(game) or (isinstance(x0, list) and any(isinstance(v, str | dict) for v in x0))
+            or _numbers_as_text(game))
+
+
+def _numbers_as_text(game: dict) -> bool:
+    """Whether a bound, a start value or the ode's dt is written as an expression (``lower: -umax``)."""
+    dynamics = game.get("dynamics")
+    if isinstance(dynamics, dict) and "ode" in dynamics and isinstance(dynamics.get("dt"), str):
+        return True
+    agents = game.get("agents")
+    for agent in agents if isinstance(agents, list) else []:
+        for field_ in ("variables", "inputs"):
+            variables = agent.get(field_) if isinstance(agent, dict) else None
+            parts = [variables] if isinstance(variables, dict) else variables if isinstance(variables, list) else []
+            for spec in (s for part in parts if isinstance(part, dict) for s in part.values()):
+                numbers = [spec.get(k) for k in ("lower", "upper", "start")] if isinstance(spec, dict) else []
+                numbers += [v for n in numbers if isinstance(n, list) for v in n]  # a start value per stage
+                if any(isinstance(v, str) for v in numbers):
+                    return True
+    return False
 
 
 def _uses(value: Any) -> bool:
@@ -60,7 +79,8 @@ def _uses(value: Any) -> bool:
     if isinstance(value, list):
         return any(_uses(v) for v in value)
     if isinstance(value, str):
-        return "{" in value or "[" in value or _AGGREGATE.search(value) is not None and " for " in value
+        return ("{" in value or "[" in value or "%" in value or "//" in value
+                or _AGGREGATE.search(value) is not None and " for " in value)
     return False
 
 
@@ -96,7 +116,9 @@ class Expander:
             out = self._document(data)
         except Problem as p:
             if p.column is not None:
-                where = self.src.locate_in_text(p.path, p.column)
+                text = p.path[-1] if p.key else _value_at(data, p.path)
+                where = self.src.locate_in_text(p.path, p.column, key=p.key,
+                                                text=text if isinstance(text, str) else None)
             else:
                 where = self.src.locate(p.path, key=p.key)
             if p.bindings:
@@ -148,7 +170,7 @@ class Expander:
             path = ("game", "definitions", name)
             if not isinstance(name, str) or NAME.fullmatch(name) is None:
                 raise Problem(path, f"a definition's name must be a name, not {name!r}")
-            shadowed = _reserved(name, kept, self.vectors)
+            shadowed = _reserved(name, kept, self.vectors, _has_ode(game))
             if shadowed:
                 raise Problem(path, f"definition {name!r} has the name of {shadowed}; a definition may not shadow a "
                                      "variable, state, input, parameter or constant", key=True)
@@ -195,7 +217,7 @@ class Expander:
                 if k == "for":
                     raise Problem(src + (k,), "for: belongs to an item of a list (agents, states, constraints, "
                                                "shared constraints, dynamics)", scope.indices)
-                nk = self.subst.template(k, src + (k,), scope) if isinstance(k, str) else k
+                nk = self.subst.template(k, src + (k,), scope, key=True) if isinstance(k, str) else k
                 if nk in out:
                     raise Problem(src + (k,), f"key {nk!r} appears twice after expansion", scope.indices)
                 self.positions.copy(src + (k,), dst + (nk,), key=True, scope=scope)
@@ -212,7 +234,8 @@ class Expander:
                         isinstance(x, dict) and set(x) - {"for", "names"} for x in v):
                     out[nk] = self._merged(v, src + (k,), dst + (nk,), scope, logical + (k,), nk)
                     continue
-                out[nk] = self._walk(v, src + (k,), dst + (nk,), scope, logical + (k,))
+                discrete = logical == ("dynamics",) and "ode" not in value  # x(t+1) of every state, dt a state
+                out[nk] = self._walk(v, src + (k,), dst + (nk,), scope, logical + ("*" if discrete else k,))
             return out
         if isinstance(value, list):
             items: list[Any] = []
@@ -229,7 +252,7 @@ class Expander:
                     items.append(self._walk(item, src + (idx,), dst + (len(items),), scope, logical + ("*",)))
             return items
         if isinstance(value, str):
-            if logical == ("x0", "*"):
+            if is_number(logical):
                 return self.subst.number(value, src, scope)
             if is_expression(logical):
                 return self.subst.expression(value, src, scope)
@@ -289,7 +312,7 @@ class Expander:
                 scopes = self.families.family(part["for"], src + (idx, "for"), scope)
             for inner in scopes:
                 for k, v in body.items():
-                    name = self.subst.template(k, src + (idx, k), inner) if isinstance(k, str) else k
+                    name = self.subst.template(k, src + (idx, k), inner, key=True) if isinstance(k, str) else k
                     if name in merged:
                         raise Problem(src + (idx, k), f"{name!r} is given twice in {what}", inner.indices)
                     self.positions.copy(src + (idx, k), dst + (name,), key=True, scope=inner)
@@ -297,7 +320,23 @@ class Expander:
         return merged
 
 
-def _reserved(name: str, parameters: dict, vectors: dict) -> str | None:
+def _value_at(data: Any, path: PathKey) -> Any:
+    """The value at ``path`` of a document (None if there is none)."""
+    for part in path:
+        if (isinstance(data, dict) and part in data
+                or isinstance(data, list) and isinstance(part, int) and 0 <= part < len(data)):
+            data = data[part]
+        else:
+            return None
+    return data
+
+
+def _has_ode(game: dict) -> bool:
+    dynamics = game.get("dynamics")
+    return isinstance(dynamics, dict) and "ode" in dynamics
+
+
+def _reserved(name: str, parameters: dict, vectors: dict, ode: bool = False) -> str | None:
     """What a definition named ``name`` would shadow among the names known before the game is expanded."""
     if name in FUNCTIONS or name in AGGREGATES:
         return "a function"
@@ -309,6 +348,8 @@ def _reserved(name: str, parameters: dict, vectors: dict) -> str | None:
         return "the horizon T"
     if name in parameters or name in vectors:
         return "a parameter"
+    if name == "dt" and ode:
+        return "the sampling time dt"
     return None
 
 

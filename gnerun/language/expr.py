@@ -6,12 +6,17 @@ or sympify of raw strings). The grammar:
 
     constraint := expr ("<=" | ">=" | "==") expr
     expr       := term (("+" | "-") term)*
-    term       := unary (("*" | "/") unary)*
+    term       := unary (("*" | "/" | "//" | "%") unary)*
     unary      := ("-" | "+") unary | power
     power      := atom (("**" | "^") unary)?          # right-associative, binds tighter than unary minus
     atom       := NUMBER | NAME | NAME "(" expr ("," expr)* ")" | "(" expr ")"
 
-so that ``-x**2 == -(x**2)`` and ``2**3**2 == 2**9`` as in Python and in mathematics.
+so that ``-x**2 == -(x**2)`` and ``2**3**2 == 2**9`` as in Python and in mathematics. Spaces, tabs and newlines
+between tokens are whitespace (a YAML block scalar may spread an expression over several lines).
+``//`` (floor division) and ``%`` (its remainder, with the sign of the divisor, as in Python) are integer arithmetic:
+they belong to the integer expressions of indices, ranges and templates (:mod:`gnerun.language.integers`), and in an
+expression of decision variables they are written out when the config is loaded, where both operands are integers
+known then (``x{i % N + 1}``, ``w[i][i % N + 1]``, ``(i % 2)*x1``); anywhere else they are refused.
 Functions: sqrt exp log log2 log10 sin cos tan asin acos atan sinh cosh tanh abs (one argument), atan2 hypot
 (two), min max (two or more); the constant pi.
 
@@ -40,6 +45,8 @@ VARIADIC_FUNCTIONS = ("min", "max")
 FUNCTIONS = UNARY_FUNCTIONS + BINARY_FUNCTIONS + VARIADIC_FUNCTIONS
 CONSTANTS = {"pi": math.pi}  # names every expression knows
 RELATIONS = ("<=", ">=", "==")
+PRODUCTS = ("*", "/", "//", "%")  # the operators of a term, left-associative
+INTEGER_OPERATORS = ("//", "%")  # integer arithmetic only (see the module docstring)
 
 
 class ExpressionError(ValueError):
@@ -82,7 +89,7 @@ class Unary:
 
 @dataclass(frozen=True)
 class Binary:
-    op: str  # + - * / **
+    op: str  # + - * / ** // %
     left: Node
     right: Node
     column: int
@@ -157,6 +164,15 @@ def children(node: Node) -> tuple[Node, ...]:
     return ()
 
 
+def nodes(node: Node) -> Iterator[Node]:
+    """Every node of the tree, parents before their operands (explicit stack: no recursion)."""
+    stack = [node]
+    while stack:
+        n = stack.pop()
+        yield n
+        stack.extend(reversed(children(n)))
+
+
 def _names(node: Node) -> list[Name]:
     """Every Name node of the tree (explicit stack: no recursion)."""
     out: list[Name] = []
@@ -187,10 +203,10 @@ def first_column_of(node: Node, name: str) -> int | None:
 
 _TOKEN = re.compile(
     r"""
-    (?P<ws>[ \t]+)
+    (?P<ws>[ \t\r\n]+)
   | (?P<number>(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?)
   | (?P<name>[A-Za-z_][A-Za-z0-9_]*)
-  | (?P<op>\*\*|<=|>=|==|[-+*/^(),\[\]])
+  | (?P<op>\*\*|<=|>=|==|//|[-+*/^(),%\[\]])
     """,
     re.VERBOSE,
 )
@@ -277,7 +293,7 @@ class _Parser:
 
     def term(self) -> Node:
         node = self.unary()
-        while self.peek().kind == "op" and self.peek().text in ("*", "/"):
+        while self.peek().kind == "op" and self.peek().text in PRODUCTS:
             tok = self.advance()
             node = Binary(tok.text, node, self.unary(), tok.column)
         return node
@@ -625,6 +641,8 @@ _BINARY: dict[str, Callable[[Any, Any], Any]] = {
     "*": _ieee(lambda a, b: a * b),
     "/": _ieee(lambda a, b: a / b),
     "**": _ieee(lambda a, b: a**b),
+    "//": _ieee(lambda a, b: a // b),  # numpy's floor division and remainder: Python's signs
+    "%": _ieee(lambda a, b: a % b),
 }
 
 
@@ -648,7 +666,7 @@ def check_names(parsed: Expression | Constraint, allowed: Iterable[str], what: s
 # ---------------------------------------------------------------------------------------------
 
 _SUM, _PRODUCT, _UNARY, _POWER, _ATOM = 1, 2, 3, 4, 5
-_PRECEDENCE = {"+": _SUM, "-": _SUM, "*": _PRODUCT, "/": _PRODUCT, "**": _POWER}
+_PRECEDENCE = {"+": _SUM, "-": _SUM, "*": _PRODUCT, "/": _PRODUCT, "//": _PRODUCT, "%": _PRODUCT, "**": _POWER}
 
 
 def _negative(value: float) -> bool:
@@ -720,9 +738,9 @@ def unparse(node: Node) -> str:
                 operand(n.right, right < _POWER)
                 stack.append("**")
                 operand(n.left, left < _ATOM)
-            elif n.op in "*/":
+            elif n.op in PRODUCTS:
                 operand(n.right, right < _POWER)
-                stack.append(n.op)
+                stack.append(f" {n.op} " if n.op in INTEGER_OPERATORS else n.op)
                 operand(n.left, left < _PRODUCT or (isinstance(n.left, Num) and left == _UNARY))
             else:
                 operand(n.right, right <= _SUM or right == _UNARY)

@@ -31,7 +31,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .expr import MAX_LENGTH, Binary, Call, ExpressionError, Name, Unary, evaluate, names_in, numpy_functions
+from .expr import MAX_LENGTH, Binary, Call, ExpressionError, Name, Unary, names_in
+from .integers import IntegerError, integer_value
 from .located import Problem, is_expression
 from .templates import Aggregate, Template
 
@@ -98,16 +99,16 @@ class Counter:
         return {**self.base, **rows.columns}
 
     def _vector(self, tree, rows: Rows) -> np.ndarray:
-        """An integer expression for every copy (floats holding integers), or _Unknown."""
+        """An integer expression for every copy (floats holding integers, :mod:`gnerun.language.integers`), or
+        _Unknown."""
         env = self._env(rows)
         if not names_in(tree) <= set(env):
             raise _Unknown
-        with np.errstate(all="ignore"):
-            try:
-                v = np.broadcast_to(np.asarray(evaluate(tree, env, numpy_functions()), dtype=float), (rows.n,))
-            except (ValueError, TypeError, ZeroDivisionError, OverflowError):
-                raise _Unknown from None
-        if not np.all(np.isfinite(v)) or not np.all(v == np.round(v)) or np.any(np.abs(v) > 1e12):
+        try:
+            v = np.broadcast_to(np.asarray(integer_value(tree, env), dtype=float), (rows.n,))
+        except IntegerError:
+            raise _Unknown from None
+        if np.any(np.abs(v) > 1e12):
             raise _Unknown
         return v
 

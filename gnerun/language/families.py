@@ -10,8 +10,9 @@ import time
 from dataclasses import dataclass, field
 from typing import Any
 
-from .expr import ExpressionError, Node, evaluate, names_in, numpy_functions, parse_expression
+from .expr import ExpressionError, Node, first_column_of, names_in, parse_expression
 from .extent import MAX_ITEMS
+from .integers import IntegerError, integer_value
 from .located import Problem
 from .yaml_source import PathKey
 
@@ -110,14 +111,17 @@ class Families:
         if not isinstance(text, str) or text.count("..") != 1:
             raise Problem(path, f"a range is written a..b (both ends included), not {text!r}", scope.indices)
         a, b = text.split("..")
-        return self.bounds(self._parsed_integer(a, path, scope), self._parsed_integer(b, path, scope), text.strip(),
-                           path, scope)
+        at = (1, len(a) + 3)  # the columns where the two ends begin
+        return self.bounds(self._parsed_integer(a, path, scope, at[0]), self._parsed_integer(b, path, scope, at[1]),
+                           text.strip(), path, scope, at)
 
-    def bounds(self, lo: Node, hi: Node, text: str, path: PathKey, scope: Scope) -> tuple[int, int]:
-        """The ends of a range. One that uses no index (a count given by parameters) may be empty (b = a - 1) but not
-        shorter: a negative count is a mistake, not an empty family."""
-        a = self.value(lo, text.split("..")[0], path, scope)
-        b = self.value(hi, text.split("..")[-1], path, scope)
+    def bounds(self, lo: Node, hi: Node, text: str, path: PathKey, scope: Scope,
+               at: tuple[int, int] = (1, 1)) -> tuple[int, int]:
+        """The ends of a range (their trees' columns counted from ``at``, the columns of the string at ``path`` where
+        each begins). One that uses no index (a count given by parameters) may be empty (b = a - 1) but not shorter:
+        a negative count is a mistake, not an empty family."""
+        a = self.value(lo, text.split("..")[0], path, scope, at[0])
+        b = self.value(hi, text.split("..")[-1], path, scope, at[1])
         used = names_in(lo) | names_in(hi)
         if b < a - 1 and not used & set(scope.indices):
             given = ", ".join(f"{k} = {scope.base[k]}" for k in sorted(used) if k in scope.base)
@@ -126,33 +130,43 @@ class Families:
                                  "but not shorter", scope.indices)
         return a, b
 
-    def _parsed_integer(self, text: str, path: PathKey, scope: Scope) -> Node:
+    def _parsed_integer(self, text: str, path: PathKey, scope: Scope, at: int | None) -> Node:
         try:
             return self.integer_tree(text)
         except ExpressionError as e:
-            raise Problem(path, f"in the integer expression {text.strip()!r}: {e.message}", scope.indices) from None
+            raise Problem(path, f"in the integer expression {text.strip()!r}: {e.message}", scope.indices,
+                          column=None if at is None else at - 1 + e.column) from None
 
-    def integer(self, text: str, path: PathKey, scope: Scope) -> int:
-        return self.value(self._parsed_integer(text, path, scope), text, path, scope)
+    def integer(self, text: str, path: PathKey, scope: Scope, at: int | None = None) -> int:
+        """The integer expression ``text``, which begins at column ``at`` of the string at ``path``."""
+        return self.value(self._parsed_integer(text, path, scope, at), text, path, scope, at)
 
-    def value(self, tree: Node, text: str, path: PathKey, scope: Scope) -> int:
-        """An integer expression of the indices in scope, the integer parameters and T."""
+    def value(self, tree: Node, text: str, path: PathKey, scope: Scope, at: int | None = None) -> int:
+        """An integer expression of the indices in scope, the integer parameters and T, evaluated exactly
+        (:mod:`gnerun.language.integers`); a problem is located at its node, counting the tree's columns from ``at``
+        (the column of the string at ``path`` where ``text`` begins; None: at the string)."""
         env = scope.env()
+
+        def column(c: int | None) -> int | None:
+            return None if at is None or c is None else at - 1 + c
+
         for name in names_in(tree):
             if name in self.runtime and name not in env:
                 raise Problem(path, f"{name!r} in {text.strip()!r} is a runtime parameter; ranges, templates and "
                                      "indices need integers known when the game is compiled (declare it under "
-                                     "parameters)", scope.indices)
+                                     "parameters)", scope.indices, column=column(first_column_of(tree, name)))
             if name not in env:
                 known = ", ".join(sorted(env)) or "none"
                 raise Problem(path, f"{name!r} in {text.strip()!r} is not an index, an integer parameter or T "
-                                     f"(known here: {known})", scope.indices)
-        with quiet():
-            value = evaluate(tree, env, numpy_functions())
-        if not (isinstance(value, int | float) and math.isfinite(value) and float(value).is_integer()):
-            raise Problem(path, f"{text.strip()!r} is {value!r}, not an integer", scope.indices)
+                                     f"(known here: {known})", scope.indices,
+                              column=column(first_column_of(tree, name)))
+        try:
+            value = float(integer_value(tree, env))
+        except IntegerError as e:
+            raise Problem(path, f"in the integer expression {text.strip()!r}: {e.message}", scope.indices,
+                          column=column(e.column)) from None
         if abs(value) > 10**12:
-            raise Problem(path, f"{text.strip()!r} = {value:.0f} is out of range", scope.indices)
+            raise Problem(path, f"{text.strip()!r} = {value:.0f} is out of range", scope.indices, column=column(1))
         return int(value)
 
 

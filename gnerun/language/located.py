@@ -1,5 +1,5 @@
 """A problem at a place of a config document, found while its templates are counted (:mod:`gnerun.language.extent`)
-or expanded (:mod:`gnerun.language.expand`), and which places of a game section hold expressions."""
+or expanded (:mod:`gnerun.language.expand`), and which places of a game section hold expressions and numbers."""
 
 from __future__ import annotations
 
@@ -12,6 +12,13 @@ EXPRESSIONS = (
     ("agents", "*", "constraints", "*"), ("agents", "*", "constraints", "*", "expr"),
     ("shared_constraints", "*"), ("shared_constraints", "*", "expr"),
     ("dynamics", "*"), ("dynamics", "ode", "*"), ("definitions", "*"),
+)
+
+
+# where a string is a number written as an expression of parameters and indices (evaluated when the config is loaded)
+NUMBERS = tuple(("agents", "*", kind, "*", field) for kind in ("variables", "inputs")
+                for field in ("lower", "upper", "start")) + (
+    ("agents", "*", "inputs", "*", "start", "*"), ("x0", "*"), ("dynamics", "dt"),
 )
 
 
@@ -28,7 +35,17 @@ class Problem(Exception):
         self.column = column  # located at this character of the string at ``path``
 
 
+def _matches(logical: tuple, places: tuple) -> bool:
+    return any(len(p) == len(logical) and all(a == "*" or a == b for a, b in zip(p, logical, strict=True))
+               for p in places)
+
+
 def is_expression(logical: tuple) -> bool:
     """Whether the place ``logical`` (list indices and keys as "*") holds an expression."""
-    return any(len(p) == len(logical) and all(a == "*" or a == b for a, b in zip(p, logical, strict=True))
-               for p in EXPRESSIONS)
+    return _matches(logical, EXPRESSIONS)
+
+
+def is_number(logical: tuple) -> bool:
+    """Whether the place ``logical`` holds a number, which may be written as an expression of parameters (a bound, a
+    start value, an entry of x0, the ode's dt)."""
+    return _matches(logical, NUMBERS)

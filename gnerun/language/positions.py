@@ -15,7 +15,7 @@ class Positions:
 
     def __init__(self, src: SourceMap):
         self.src = src
-        self.out = SourceMap(src.file, overridden=dict(src.overridden))
+        self.out = SourceMap(src.file, overridden=dict(src.overridden), text=src.text)
 
     def copy(self, src: PathKey, dst: PathKey, *, key: bool = False, scope: Scope | None = None) -> None:
         """The position of ``src`` (a key's, or else a value's or its nearest enclosing value's) given to ``dst``."""
@@ -29,7 +29,7 @@ class Positions:
             pos = self.src.values.get(p)
         if pos is not None:
             changed = src != dst or (scope is not None and scope.indices)
-            table_dst[dst] = replace(pos, single_line=False) if changed else pos
+            table_dst[dst] = replace(pos, single_line=False, span=None) if changed else pos
         if scope is not None and scope.indices and not key:
             self.out.notes[dst] = "for " + ", ".join(f"{k} = {v}" for k, v in scope.indices.items())
 

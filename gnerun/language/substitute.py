@@ -9,6 +9,7 @@ from typing import Any
 
 from .expr import (
     CONSTANTS,
+    INTEGER_OPERATORS,
     Binary,
     Call,
     ExpressionError,
@@ -19,11 +20,13 @@ from .expr import (
     Unary,
     children,
     evaluate,
+    first_column_of,
     names_in,
     numpy_functions,
     unparse,
 )
 from .families import NAME, Families, Scope, quiet
+from .integers import IntegerError, integer_value, is_integer_expression
 from .located import Problem
 from .templates import Aggregate, Entry, Hole, Template, Word, parse_template
 from .yaml_source import PathKey
@@ -69,14 +72,18 @@ class Substitution:
             base["T"] = horizon
         return kept, base
 
-    def template(self, text: str, path: PathKey, scope: Scope) -> str:
-        """``{...}`` in a string that is not an expression (a name, a key): the integers written in."""
+    def template(self, text: str, path: PathKey, scope: Scope, *, key: bool = False) -> str:
+        """``{...}`` in a string that is not an expression (a name, or a mapping ``key``): the integers written in."""
         if "{" not in text and "}" not in text:
             return text
-        out = _TEMPLATE.sub(lambda m: str(self.families.integer(m.group(1), path, scope)), text)
+        try:
+            out = _TEMPLATE.sub(lambda m: str(self.families.integer(m.group(1), path, scope, m.start(1) + 1)), text)
+        except Problem as p:
+            p.key = key
+            raise
         if "{" in out or "}" in out:
             raise Problem(path, f"unbalanced or nested braces in {text!r} (a template is {{integer expression}})",
-                           scope.indices)
+                           scope.indices, key=key)
         return out
 
     def parsed(self, text: str, path: PathKey, scope: Scope) -> Template:
@@ -104,7 +111,7 @@ class Substitution:
 
     def number(self, value: Any, path: PathKey, scope: Scope) -> Any:
         """A number written as an expression of the indices and numeric parameters (``-0.8 - 0.2*(i - 1)``,
-        ``pi/12``), evaluated when the config is loaded; a number as it is."""
+        ``pi/12``, ``-umax``, ``2*v[i]``), evaluated when the config is loaded; a number as it is."""
         if not isinstance(value, str):
             return value
         tree, relation, _, _ = self.expanded(value, path, scope)
@@ -113,7 +120,11 @@ class Substitution:
         env = dict(self.scalars)
         unknown = sorted(dag_names(tree, self.definition_names) - set(env) - set(CONSTANTS))
         if unknown:
-            raise Problem(path, f"{unknown[0]!r} in {value!r} is not an index or a numeric parameter", scope.indices)
+            what = {"lower": "a bound", "upper": "a bound", "start": "a start value", "dt": "dynamics.dt"}.get(
+                next((p for p in reversed(path) if isinstance(p, str)), ""), "an entry of x0")
+            raise Problem(path, f"{unknown[0]!r} in {value!r} is not a number known when the config is loaded: "
+                                 f"{what} is an expression of numbers, numeric parameters (and entries name[i]), "
+                                 "indices and pi", scope.indices, column=first_column_of(tree, unknown[0]))
         with quiet():
             number = float(evaluate(tree, env, numpy_functions()))
         if not math.isfinite(number):
@@ -150,7 +161,8 @@ class Substitution:
                 elif isinstance(n, Unary):
                     values.append(Unary(n.op, children[0], n.column))
                 elif isinstance(n, Binary):
-                    values.append(Binary(n.op, children[0], children[1], n.column))
+                    node = Binary(n.op, children[0], children[1], n.column)
+                    values.append(self._integer(node, path, sc) if n.op in INTEGER_OPERATORS else node)
                 else:
                     values.append(Call(n.function, tuple(children), n.column))
         return values[0]
@@ -165,7 +177,7 @@ class Substitution:
         if isinstance(n, Word):
             return self._name(self._word(n, path, sc), n.column, sc)
         if isinstance(n, Hole):
-            return Num(self.families.value(n.expr.tree, n.expr.text, path, sc), n.column)
+            return Num(self.families.value(n.expr.tree, n.expr.text, path, sc, n.column + 1), n.column)
         if n.name in self.runtime:
             return self._runtime_entry(n, path, sc)
         return Num(self._entry(n, path, sc), n.column)
@@ -180,6 +192,22 @@ class Substitution:
             else:
                 indices.append(Num(self.families.value(index, unparse(index), path, scope), entry.column))
         return Index(entry.name, tuple(indices), entry.column)
+
+    def _integer(self, node: Binary, path: PathKey, sc: Scope) -> Num:
+        """``a // b`` or ``a % b`` in an expression, written out as its value: both operands must be integers known
+        now (indices, integer parameters, T, whole numbers; :mod:`gnerun.language.integers`)."""
+        other = is_integer_expression(node, sc.base)
+        if other is not None:
+            raise Problem(path, f"'{node.op}' is integer arithmetic, written out when the config is loaded: its "
+                                 f"operands are integers (indices, integer parameters, T), but {unparse(node)!r} "
+                                 f"uses {other!r}", sc.indices, column=node.column)
+        try:
+            value = integer_value(node, sc.base)
+        except IntegerError as e:
+            raise Problem(path, f"in the integer expression {unparse(node)!r}: {e.message}", sc.indices,
+                           column=e.column) from None
+        self.changed = True
+        return Num(int(value), node.column)
 
     def _aggregate_range(self, n: Aggregate, path: PathKey, sc: Scope) -> tuple[int, int, int]:
         """The number of terms of an aggregate and its range, counted (its index checked) before it is written out."""
@@ -209,7 +237,9 @@ class Substitution:
 
     def _word(self, word: Word, path: PathKey, scope: Scope) -> str:
         """A templated name (``x{i}``) with its integers written in; what it makes must be a name."""
-        text = "".join(p if isinstance(p, str) else str(self.families.value(p.tree, p.text, path, scope))
+        starts = iter(m.start(1) for m in _TEMPLATE.finditer(word.text))  # where each {...} of the word begins
+        text = "".join(p if isinstance(p, str) else
+                       str(self.families.value(p.tree, p.text, path, scope, word.column + next(starts)))
                        for p in word.pieces)
         if NAME.fullmatch(text) is None:
             raise Problem(path, f"{word.text!r} makes {text!r}, which is not a name (a template inside a name must "
@@ -224,7 +254,7 @@ class Substitution:
                                  f"{known})", scope.indices, column=entry.column)
         value: Any = self.vectors[entry.name]
         for index in entry.indices:
-            k = self.families.value(index, unparse(index), path, scope)
+            k = self.families.value(index, unparse(index), path, scope, 1)
             if not isinstance(value, list):
                 raise Problem(path, f"{entry.name!r} has fewer dimensions than indices", scope.indices,
                                column=entry.column)

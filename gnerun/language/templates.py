@@ -3,10 +3,18 @@
 A template expression is an expression of gnerun's language (:mod:`gnerun.language.expr`) that may also hold
 
 - ``{E}``: an integer expression E of the indices in scope, the integer parameters and ``T``, either alone (a number,
-  :class:`Hole`) or inside a name that starts with a letter (``x{i}``, ``px{i+1}``: a :class:`Word`);
-- ``name[i]``, ``name[i][j]``: an entry of a vector or matrix parameter (:class:`Entry`; no space before ``[``);
-- ``sum(E for k in a..b)`` (and ``prod``, ``max``, ``min``): an :class:`Aggregate` over an integer range;
+  :class:`Hole`) or inside a name that starts with a letter (``x{i}``, ``px{i+1}``, ``x{i % N + 1}``: a
+  :class:`Word`);
+- ``name[i]``, ``name[i][j]``: an entry of a vector or matrix parameter (:class:`Entry`; no space before ``[``;
+  ``w[i][i % N + 1]``);
+- ``sum(E for k in a..b)`` (and ``prod``, ``max``, ``min``): an :class:`Aggregate` over an integer range (its ends may
+  use ``min``, ``max``, ``//`` and ``%``: ``k in i+1..min(i+2, N)``);
 - names of definitions and of the indices in scope (plain :class:`~gnerun.language.expr.Name` nodes).
+
+Integer expressions (holes, indices, range ends) are evaluated exactly (:mod:`gnerun.language.integers`): ``//`` is
+floor division, ``%`` its remainder, and ``/`` must divide exactly (``i/N`` with i = 1, N = 4 is an error, not 0.25
+and not 0). Elsewhere ``a // b`` and ``a % b`` are written out as their values when both operands are integers known
+then (``(i % 2)*x1``), and are an error otherwise (``x1 % 2``). Newlines are whitespace, like spaces and tabs.
 
 :func:`parse_template` reads such a text into a tree of the expression nodes and these; the expander
 (:mod:`gnerun.language.expand`) replaces every template node by plain nodes (numbers, the trees of definitions, the
@@ -25,6 +33,7 @@ from .expr import (
     FUNCTIONS,
     MAX_DEPTH,
     MAX_LENGTH,
+    PRODUCTS,
     RELATIONS,
     UNARY_FUNCTIONS,
     VARIADIC_FUNCTIONS,
@@ -93,10 +102,10 @@ class Template:
 
 _TOKEN = re.compile(
     r"""
-    (?P<ws>[ \t]+)
+    (?P<ws>[ \t\r\n]+)
   | (?P<number>(?:\d+(?:\.(?!\.)\d*)?|\.\d+)(?:[eE][+-]?\d+)?)
   | (?P<word>(?:[A-Za-z_]|\{[^{}]*\})(?:[A-Za-z0-9_]|\{[^{}]*\})*)
-  | (?P<op>\*\*|<=|>=|==|\.\.|[-+*/^(),\[\]])
+  | (?P<op>\*\*|<=|>=|==|\.\.|//|[-+*/^(),%\[\]])
     """,
     re.VERBOSE,
 )
@@ -190,7 +199,7 @@ class _Parser:
 
     def term(self):
         node = self.unary()
-        while self.is_op("*", "/"):
+        while self.is_op(*PRODUCTS):
             tok = self.advance()
             node = Binary(tok.text, node, self.unary(), tok.column)
         return node

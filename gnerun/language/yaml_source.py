@@ -34,6 +34,7 @@ class Position:
     column: int  # 1-based
     quoted: bool = False  # a single-line quoted scalar: its text starts one column later
     single_line: bool = True
+    span: tuple[int, int] | None = None  # a scalar written over several lines: where its source is in the text
 
 
 @dataclass
@@ -45,6 +46,7 @@ class SourceMap:
     keys: dict[PathKey, Position] = field(default_factory=dict)
     overridden: dict[PathKey, str] = field(default_factory=dict)  # path -> its override (`--set a.b=1`)
     notes: dict[PathKey, str] = field(default_factory=dict)  # path -> e.g. "for i = 2" (a family's copy)
+    text: str = field(default="", repr=False)  # the document's text (for the lines of multi-line scalars)
 
     def locate(self, path: PathKey, *, key: bool = False) -> str:
         """``file:line:column`` of the value (or key) at ``path``, or of its nearest written ancestor."""
@@ -74,15 +76,47 @@ class SourceMap:
                 return f" ({self.notes[path[:n]]})"
         return ""
 
-    def locate_in_text(self, path: PathKey, column: int) -> str:
-        """Position of character ``column`` (1-based) of the string value at ``path``."""
+    def locate_in_text(self, path: PathKey, column: int, *, key: bool = False, text: str | None = None) -> str:
+        """Position of character ``column`` (1-based) of the string value (or ``key``) at ``path``. A value written
+        over several lines (a YAML block scalar ``>-``) is located on its line when its ``text`` is given and is the
+        one written there; otherwise at its start."""
         p = tuple(path)
-        pos = self.values.get(p)
+        pos = (self.keys if key else self.values).get(p)
         if pos is None or any(p[:n] in self.overridden for n in range(len(p), 0, -1)):
-            return self.locate(p)
+            return self.locate(p, key=key)
         if not pos.single_line:
-            return f"{self.file}:{pos.line}:{pos.column}{self._note(p)}"
+            line, col = self._in_lines(pos, column, text) or (pos.line, pos.column)
+            return f"{self.file}:{line}:{col}{self._note(p)}"
         return f"{self.file}:{pos.line}:{pos.column + column - 1 + (1 if pos.quoted else 0)}"
+
+    def _in_lines(self, pos: Position, column: int, text: str | None) -> tuple[int, int] | None:
+        """Line and column of character ``column`` of ``text``, a scalar written over several lines at ``pos``: the
+        characters that are not whitespace are the same in the value and in its source (YAML folds only whitespace),
+        so the k-th of the value is the k-th of the source; None where they are not (escapes, a rewritten text)."""
+        if pos.span is None or text is None or not self.text:
+            return None
+        start, end = pos.span
+        if self.text[start] in "|>":  # a block scalar: its text begins on the line after the indicator
+            start = self.text.find("\n", start, end) + 1
+            if not start:
+                return None
+        elif self.text[start] in "'\"":
+            start += 1
+        wanted = [c for c in text if not c.isspace()]
+        at: list[int] = []  # where the characters of the value that are not whitespace are in the document
+        for i in range(start, end):
+            if len(at) == len(wanted):
+                break
+            if not self.text[i].isspace():
+                at.append(i)
+        if not at or [self.text[i] for i in at] != wanted:
+            return None
+        k = sum(1 for c in text[:max(column - 1, 0)] if not c.isspace())
+        return self._line_column(at[k] if k < len(at) else at[-1] + 1)
+
+    def _line_column(self, index: int) -> tuple[int, int]:
+        before = self.text[:index]
+        return before.count("\n") + 1, index - (before.rfind("\n") + 1) + 1
 
 
 def _mark_to_position(node: yaml.Node) -> Position:
@@ -90,7 +124,8 @@ def _mark_to_position(node: yaml.Node) -> Position:
     end = node.end_mark
     quoted = isinstance(node, yaml.ScalarNode) and node.style in ("'", '"')
     single = mark.line == end.line
-    return Position(mark.line + 1, mark.column + 1, quoted=quoted, single_line=single)
+    span = (mark.index, end.index) if isinstance(node, yaml.ScalarNode) and not single else None
+    return Position(mark.line + 1, mark.column + 1, quoted=quoted, single_line=single, span=span)
 
 
 def _yaml_error_position(err: yaml.YAMLError, file: str) -> str:
@@ -254,7 +289,7 @@ def read_yaml(path: str | Path) -> tuple[Any, SourceMap]:
 
 
 def parse_yaml(text: str, file: str = "<string>") -> tuple[Any, SourceMap]:
-    smap = SourceMap(file)
+    smap = SourceMap(file, text=text)
     problems: list[str] = []
     try:
         loader = _Loader(text, file)  # a str is checked for special characters here, at once

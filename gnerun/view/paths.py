@@ -39,7 +39,7 @@ def required_distances(config: dict) -> dict[tuple[str, str], float]:
     """The distance each pair of position states must keep at tau = 0, from the shared constraints written as
     squared distances (x positions of the two vehicles as the key)."""
     game = config.get("game") or {}
-    params = {k: v for k, v in (game.get("parameters") or {}).items() if isinstance(v, int | float)}
+    params = _parameters(game)
     out: dict[tuple[str, str], float] = {}
     for spec in game.get("shared_constraints") or []:
         text = spec.get("expr") if isinstance(spec, dict) else spec
@@ -59,8 +59,13 @@ def required_distances(config: dict) -> dict[tuple[str, str], float]:
 
 
 def _parameters(game: dict) -> dict[str, float]:
-    """The game's scalar parameters, as a log's config gives them (vectors and matrices are not positions' data)."""
-    return {k: float(v) for k, v in (game.get("parameters") or {}).items() if isinstance(v, int | float)}
+    """The game's scalar parameters, as a log's config gives them (vectors and matrices are not positions' data), and
+    the sampling time dt of an ode, a name of its expressions."""
+    params = {k: float(v) for k, v in (game.get("parameters") or {}).items() if isinstance(v, int | float)}
+    dynamics = game.get("dynamics")
+    if isinstance(dynamics, dict) and "ode" in dynamics and isinstance(dynamics.get("dt"), int | float):
+        params.setdefault("dt", float(dynamics["dt"]))
+    return params
 
 
 def position_constraints(config: dict, cars: list[tuple[str, int, int]]) -> list[tuple[int, Constraint]]:
