@@ -291,3 +291,28 @@ def test_a_declared_reference_is_logged_with_the_tracking_error_and_drawn(tmp_pa
     ax_r = fig.axes[1]
     for K, line in zip(("1", "3"), ax_r.get_lines(), strict=True):  # |x - r| per K, as the summary has it
         np.testing.assert_allclose(line.get_ydata(), np.abs(summary["by_K"][K]["tracking_error"]["p1"]), atol=1e-15)
+
+
+def test_a_sweep_over_a_runtime_parameter_compiles_once_per_worker(tmp_path) -> None:
+    from gnerun.runs.sweep import load_sweep, run_sweep
+
+    spec = tmp_path / "sweep.yaml"
+    spec.write_text(f"""version: 1
+name: w-sweep
+base: {CONFIGS / "tracking.yaml"}
+command: simulate
+set: {{run.K: [2], run.steps: 8, run.reference: none}}
+mode: product
+grid:
+  game.runtime.w.value: [0.3, 0.9, 1.5, 2.1]
+""")
+    result = run_sweep(load_sweep(spec), tmp_path / "out", workers=1)
+    assert result.ran == 4 and result.failed == 0 and result.games_compiled == 1
+    assert json.loads((tmp_path / "out" / "sweep.json").read_text())["games_compiled"] == 1
+    # each point is the run of its own config, compiled on its own
+    for point in load_sweep(spec).points:
+        run = tmp_path / "out" / point.directory
+        alone = gnerun.simulate(load_config(run / "config.yaml"))
+        summary = json.loads((run / "summary.json").read_text())
+        np.testing.assert_array_equal(np.array(summary["by_K"]["2"]["x"]), alone[2].x)
+        assert summary["by_K"]["2"]["parameters"]["w"] == [point.params["game.runtime.w.value"]] * 8
