@@ -1,4 +1,4 @@
-"""Runtime parameters (gnerun.game.runtime): inputs of the compiled functions, changed without recompiling.
+"""Runtime parameters (gnerun.language.runtime): inputs of the compiled functions, changed without recompiling.
 
 Every number here is checked against an independent reference: a closed-form equilibrium, a numpy roll-out of the
 condensed costs, numpy's interpolation, or a game compiled with the value written in as a constant.

@@ -30,6 +30,7 @@ DEFERRED = {
     ("gnerun.cli", "*"): "the CLI loads a command's modules when it runs, so that `gnerun --help` is fast",
     ("gnerun.runs.sweep", "gnerun.runs.closed_loop"): "a sweep worker loads the run it makes",
     ("gnerun.runs.sweep", "gnerun.runs.solving"): "a sweep worker loads the run it makes",
+    ("gnerun.runs.sweep", "gnerun.game.compile"): "a sweep worker loads the compiler of the game it shares",
     ("gnerun.runs.sweep", "gnerun.runs.interrupt"): "a worker process's signal handling, set up in the worker",
     ("gnerun.runs.solving", "*"): "the certificate and phase 1 load when a solve ends, and only where they are used",
     ("gnerun.solvers.certificate", "*"): "the best responses load their solvers when a player is checked",

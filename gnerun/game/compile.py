@@ -23,6 +23,8 @@ agent, inputs are time-major: a_i = (u_i(0), u_i(1), ..., u_i(T)) with u_i(tau) 
 from __future__ import annotations
 
 import functools
+import hashlib
+import json
 import math
 from dataclasses import dataclass, field, replace
 from typing import NamedTuple
@@ -41,13 +43,13 @@ from ..language.config import (
     constraint_text,
 )
 from ..language.expr import casadi_functions, evaluate, parse_constraint, parse_expression
+from ..language.runtime import RuntimeLayout, runtime_layout
 from .affine import LQStructure, derivatives_affine, offset_map
 from .agents import AgentFunctions
 from .building import stoppable
 from .evaluator import Evaluator
 from .horizon import Horizon
 from .pattern import Pattern
-from .runtime import RuntimeLayout, runtime_layout
 
 
 @dataclass(frozen=True)
@@ -699,9 +701,6 @@ def _domain_function(a: ca.SX, x: ca.SX, domain: list) -> tuple[Evaluator, np.nd
 def compile_key(cfg: Config) -> str:
     """What a compiled game depends on: the game without its runtime values (their shapes stay) and x0, and the
     sampling time. Configs of equal keys share one compilation (:meth:`CompiledGame.adopt`)."""
-    import hashlib
-    import json
-
     data = cfg.model_dump(mode="json")
     game = data["game"]
     game.pop("x0", None)

@@ -56,6 +56,7 @@ from .parts import constraint_agents as constraint_agents  # (the compiler reads
 from .parts import constraint_stages as constraint_stages
 from .parts import constraint_text as constraint_text
 from .parts import sparse_obstacles
+from .runtime import SymbolTable, TableError, data_path, needed_span, read_table, runtime_layout
 from .size import Size, estimate, from_extent
 from .yaml_source import PathKey, SourceMap, parse_yaml, read_yaml
 from .yaml_source import dotted as show_path
@@ -216,7 +217,7 @@ def _runtime_shorthand(v: Any) -> Any:
 
 
 class RuntimeParameter(Strict):
-    """A runtime parameter: an input of the compiled functions, like the plant state (gnerun.game.runtime). Its
+    """A runtime parameter: an input of the compiled functions, like the plant state (gnerun.language.runtime). Its
     value changes without recompiling: from ``value``, a data file, the Python API or a sweep."""
 
     value: float | list[float] | list[list[float]] | None = Field(
@@ -902,8 +903,6 @@ class _SemanticChecks:
         return "scalar"
 
     def _table(self, name: str, spec: Any, path: PathKey) -> None:
-        from ..game.runtime import TableError, data_path, needed_span, read_table
-
         try:
             table = read_table(data_path(self.cfg.source, spec.file), spec.column if spec.column is not None else name,
                                spec.time, spec.interpolation)
@@ -924,8 +923,6 @@ class _SemanticChecks:
         """The runtime parameters' entries in one expression: each names a vector, matrix or per-stage table with
         as many indices as it has, every index an exact integer in its range at every stage ``taus`` it is used at
         (None: no stage index here); a vector or matrix is never used without its indices."""
-        from ..game.runtime import SymbolTable, runtime_layout
-
         roots = [parsed.tree] if isinstance(parsed, Expression) else [parsed.lhs, parsed.rhs]
         stack = list(roots)
         found: list[Index] = []

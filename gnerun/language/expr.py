@@ -104,7 +104,7 @@ class Call:
 
 @dataclass(frozen=True)
 class Index:
-    """``name[i]`` or ``name[i][j]``: an entry of a runtime parameter (gnerun.game.runtime), looked up when the game
+    """``name[i]`` or ``name[i][j]``: an entry of a runtime parameter (gnerun.language.runtime), looked up when the game
     is compiled; the indices are integer expressions of numbers, integer parameters and the stage index tau."""
 
     name: str

@@ -25,8 +25,8 @@ import numpy as np
 from ..errors import InputError
 from ..game.building import no_check, polled
 from ..game.compile import CompiledGame, StageConstraints, compile_game, compile_stage_constraints
-from ..game.runtime import References
 from ..language.config import Config, PlantDisturbance
+from ..language.runtime import References
 from ..log import topics
 from ..log.mcap_log import json_ready
 from ..log.messages import MpcError, MpcIterate, MpcState, RuntimeValues

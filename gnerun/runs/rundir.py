@@ -17,6 +17,7 @@ from .. import __version__
 from ..errors import InputError, WriteError, shorten
 from ..files import replace_text, write_text
 from ..language.config import Config
+from ..language.runtime import data_path
 from ..log.mcap_log import RunLog, json_ready
 from ..log.messages import Message, SolveIterate
 from ..log.topics import SOLVE_ITERATE
@@ -67,8 +68,6 @@ def git_describe() -> str:
 def data_copies(cfg: Config) -> dict[str, tuple[Path, str]]:
     """The data files of a config's runtime parameters and where a run directory keeps their copies (data/<file>,
     relative to it: the config.yaml written there names the copies, so that the run can be run again from it)."""
-    from ..game.runtime import data_path
-
     out: dict[str, tuple[Path, str]] = {}
     taken: dict[str, Path] = {}
     for name, spec in cfg.game.runtime.items():

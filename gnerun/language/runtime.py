@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import InputError
+from .expr import evaluate, numpy_functions, parse_expression
 
 _TIME = re.compile(r"(?<![A-Za-z0-9_])t(?![A-Za-z0-9_])")
 
@@ -357,8 +358,6 @@ class References:
     0). What the log records with the runtime values, and the figures draw with the tracking error x - r."""
 
     def __init__(self, cfg: Any, layout: RuntimeLayout | None):
-        from ..language.expr import parse_expression
-
         g = cfg.game
         self.layout = layout
         self.parameters = dict(g.parameters)
@@ -370,8 +369,6 @@ class References:
 
     def at(self, t_k: float, p: np.ndarray) -> dict[str, float]:
         """r(t_k) of every referenced state."""
-        from ..language.expr import evaluate, numpy_functions
-
         env: dict[str, Any] = dict(self.parameters)
         if self.layout is not None:
             common, stages = self.layout.symbols(p)
