@@ -321,7 +321,29 @@ def test_newton_best_responses_find_the_same_gaps() -> None:
     star = np.array([5.0, 9.0])
     cert = certificate(game, _z(game, star), responses=NewtonResponses(cfg, game))
     assert all(abs(g) <= GAP_TOL for g in cert["best_response_gap"].values())
-    assert all(note.startswith("ok (Newton") for note in cert["best_response_note"].values())
+    # Harker's players are convex QPs: one solve of each, no Newton start and no agent problem compiled
+    assert all(note.startswith("ok (convex") for note in cert["best_response_note"].values())
+    assert "agent_problems" not in game.derived
+
+
+@pytest.mark.parametrize("x2", [0.0, 3.0, 9.0, 12.5])
+def test_a_convex_players_gap_is_its_exact_best_response(x2) -> None:
+    """Harker's player 1 away from the equilibrium: min x1^2 + 8/3 x1 x2 - 34 x1 over 0 <= x1 <= 10, x1 + x2 <= 15,
+    whose best response is the clipped stationary point (34 - 8/3 x2) / 2; the certificate's one QP solve gives
+    that response and the gap J1(x1) - J1(best) in closed form, for a candidate x1 = 1 (its multipliers zero)."""
+    cfg = load_config(CONFIGS / "harker.yaml")
+    game = compile_game(cfg)
+    from gnerun.solvers.certificate import NewtonResponses
+
+    cert = certificate(game, _z(game, np.array([1.0, x2])), responses=NewtonResponses(cfg, game))
+    best = min(max((34 - 8 / 3 * x2) / 2, 0.0), 10.0, 15.0 - x2)
+
+    def J1(x1: float) -> float:
+        return x1**2 + 8 / 3 * x1 * x2 - 34 * x1
+
+    assert cert["best_response_gap"]["p1"] == pytest.approx(J1(1.0) - J1(best), rel=1e-12, abs=1e-12)
+    assert cert["best_response_kind"]["p1"] == "global (convex)"
+    assert cert["best_response_note"]["p1"].startswith("ok (convex")
 
 
 def test_best_responses_gain_nothing_from_violating_a_priced_constraint() -> None:

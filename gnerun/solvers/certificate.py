@@ -428,6 +428,16 @@ def check_player(game: CompiledGame, agent: int, z: np.ndarray, x: np.ndarray | 
                 "a log, sqrt, asin or acos in it is evaluated outside its domain")
         return PlayerCheck(None, None, "not checked", f"the cost is not finite at the point ({what})", finite=False)
     tol = GAP_TOL * max(1.0, abs(J0))
+    hessian = _convex_player(game, agent, a, x)  # then a local solve is global already: no box search
+    convex = hessian is not None
+    if convex:  # one solve of its convex QP: a KKT point of a convex problem is its global minimum
+        answer = _convex_response(game, agent, a, x, hessian, grad, prices)
+        if answer is not None:
+            val, ok = _values(game, agent, a, x, [answer], prices)
+            if ok[0] and math.isfinite(val[0]):
+                gap = J0 - float(val[0])
+                return PlayerCheck(gap, answer, "global (convex)",  # the exact gap, whatever its size
+                                   "ok (convex: one QP solve on the candidate's active set)")
     starts = response_starts(game, agent, a, x)
     best_val, best_x = math.inf, None
 
@@ -450,7 +460,6 @@ def check_player(game: CompiledGame, agent: int, z: np.ndarray, x: np.ndarray | 
 
     # the box search (small players): a global statement, or a witness
     box_result, box = None, None
-    convex = _convex_player(game, agent, a, x)  # then a local solve is global already: no box search
     if 0 < ni <= global_response.MAX_DIM and not convex:
         box_result, box = _box_search(game, agent, a, x, J0 - tol, tol)
         if box_result is not None and box_result.witness is not None:
@@ -522,9 +531,9 @@ def check_player(game: CompiledGame, agent: int, z: np.ndarray, x: np.ndarray | 
 HESSIAN_BUILT_UP_TO = 100  # an LQ player with more decisions reads its Hessian from gradients
 
 
-def _convex_player(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | None) -> bool:
-    """The agent's problem is convex for certain: an LQ game (constant derivatives, affine rows) whose agent's own
-    Hessian block is positive semidefinite. Its KKT points are its minima."""
+def _convex_player(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | None) -> np.ndarray | None:
+    """The agent's own Hessian block where its problem is convex for certain: an LQ game (constant derivatives,
+    affine rows) whose agent's block is positive semidefinite (its KKT points are its minima); None otherwise."""
     # whether the game is LQ, where that is known without building its condensed derivatives (a game solved in the
     # sparse formulation has not built them, and at long horizons they cost more than the solve)
     if "_derivatives" in game.__dict__ or game.kind == "static":
@@ -533,7 +542,7 @@ def _convex_player(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray 
         sparse = game.derived.get("sparse")
         affine = bool(sparse is not None and sparse.affine)
     if not affine:
-        return False
+        return None
     sl = game.agent_slices[agent]
     if sl.stop - sl.start <= HESSIAN_BUILT_UP_TO:
         H = game.agents.hessian(agent, a, x)
@@ -541,8 +550,58 @@ def _convex_player(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray 
         # J_i is quadratic: its gradient's differences are the Hessian's columns (building the Hessian's own
         # function grows like T^3.7 at horizon T in a condensed dynamic game: 6 s at T = 400)
         H = _hessian_from_gradients(game, agent, a, x)
-    w = np.linalg.eigvalsh(0.5 * (H + H.T))
-    return bool(w.size == 0 or w[0] >= -1e-10 * max(1.0, float(np.max(np.abs(w)))))
+    H = 0.5 * (H + H.T)
+    w = np.linalg.eigvalsh(H)
+    return H if w.size == 0 or w[0] >= -1e-10 * max(1.0, float(np.max(np.abs(w)))) else None
+
+
+def _convex_response(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | None, H: np.ndarray,
+                     grad: np.ndarray, prices: np.ndarray) -> np.ndarray | None:
+    """The best response of a player whose problem is a convex QP (:func:`_convex_player`), by one QP solve: an
+    active-set method from the candidate's active set (its equalities, and the rows that hold with equality or carry a
+    positive multiplier), each step the QP's KKT system on the working set (exact for a quadratic with affine rows),
+    the most violated row added or the most negative multiplier dropped. Returned only where the answer satisfies the
+    QP's KKT conditions (every row feasible, the inequalities' multipliers nonnegative): then it is the player's
+    global minimum. None where the method does not get there (the general path then decides)."""
+    sl = game.agent_slices[agent]
+    ni = sl.stop - sl.start
+    rows = game.agents.constraint_rows(agent)
+    y = a[sl]
+    size = max(1.0, float(np.max(np.abs(y), initial=0.0)))
+    if rows.size:
+        c_all, dc = game.constraint_values(a, x)
+        c0, C = c_all[rows], dc[rows][:, sl]
+    else:
+        c0, C = np.zeros(0), np.zeros((0, ni))
+    eq = game.equality_mask[rows]
+    active = eq | (prices > 0) | (c0 >= -FEASIBILITY_TOL * size)
+    for _ in range(2 * rows.size + 10):
+        A = np.flatnonzero(active)
+        K = np.block([[H, C[A].T], [C[A], np.zeros((A.size, A.size))]])
+        rhs = np.concatenate([-grad, -c0[A]])
+        try:
+            sol = np.linalg.solve(K, rhs)
+        except np.linalg.LinAlgError:
+            sol = np.linalg.lstsq(K, rhs, rcond=None)[0]
+        dy, mu = sol[:ni], sol[ni:]
+        scale = max(1.0, float(np.max(np.abs(rhs), initial=0.0)))
+        if not (np.all(np.isfinite(sol)) and np.max(np.abs(K @ sol - rhs), initial=0.0) <= 1e-10 * scale):
+            return None  # no stationary point on this working set
+        c_new = c0 + C @ dy
+        over = np.where(eq, np.abs(c_new), c_new)
+        tol = FEASIBILITY_TOL * max(size, 1.0 + float(np.max(np.abs(y + dy), initial=0.0)))
+        violated = np.where(active, -np.inf, over)
+        if violated.size and violated.max() > tol:
+            active[int(np.argmax(violated))] = True
+            continue
+        inequality = ~eq[A]
+        scale = max(1.0, float(np.max(np.abs(mu), initial=0.0)))  # (of the multipliers)
+        if np.any(mu[inequality] < -1e-9 * scale):
+            k = int(np.argmin(np.where(inequality, mu, np.inf)))
+            active[A[k]] = False
+            continue
+        return y + dy  # the QP's KKT conditions hold
+    return None
 
 
 def _hessian_from_gradients(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | None) -> np.ndarray:
