@@ -291,7 +291,8 @@ def solve(config: ConfigArg, out: OutOpt = None, set_: SetOpt = None, quiet: Qui
     else:
         checked = "best responses not checked (run.certificate: false)"
     typer.echo(f"certificate: KKT residual {_fmt(cert['kkt_residual'], '.1e')}; {checked}")
-    typer.echo(f"solver time {result.time_s * 1e3:.2f} ms ({_plural(result.iterations, 'iteration')}); "
+    checking = f"certificate {result.certificate_time_s * 1e3:.0f} ms; " if "best_response_gap" in cert else ""
+    typer.echo(f"solver time {result.time_s * 1e3:.2f} ms ({_plural(result.iterations, 'iteration')}); {checking}"
                f"compile {result.compile_time_s * 1e3:.0f} ms")
     typer.echo(f"run directory: {result.run_dir}")
 

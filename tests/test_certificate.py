@@ -8,6 +8,8 @@ stationary point, in closed form. The paper's Study 1 is checked end to end.
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -598,3 +600,16 @@ def test_a_fixed_decision_gets_an_empty_box_not_a_crash() -> None:
     assert cert["best_response_gap"]["p1"] == pytest.approx(j(x1) - best, rel=1e-6)
     with pytest.raises(Exception, match="not a boolean"):
         load_config(text=text.replace("upper: 0.5", "upper: false"))
+
+
+def test_the_certificates_time_is_reported_apart(tmp_path) -> None:
+    from .conftest import run_cli
+
+    proc = run_cli("solve", str(CONFIGS / "harker.yaml"), "--out", str(tmp_path / "run"))
+    assert proc.returncode == 0, proc.stderr
+    summary = json.loads((tmp_path / "run" / "summary.json").read_text())
+    assert summary["certificate_time_s"] > 0 and summary["time_s"] > 0
+    line = next(t for t in proc.stdout.splitlines() if t.startswith("solver time"))
+    assert f"certificate {summary['certificate_time_s'] * 1e3:.0f} ms" in line
+    unchecked = solve(load_config(CONFIGS / "harker.yaml", ["run.certificate=false"]))
+    assert unchecked.certificate_time_s == 0.0

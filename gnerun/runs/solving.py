@@ -99,6 +99,7 @@ class Certified:
     status: str = ""  # the solve's status: the solver's, or what the certificate concludes (see conclude)
     message: str = ""
     diagnosis: dict = field(default_factory=dict)  # a failed solve's phase 1 (``infeasibility``), when run
+    certificate_time_s: float = 0.0  # the certificates' time (best responses, their builds)
 
 
 def certified_solve(game: CompiledGame, solver: Solver, state: SSNState, x: np.ndarray | None = None,
@@ -117,7 +118,7 @@ def certified_solve(game: CompiledGame, solver: Solver, state: SSNState, x: np.n
     from ..solvers.certificate import assess, certificate, kkt_residuals
 
     restarts = CERTIFY_RESTARTS if restarts is None else restarts
-    elapsed = 0.0
+    elapsed = checking = 0.0
     used = 0
     while True:
         t = time.perf_counter()
@@ -130,12 +131,14 @@ def certified_solve(game: CompiledGame, solver: Solver, state: SSNState, x: np.n
         if on_stage is not None:
             on_stage(f"checking the best response of each of {len(game.agent_names)} agents (run.certificate: "
                      "false skips it)")
+        t = time.perf_counter()
         cert = certificate(game, state.z, x, best, responses, check)
         verdict = assess(game, cert, state.z[: game.n], x)
+        checking += time.perf_counter() - t
         improving = verdict.improving if state.status == Status.CONVERGED else {}
         if (not improving or verdict.unbounded or verdict.not_finite or used >= restarts
                 or not all(name in best for name in improving)):
-            return conclude(game, Certified(state, cert, improving, used, elapsed), x)
+            return conclude(game, Certified(state, cert, improving, used, elapsed, certificate_time_s=checking), x)
         used += 1
         z = state.z.copy()
         for i, name in enumerate(game.agent_names):
@@ -279,7 +282,7 @@ def _smoothed(cfg: Config, game: CompiledGame, solver, outcome: Certified, z0: n
                f"nonsmooth system's, with one branch's derivative at the kink (the unsmoothed solve: "
                f"{outcome.state.message})")
     return Certified(state, cert, {}, outcome.restarts, outcome.time_s + elapsed, str(Status.CONVERGED), message,
-                     outcome.diagnosis)
+                     outcome.diagnosis, outcome.certificate_time_s)
 
 
 @dataclass
@@ -306,6 +309,7 @@ class SolveResult:
     game: CompiledGame = field(repr=False)
     run_dir: Path | None = None
     parameters: dict = field(default_factory=dict)  # the runtime values the game was solved with
+    certificate_time_s: float = 0.0  # the certificate's best responses (excluded from time_s)
 
     @property
     def success(self) -> bool:
@@ -347,6 +351,7 @@ class SolveResult:
             "z": self.z.tolist(),
             "z_star": None if self.z_star is None else self.z_star.tolist(),
             "time_s": self.time_s,
+            "certificate_time_s": self.certificate_time_s,
             "compile_time_s": self.compile_time_s,
             **({"parameters": self.parameters} if self.parameters else {}),
         })
@@ -526,6 +531,7 @@ def _result(game: CompiledGame, outcome, history: list[SSNState], z_star: np.nda
         game=game,
         run_dir=run.path if run is not None else None,
         parameters=game.parameters,
+        certificate_time_s=outcome.certificate_time_s,
     )
 
 
