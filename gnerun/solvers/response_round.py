@@ -24,7 +24,6 @@ import math
 import warnings
 
 import numpy as np
-from scipy.optimize import minimize
 
 from ..game.compile import CompiledGame
 
@@ -67,6 +66,8 @@ def best_answer(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | N
     if eq_rows.size:
         constraints.append({"type": "eq", "fun": lambda ai: values(ai)[0][eq_rows],
                             "jac": lambda ai: values(ai)[1][eq_rows]})
+    from scipy.optimize import minimize  # (loaded when a round of best responses runs: a fallback, 0.2 s of import)
+
     best: tuple[float, np.ndarray] | None = None
     for s in starts:
         with warnings.catch_warnings(), np.errstate(all="ignore"):
