@@ -665,7 +665,7 @@ def _run_sweep(sweep: Sweep, sweep_dir: Path, executor: str, workers: int, addre
         for task, task_rows in completed if tasks else ():
             rows[task["index"]] = task_rows
             failed += any(r["status"] == "error" for r in task_rows)
-            compiled += any(r.get("compiled") for r in task_rows)
+            compiled += any([r.pop("compiled", False) for r in task_rows])  # (not a column of the index)
             done += 1
             if done < len(sweep.points):  # the last one is written below, with the parquet table
                 write_index(sweep, sweep_dir, rows, parquet=False)
