@@ -99,9 +99,9 @@ def test_a_failure_at_each_stage_of_a_solve_leaves_a_complete_directory(stage: s
         original = solving_module.make_solver
         monkeypatch.setattr(solving_module, "make_solver", lambda *a, **kw: _FailingSolver(original(*a, **kw), 1))
     elif stage == "certificate":
-        from gnerun.solvers.certificate import NewtonResponses
+        import gnerun.solvers.certificate as certificate_module
 
-        monkeypatch.setattr(NewtonResponses, "solve_from", _raiser("the best response failed"))
+        monkeypatch.setattr(certificate_module, "check_player", _raiser("the best response failed"))
     elif stage == "stage callback":
         def on_stage(text):
             if "best response" in text:
