@@ -3,7 +3,8 @@
 (`python -m benchmarks robustness` runs the robustness suite instead: benchmarks/robustness.py; `python -m benchmarks
 certificate` what the certificate costs next to the solve: benchmarks/certificate.py; `python -m benchmarks identical
 record|compare OUT.npz` whether a change left every iterate and status as it was: benchmarks/identical.py; `python -m
-benchmarks runtime` what runtime parameters cost per iteration against constants: benchmarks/runtime.py.)
+benchmarks runtime` what runtime parameters cost per iteration against constants: benchmarks/runtime.py; `python -m
+benchmarks montecarlo` random merges solved with one compiled game: benchmarks/montecarlo.py.)
 
 Prints a markdown table and writes JSON to benchmarks/results/. Every number is a median over repeats;
 every ratio is baseline time / gnerun time, both measured here, in this run.
@@ -562,6 +563,10 @@ if __name__ == "__main__":
         from .runtime import main as runtime_cost
 
         sys.exit(runtime_cost(sys.argv[2:]))
+    if sys.argv[1:2] == ["montecarlo"]:
+        from .montecarlo import main as montecarlo
+
+        sys.exit(montecarlo(sys.argv[2:]))
     if sys.argv[1:2] == ["identical"]:
         from .identical import main as identical
 

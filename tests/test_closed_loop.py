@@ -318,6 +318,7 @@ def test_reference_none_never_solves_for_z_star(monkeypatch: pytest.MonkeyPatch)
         raise AssertionError("the reference solve was called")
 
     monkeypatch.setattr(closed_loop.ReferenceSolver, "solve", refused)
+    monkeypatch.setattr(closed_loop.ReferenceSolver, "reached", staticmethod(refused))  # a converged step's z*
     monkeypatch.setattr(solving, "reference_solution", refused)
     monkeypatch.setattr(certificate, "best_response", refused)
     monkeypatch.setattr(certificate.NewtonResponses, "best_response", refused)
@@ -436,3 +437,36 @@ def test_the_reference_solver_is_built_once_and_solves_as_a_new_one() -> None:
         if built is None:
             built = {k: id(s) for k, s in reference.solvers.items()}
         assert {k: id(s) for k, s in reference.solvers.items()} == built
+
+
+def test_a_converged_sampling_times_reference_is_its_own_iterate(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Where the loop's solve converged (undisturbed), z*(t) is its iterate, not solved for again: it agrees with a
+    fresh solve at the same state (Study 2's game has one equilibrium) to the solver's tolerance; where the loop did
+    not converge (K = 1), and in a disturbed loop, z*(t) is solved for."""
+    from gnerun.runs import closed_loop
+    from gnerun.runs.solving import reference_solution
+
+    solved = []
+    original = closed_loop.ReferenceSolver.solve
+
+    def counting(self, *args, **kwargs):
+        solved.append(1)
+        return original(self, *args, **kwargs)
+
+    monkeypatch.setattr(closed_loop.ReferenceSolver, "solve", counting)
+    cfg = load_config(CONFIGS / "paper_study2.yaml", {"run.K": [1, 7], "run.steps": 8})
+    sim = simulate(cfg)
+    game = compile_game(cfg)
+    for K in (1, 7):
+        loop = sim[K]
+        for t in range(8):
+            fresh = reference_solution(game, cfg, game.z_start(), loop.x[t])
+            assert np.max(np.abs(loop.z_star[t] - fresh.z)) <= 1e-10
+            if loop.status[t] == "converged":
+                assert np.array_equal(loop.z_star[t], loop.z[t]) and loop.e_norm[t] == 0.0
+    not_converged = sum(s != "converged" for K in (1, 7) for s in sim[K].status)
+    assert not_converged > 0 and len(solved) == not_converged  # a solve per sampling time that did not converge
+    solved.clear()
+    disturbed = load_config(CONFIGS / "paper_study1_disturbed.yaml", {"run.K": [7], "run.steps": 3})
+    simulate(disturbed)
+    assert len(solved) == 3

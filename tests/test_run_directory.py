@@ -187,15 +187,18 @@ def test_a_failure_at_each_stage_of_a_closed_loop_leaves_a_complete_directory(st
         original = closed_loop_module.make_solver
         monkeypatch.setattr(closed_loop_module, "make_solver", lambda *a, **kw: _FailingSolver(original(*a, **kw), n))
     elif stage == "reference":
-        original_ref = ReferenceSolver.solve
+        original_ref, original_reached = ReferenceSolver.solve, ReferenceSolver.reached
         calls = []
 
-        def reference(*args, **kwargs):
-            calls.append(1)
-            if len(calls) == 2:
-                raise Injected("the reference solve failed")
-            return original_ref(*args, **kwargs)
-        monkeypatch.setattr(ReferenceSolver, "solve", reference)
+        def counted(original):  # z*(t) solved for, or a converged step's own (every sampling time has one)
+            def reference(*args, **kwargs):
+                calls.append(1)
+                if len(calls) == 2:
+                    raise Injected("the reference solve failed")
+                return original(*args, **kwargs)
+            return reference
+        monkeypatch.setattr(ReferenceSolver, "solve", counted(original_ref))
+        monkeypatch.setattr(ReferenceSolver, "reached", staticmethod(counted(original_reached)))
     elif stage.startswith("logging"):
         n = int(stage.split()[-1])
         original_write = RunLog._write

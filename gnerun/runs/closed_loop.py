@@ -356,6 +356,9 @@ class ClosedLoop:
         self.agent_idx = [game.agent_indices(i) for i in range(len(game.agent_names))]
         self.nu = sum(len(v) for v in game.variable_names)
         self.z_star_prev = game.z_start()  # z*(t-1), a start of the z*(t) solve
+        # a converged iterate of the loop is the reference's own where the loop's solver is the reference's method,
+        # undisturbed (a distributed loop is measured against centralised SSN: always solved again)
+        self.polishes = cfg.disturbance.kind == "none" and cfg.solver.kind != "distributed"
         self.rng = None  # the solver's random state, from one sampling time to the next
 
     def _iterate(self, state, budget: int) -> tuple[object, list, float]:
@@ -376,11 +379,17 @@ class ClosedLoop:
             self.log.log("warning", f"K={self.K}: interrupted ({self.interrupt.reason}) after {t} sampling "
                                     f"time{'s' * (plural or t != 1)}")
 
-    def _z_star(self, t: int, x: np.ndarray, z_warm: np.ndarray) -> tuple[np.ndarray | None, str]:
-        """z*(t) (None where it is not found, or not asked for: run.reference none) and the status of its solve."""
+    def _z_star(self, t: int, x: np.ndarray, z_warm: np.ndarray, solved=None) -> tuple[np.ndarray | None, str]:
+        """z*(t) (None where it is not found, or not asked for: run.reference none) and the status of its solve.
+        Where the loop's own solve from z_warm converged (``solved``, its state; undisturbed, by the reference's
+        method), the unbudgeted solve from z_warm would take the same iterates: z*(t) is that iterate
+        (:meth:`~gnerun.runs.reference.ReferenceSolver.reached`), not solved for again."""
         if self.reference is None:
             return None, "skipped"
-        ref = self.reference.track(z_warm, self.z_star_prev, x, self.interrupt)
+        if solved is not None:
+            ref = self.reference.reached(solved)
+        else:
+            ref = self.reference.track(z_warm, self.z_star_prev, x, self.interrupt)
         if ref.converged:
             self.z_star_prev = ref.z
         elif self.log is not None:
@@ -454,15 +463,16 @@ class ClosedLoop:
                 break
             rec.xs.append(x)
             self._runtime_values(t, x)
+            state, trace, elapsed = self._solve(t, x, z_warm)
+            _, final = self.solver.terminate(state)
             try:
-                z_star, ref_status = self._z_star(t, x, z_warm)
+                z_star, ref_status = self._z_star(t, x, z_warm, state if final == Status.CONVERGED
+                                                  and self.polishes else None)
             except Stopped:  # a stop request during z*(t): this sampling time is not run
                 rec.xs.pop()
                 ended, completed = "interrupted", t
                 self._interrupted(t, plural=True)
                 break
-            state, trace, elapsed = self._solve(t, x, z_warm)
-            _, final = self.solver.terminate(state)
             failed = final in FAILURES
             solved = self._solved(state, final, failed, z_star, ref_status, elapsed)
             if failed:

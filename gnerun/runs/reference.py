@@ -13,6 +13,7 @@ import numpy as np
 
 from ..game.compile import CompiledGame
 from ..language.config import Config
+from ..solvers.status import Status
 from .interrupt import Interrupt
 from .solving import Reference, reference_solution
 
@@ -28,6 +29,13 @@ class ReferenceSolver:
         """z* from z0 at x. A stop request (``interrupt``) raises :class:`~gnerun.runs.interrupt.Stopped` between two
         iterates."""
         return reference_solution(self.game, self.cfg, z0, x, interrupt=interrupt, solvers=self.solvers)
+
+    @staticmethod
+    def reached(state) -> Reference:
+        """z* where the loop's own solver converged from its warm start (undisturbed, the reference's method): the
+        unbudgeted solve from that start takes the same iterates (to rounding), so z* is the loop's iterate, to the
+        solver's tolerance, and is not solved for again."""
+        return Reference(state.z.copy(), Status.CONVERGED, state.residual_norm, state.k, "the loop's own solve")
 
     def track(self, z_warm: np.ndarray, z_previous: np.ndarray, x: np.ndarray,
               interrupt: Interrupt | None = None) -> Reference:
