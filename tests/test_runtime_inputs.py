@@ -121,3 +121,13 @@ def test_the_location_is_the_line_of_the_field(tmp_path) -> None:
     line = _one_line_exit_2(run_cli("validate", str(tmp_path / "game.yaml")))
     row = text.splitlines().index("    r: {file: ref.csv}") + 1
     assert f"game.yaml:{row}:" in line, line
+
+
+def test_a_runtime_parameter_as_a_bound_is_refused_with_the_way_out(tmp_path) -> None:
+    text, _ = _case("    umax: 1.0", cost="(x - 1)**2 + u**2")
+    text = text.replace("      inputs: [u]", "      inputs: {u: {lower: -umax, upper: 2}}")
+    (tmp_path / "game.yaml").write_text(text)
+    line = _one_line_exit_2(run_cli("validate", str(tmp_path / "game.yaml")))
+    row = text.splitlines().index("      inputs: {u: {lower: -umax, upper: 2}}") + 1
+    assert f"game.yaml:{row}:" in line
+    assert "it is a runtime parameter: write a bound that changes at run time as a constraint, e.g. u <= umax" in line

@@ -122,9 +122,11 @@ class Substitution:
         if unknown:
             what = {"lower": "a bound", "upper": "a bound", "start": "a start value", "dt": "dynamics.dt"}.get(
                 next((p for p in reversed(path) if isinstance(p, str)), ""), "an entry of x0")
+            runtime = (" (it is a runtime parameter: write a bound that changes at run time as a constraint, "
+                       f"e.g. u <= {unknown[0]})") if unknown[0] in self.runtime else ""
             raise Problem(path, f"{unknown[0]!r} in {value!r} is not a number known when the config is loaded: "
                                  f"{what} is an expression of numbers, numeric parameters (and entries name[i]), "
-                                 "indices and pi", scope.indices, column=first_column_of(tree, unknown[0]))
+                                 f"indices and pi{runtime}", scope.indices, column=first_column_of(tree, unknown[0]))
         with quiet():
             number = float(evaluate(tree, env, numpy_functions()))
         if not math.isfinite(number):
