@@ -1,12 +1,13 @@
-"""`python -m benchmarks montecarlo [COUNT]`: a Monte Carlo over initial states with one compiled game.
+"""`python -m benchmarks montecarlo [COUNT [WORKERS]]`: a Monte Carlo over initial states, one compiled game per
+worker.
 
-ALGAMES's random merges (benchmarks/problems/trajectory.py, its draws of seed 0): the game is compiled once, for
-the first draw, and every draw's x0 is put in force by ``CompiledGame.adopt`` (what a sweep worker does with the
-points it runs), then solved by `gnerun.solve` with the default method and its certificate, in one process (one
-core). The draws' configs differ from the first in x0 and in the constant of each terminal cost (an offset, which
-moves no equilibrium); each draw is solved under its own x0 with the first draw's constants. Printed: the compile,
-solves per second, the solver's and the certificate's median times, iterations (median, p90), and how many ended
-converged (certified).
+ALGAMES's random merges (benchmarks/problems/trajectory.py, its draws of seed 0): each worker process compiles the
+game once, for the first draw, and puts every draw's x0 it is given in force by ``CompiledGame.adopt`` (what a sweep
+worker does with the points it runs), then solves it by `gnerun.solve` with the default method and its certificate
+(WORKERS processes, default 1: one core each). The draws' configs differ from the first in x0 and in the constant of
+each terminal cost (an offset, which moves no equilibrium); each draw is solved under its own x0 with the first
+draw's constants. Printed: the compile, solves per second (and per core), the solver's and the certificate's median
+times, iterations (median, p90), and how many ended converged (certified).
 """
 
 from __future__ import annotations
@@ -23,37 +24,55 @@ from .__main__ import RESULTS
 from .problems import trajectory
 
 
-def main(argv: list[str]) -> int:
-    count = int(argv[0]) if argv else 100
+def _draws(task: tuple[list[int], list[list[float]]]) -> tuple[float, list[dict]]:
+    """One worker: the game compiled once, then the given draws (index, x0) solved in it; (compile time, rows)."""
+    indices, states = task
     first = trajectory.merge_problems(1)[0]
-    states = trajectory.merge_initial_states(count)
-    base = load_config(text=first.config_yaml)
     t0 = time.perf_counter()
-    game = compile_game(base)
+    game = compile_game(load_config(text=first.config_yaml))
     compile_s = time.perf_counter() - t0
     rows = []
-    t0 = time.perf_counter()
-    for k, x0 in enumerate(states):
-        overrides = {"game.x0": [float(v) for v in x0], "run.reference": "none"}
-        cfg = load_config(text=first.config_yaml, overrides=overrides)
+    for k, x0 in zip(indices, states, strict=True):
+        cfg = load_config(text=first.config_yaml, overrides={"game.x0": x0, "run.reference": "none"})
         t = time.perf_counter()
         result = solve(cfg, game=game)
         rows.append({"draw": k, "status": result.status, "iterations": result.iterations, "solver_s": result.time_s,
                      "certificate_s": result.certificate_time_s, "wall_s": time.perf_counter() - t})
+    return compile_s, rows
+
+
+def main(argv: list[str]) -> int:
+    count = int(argv[0]) if argv else 100
+    workers = int(argv[1]) if len(argv) > 1 else 1
+    states = [[float(v) for v in x0] for x0 in trajectory.merge_initial_states(count)]
+    tasks = [(list(range(w, count, workers)), states[w::workers]) for w in range(workers)]
+    t0 = time.perf_counter()
+    if workers == 1:
+        done = [_draws(tasks[0])]
+    else:
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
+
+        with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
+            done = list(pool.map(_draws, tasks))
     wall = time.perf_counter() - t0
+    compile_s = max(c for c, _ in done)
+    rows = sorted((r for _, part in done for r in part), key=lambda r: r["draw"])
     its = [r["iterations"] for r in rows]
     converged = sum(r["status"] == "converged" for r in rows)
     summary = {
-        "draws": count, "compiles": 1, "compile_s": compile_s, "solves_per_second_per_core": count / wall,
+        "draws": count, "workers": workers, "compiles": workers, "compile_s": compile_s,
+        "solves_per_second": count / wall, "solves_per_second_per_core": count / wall / workers,
         "median_solver_ms": 1e3 * statistics.median(r["solver_s"] for r in rows),
         "median_certificate_ms": 1e3 * statistics.median(r["certificate_s"] for r in rows),
         "median_iterations": statistics.median(its), "p90_iterations": float(np.percentile(its, 90)),
         "converged_certified": converged,
     }
-    print("| draws | compiles | compile | solves/s per core | solver (median) | certificate (median) | iterations "
-          "median / p90 | converged, certified |")
+    print("| draws | workers (compiles) | compile | solves/s (per core) | solver (median) | certificate (median) | "
+          "iterations median / p90 | converged, certified |")
     print("|---|---|---|---|---|---|---|---|")
-    print(f"| {count} | 1 | {compile_s:.2f} s | {summary['solves_per_second_per_core']:.2f} | "
+    print(f"| {count} | {workers} | {compile_s:.2f} s | {summary['solves_per_second']:.2f} "
+          f"({summary['solves_per_second_per_core']:.2f}) | "
           f"{summary['median_solver_ms']:.1f} ms | {summary['median_certificate_ms']:.1f} ms | "
           f"{summary['median_iterations']:.0f} / {summary['p90_iterations']:.0f} | {converged} of {count} |")
     RESULTS.mkdir(exist_ok=True)
