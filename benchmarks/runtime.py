@@ -82,7 +82,7 @@ SCENARIOS = {"tracking (A, w, t)": _tracking, "moving obstacle (data file)": _ob
 
 def _steps(cfg, repeats: int) -> tuple[list[np.ndarray], float]:
     game = compile_game(cfg)
-    if game.runtime is not None and game.runtime.moves and "ox" in game.runtime.entries:
+    if game.runtime is not None and "ox" in game.runtime.entries:
         game.set_parameters(t=OBSTACLE_T)
     solver = make_solver(cfg, game)
     states: list = []

@@ -261,12 +261,17 @@ class CompiledGame:
         """Put runtime values in force: the declared ones at time ``t`` (data files interpolated at the stages'
         times, ``t`` the time of stage 0), except those ``values`` gives ({name: number, list or array}). Nothing
         is recompiled. Returns p."""
+        self.p = self._runtime_vector(values, t)
+        return self.p
+
+    def _runtime_vector(self, values: dict | None, t: float) -> np.ndarray:
+        """The runtime values at time t: the declared ones, except those ``values`` gives (no runtime parameters:
+        the empty vector, and no values may be given)."""
         if self.runtime is None:
             if values:
                 raise ValueError(f"runtime values for {', '.join(values)}: this game has no runtime parameters")
-            return self.p
-        self.p = self.runtime.vector(t, values)
-        return self.p
+            return np.zeros(0)
+        return self.runtime.vector(t, values)
 
     def adopt(self, cfg: Config) -> CompiledGame:
         """This compiled game for ``cfg``, a config that compiles to the same functions (:func:`compile_key`): its
@@ -286,11 +291,7 @@ class CompiledGame:
         x = self.x0 if x is None else np.asarray(x, dtype=float).reshape(-1)
         if x.size != self.nx:
             raise ValueError(f"state x has {x.size} entries, the game has {self.nx} states")
-        if self.runtime is None:
-            if values:
-                raise ValueError(f"runtime values for {', '.join(values)}: this game has no runtime parameters")
-            return x
-        return np.concatenate([x, self.runtime.vector(t, values)])
+        return np.concatenate([x, self._runtime_vector(values, t)])
 
     @property
     def parameters(self) -> dict:

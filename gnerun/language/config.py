@@ -45,6 +45,7 @@ from .expr import (
     check_names,
     children,
     evaluate,
+    names_in,
     nodes,
     numpy_functions,
     parse_cache,
@@ -785,8 +786,7 @@ class _SemanticChecks:
         self.problems: list[str] = []
         self.seen: dict[str, str] = {}  # every name declared so far, and what it is
         self.agent_names: set[str] = set()
-        self.tables: dict[str, str] = {}  # runtime parameters that are indexed, and their kind (vector ...)
-        self.scalars: set[str] = set()  # runtime parameters used by name alone
+        self.kinds: dict[str, str] = {}  # runtime parameters and their kind: scalar, vector, matrix or stages
         self.runtime_ok = True
 
     def report(self, path: PathKey, message: str, *, key: bool = False, column: int | None = None,
@@ -868,16 +868,11 @@ class _SemanticChecks:
                 if spec.value is not None or spec.per_stage:
                     self.report(path, "a data file gives the values at every stage: leave out value and per_stage")
                 self._table(name, spec, path)
-                self.tables[name] = "stages"
-                self.scalars.add(name)
+                self.kinds[name] = "stages"
                 continue
             kind = self._runtime_value(spec, path)
-            if kind is None:
-                continue
-            if kind in ("scalar", "stages"):
-                self.scalars.add(name)
-            if kind != "scalar":
-                self.tables[name] = kind
+            if kind is not None:
+                self.kinds[name] = kind
         self.runtime_ok = len(self.problems) == reported  # the layout can be built (the entries' checks need it)
 
     def _runtime_value(self, spec: Any, path: PathKey) -> str | None:
@@ -930,28 +925,30 @@ class _SemanticChecks:
             n = stack.pop()
             if isinstance(n, Index):
                 found.append(n)
-            elif isinstance(n, Name) and n.id in self.tables and n.id not in self.scalars:
-                self.report(path, f"{n.id!r} is a runtime {self.tables[n.id]}: use its entries ({n.id}[1]"
-                                  f"{'[1]' if self.tables[n.id] == 'matrix' else ''})", column=n.column)
+            elif isinstance(n, Name) and self.kinds.get(n.id) in ("vector", "matrix"):  # scalars, stages: by name
+                self.report(path, f"{n.id!r} is a runtime {self.kinds[n.id]}: use its entries ({n.id}[1]"
+                                  f"{'[1]' if self.kinds[n.id] == 'matrix' else ''})", column=n.column)
                 return
             stack.extend(children(n))
         if not found:
             return
         layout = runtime_layout(self.cfg)
         ints = {k: v for k, v in self.g.parameters.items() if float(v).is_integer()}
+        fns = numpy_functions()
         for node in found:
-            if node.name not in self.tables:
+            if self.kinds.get(node.name, "scalar") == "scalar":
                 what = "a runtime number" if node.name in self.g.runtime else "not a runtime parameter"
                 self.report(path, f"{node.name!r} is indexed but is {what} (indexed here: runtime vectors, matrices "
                                   "and per-stage parameters)", column=node.column)
                 return
             entry = layout.entries[node.name]
             table = SymbolTable(entry, list(range(entry.size)))
-            for tau in (taus if taus is not None else [None]):
+            staged = taus is not None and "tau" in names_in(node)  # an index of tau: checked at every stage
+            for tau in (taus if staged else [None]):
                 env = dict(ints) if tau is None else {**ints, "tau": float(tau)}
                 env[node.name + "[]"] = table
                 try:
-                    evaluate(node, env, numpy_functions())
+                    evaluate(node, env, fns)
                 except KeyError as e:
                     self.report(path, f"{e.args[0]!r} in an index of {node.name!r} is not an integer parameter or "
                                       "tau", column=node.column)

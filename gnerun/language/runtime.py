@@ -120,15 +120,6 @@ class RuntimeLayout:
             start += self.entries[name].size
         self.size = start
 
-    @property
-    def names(self) -> list[str]:
-        return list(self.entries)
-
-    @property
-    def moves(self) -> bool:
-        """Whether p changes with the sampling time by itself (t, or a data file)."""
-        return self.time or any(e.table is not None for e in self.entries.values())
-
     def stage_times(self, t_k: float) -> np.ndarray:
         """The times of the stages 0..T + 1 at the sampling time t_k."""
         return t_k + self.dt * np.arange(self.horizon + 2)
@@ -139,8 +130,9 @@ class RuntimeLayout:
         p = np.empty(self.size)
         if self.time:
             p[0] = t_k
+        times = self.stage_times(t_k) if self.dynamic else None
         for e in self.entries.values():
-            p[e.slice] = e.default if e.table is None else e.table.at(self.stage_times(t_k))
+            p[e.slice] = e.default if e.table is None else e.table.at(times)
         for name, value in (values or {}).items():
             e = self.entries.get(name)
             if e is None:
@@ -159,10 +151,7 @@ class RuntimeLayout:
             raise InputError(f"runtime value for {e.name!r}: {_shown(value)} is not a number or an array of "
                              "numbers") from None
         if e.kind == "stages":
-            if v.ndim == 0:
-                v = np.full(e.shape, float(v))
-            elif v.ndim == 1 and v.size == e.shape[0] - 1:
-                v = np.append(v, v[-1])
+            v = _over_stages(v, e.shape[0])
         if v.shape != e.shape:
             want = "one number" if not e.shape else f"shape {e.shape}"
             if e.kind == "stages":
@@ -212,17 +201,22 @@ def _declared(spec: Any, horizon: int | None) -> tuple[str, tuple[int, ...], np.
     value = spec.value
     if spec.per_stage:
         n = horizon + 2
-        v = np.zeros(n) if value is None else np.asarray(value, dtype=float)
-        if v.ndim == 0:
-            v = np.full(n, float(v))
-        elif v.size == n - 1:
-            v = np.append(v, v[-1])
-        return "stages", (n,), v.reshape(-1)
+        return "stages", (n,), _over_stages(np.asarray(0.0 if value is None else value, dtype=float), n)
     if value is None:
         return "scalar", (), np.zeros(1)
     v = np.asarray(value, dtype=float)
     kind = {0: "scalar", 1: "vector", 2: "matrix"}[v.ndim]
     return kind, v.shape, v.reshape(-1)
+
+
+def _over_stages(v: np.ndarray, n: int) -> np.ndarray:
+    """Per-stage values as given (one number for every stage, or T + 1 values whose last serves the terminal cost
+    too) over the n = T + 2 stages; any other shape as it is (the caller checks it)."""
+    if v.ndim == 0:
+        return np.full(n, float(v))
+    if v.ndim == 1 and v.size == n - 1:
+        return np.append(v, v[-1])
+    return v
 
 
 def _shown(value: Any) -> str:
@@ -311,11 +305,6 @@ def _npy_columns(path: Path) -> dict[str | int, np.ndarray]:
     if arr.ndim != 2 or not np.issubdtype(arr.dtype, np.number):
         raise TableError(f"{path}: a .npy table is a 2-D array of numbers (columns by number) or a structured array")
     return {j: np.asarray(arr[:, j], dtype=float) for j in range(arr.shape[1])}
-
-
-def covers(table: Table, start: float, end: float) -> bool:
-    return table.times[0] <= start + 1e-12 * max(1.0, abs(start)) and table.times[-1] >= end - 1e-9 * max(
-        1.0, abs(end))
 
 
 def data_path(source: str | None, file: str) -> Path:

@@ -99,6 +99,7 @@ class ClosedLoopResult:
 
     def summary(self, game: CompiledGame) -> dict:
         done = self.done
+        references = _by_name(self.references[:done])  # r(t) of the states with a reference, per state
         return json_ready({
             "K": self.K,
             "ended": self.ended,
@@ -124,10 +125,9 @@ class ClosedLoopResult:
             "median_solve_time_s": float(np.median(self.solve_time_s[:done])) if done else math.nan,
             "max_solve_time_s": float(np.max(self.solve_time_s[:done])) if done else math.nan,
             **({"parameters": _by_name(self.parameters[:done])} if any(self.parameters) else {}),
-            **({"reference": _by_name(self.references[:done]),
-                "tracking_error": {s: [float(self.x[k, game.state_names.index(s)] - r[s])
-                                       for k, r in enumerate(self.references[:done])]
-                                   for s in self.references[0]}} if self.references and self.references[0] else {}),
+            **({"reference": references,
+                "tracking_error": {s: (self.x[:done, game.state_names.index(s)] - r).tolist()
+                                   for s, r in references.items()}} if references else {}),
         })
 
 
@@ -321,7 +321,7 @@ class LoopLog:
         self.run.flush()
 
     def parameters(self, t: int, values: dict, references: dict) -> None:
-        self.run.write(topics.mpc(self.K, "parameters"), RuntimeValues.of(t, values, references))
+        self.run.write(topics.mpc(self.K, topics.MPC_PARAMETERS), RuntimeValues.of(t, values, references))
 
     def last_state(self, t: int, x: np.ndarray, status: str) -> None:
         """The state the loop ended in, which no solver step produced (status: '' or diverged)."""
@@ -358,7 +358,7 @@ class ClosedLoop:
         self.z_star_prev = game.z_start()  # z*(t-1), a start of the z*(t) solve
         # a converged iterate of the loop is the reference's own where the loop's solver is the reference's method,
         # undisturbed (a distributed loop is measured against centralised SSN: always solved again)
-        self.polishes = cfg.disturbance.kind == "none" and cfg.solver.kind != "distributed"
+        self.own_reference = cfg.disturbance.kind == "none" and cfg.solver.kind != "distributed"
         self.rng = None  # the solver's random state, from one sampling time to the next
 
     def _iterate(self, state, budget: int) -> tuple[object, list, float]:
@@ -467,7 +467,7 @@ class ClosedLoop:
             _, final = self.solver.terminate(state)
             try:
                 z_star, ref_status = self._z_star(t, x, z_warm, state if final == Status.CONVERGED
-                                                  and self.polishes else None)
+                                                  and self.own_reference else None)
             except Stopped:  # a stop request during z*(t): this sampling time is not run
                 rec.xs.pop()
                 ended, completed = "interrupted", t
