@@ -210,15 +210,18 @@ def test_unparse_writes_a_tree_that_parses_back_to_the_same_value(tree, i) -> No
 
 
 def _divides_by_zero(node) -> bool:
-    """Whether a division in the tree has a denominator that evaluates to zero (at x1 = 0.7)."""
+    """Whether a division in the tree has a denominator that evaluates to zero, or a zero is raised to a negative
+    power (a division by zero too: (-0.0)**-3 is -inf, 0**-3 is inf), at x1 = 0.7."""
     stack = [node]
     while stack:
         n = stack.pop()
-        if isinstance(n, Binary):
-            if n.op == "/":
-                with np.errstate(all="ignore"):
-                    if evaluate(n.right, {"x1": 0.7}, numpy_functions()) == 0:
-                        return True
+        if isinstance(n, Binary) and n.op in ("/", "**"):
+            with np.errstate(all="ignore"):
+                value = lambda e: evaluate(e, {"x1": 0.7}, numpy_functions())  # noqa: E731
+                if n.op == "/" and value(n.right) == 0:
+                    return True
+                if n.op == "**" and value(n.left) == 0 and value(n.right) < 0:
+                    return True
         stack += children(n)
     return False
 
