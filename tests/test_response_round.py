@@ -106,7 +106,9 @@ def test_the_round_comes_after_every_interior_start_from_the_cold_overtaking_sta
         monkeypatch: pytest.MonkeyPatch) -> None:
     """From zero inputs the three interior starts stall (the cars coincide at a knot, where the collision row has no
     gradient); after the round the warm interior start converges, to a point both cars' independent numpy best
-    responses confirm."""
+    responses confirm. (The line-search phase, which the default tries at iteration SLOW in the third start, is set
+    aside here: this is the round's test.)"""
+    monkeypatch.setattr(hybrid, "SLOW", 10**6)
     game, solver = _overtaking()
     calls: list[np.ndarray] = []
     real = hybrid.response_round
@@ -127,6 +129,7 @@ def test_the_round_comes_after_every_interior_start_from_the_cold_overtaking_sta
 
 def test_without_answers_the_cold_overtaking_start_stalls_and_says_why(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(hybrid, "response_round", lambda game, a, x: None)
+    monkeypatch.setattr(hybrid, "SLOW", 10**6)
     _, solver = _overtaking()
     state = iterate(solver, solver.init())
     assert state.status == "stalled"
@@ -134,8 +137,10 @@ def test_without_answers_the_cold_overtaking_start_stalls_and_says_why(monkeypat
 
 
 def test_a_stall_after_the_answers_says_how_many_starts_it_took(monkeypatch: pytest.MonkeyPatch) -> None:
-    """Answers that are the zero-input plan itself: the three interior starts from them stall as before."""
+    """Answers that are the zero-input plan itself: the three interior starts from them stall as before (the
+    line-search phase set aside)."""
     monkeypatch.setattr(hybrid, "response_round", lambda game, a, x: np.array(a, dtype=float))
+    monkeypatch.setattr(hybrid, "SLOW", 10**6)
     _, solver = _overtaking()
     state = iterate(solver, solver.init())
     assert state.status == "stalled" and state.search.answered
@@ -169,3 +174,15 @@ def test_an_undefined_start_is_no_answer(static) -> None:
     a = np.array([np.nan, 0.3])
     assert best_answer(static, 0, a, None, [np.array([np.nan])]) is None
     assert best_answer(static, 0, a, None, [np.array([np.nan]), np.array([0.0])])[1] == pytest.approx([0.1], abs=1e-6)
+
+
+def test_a_failed_line_search_phase_hands_back_to_the_interior_phase() -> None:
+    """The default from zero inputs: the line-search phase is tried at iteration SLOW, does not converge within its
+    budget on this game, and the interior phase goes on from where it was, to a point both cars' independent numpy
+    best responses confirm."""
+    game, solver = _overtaking()
+    state = iterate(solver, solver.init())
+    assert state.status == "converged", state.message
+    assert state.search.searched and state.search.phase != "search" and state.k > hybrid.SLOW
+    gaps = overtaking_model().best_response_gaps(state.z[: game.n])
+    assert max(gaps.values()) <= 1e-6

@@ -33,7 +33,17 @@ first, judged by a nonmonotone watchdog; a more robust method when it fails; res
    problem, is solved by Lemke's method from z^0 (covering vectors: all ones, then seeded random ones). The
    central path of the interior phase gives the copies of a shared constraint equal multipliers, so it misses
    plain GNEs that have no variational counterpart (FK A.8); complementary pivoting does not.
-5. **A round of best responses** (nonlinear games of several players). When every interior start from z^0 has
+5. **A line-search phase** (unperturbed runs of the condensed formulation; not for games with abs, min or max of
+   the decisions, which the smoothing homotopy of :mod:`gnerun.runs.smoothing` takes after a failed solve). An
+   interior phase still running after ``SLOW`` iterations of the solve hands z^0 to semismooth Newton on the
+   Fischer-Burmeister function with Armijo backtracking on 1/2||Phi_FB||^2 (the method of ``globalization:
+   line_search`` with ``complementarity: fischer_burmeister``), once per solve, for at most ``SEARCH_STEPS``
+   iterations; once ||Phi|| is below the hand-over threshold the Newton phase takes over as from an interior
+   iterate. Where the search does not converge (no step length decreases the merit, a singular JPhi, the budget)
+   the interior phase goes on from the iterate it had reached. On games whose barrier path is long (formation games
+   of several robots with pairwise clearance) the search converges in a fraction of the iterations, or at all;
+   measured in benchmarks/results/solver-design.md.
+6. **A round of best responses** (nonlinear games of several players). When every interior start from z^0 has
    failed, each player's best answer to the others' start plans (:mod:`gnerun.solvers.response_round`) is the new
    start, and the interior phase begins again from it, with the small barrier of a warm start and then its other
    starting points; once per solve. Cold-started trajectory games (the overtaking game of the robustness suite)
@@ -70,13 +80,15 @@ RESTARTS = len(STARTS) - 1
 LM_FAR = 1e-4  # far from a solution, a singular JPhi gets the Levenberg-Marquardt step with mu = LM_FAR ||Phi||
 FLAT = 1e-2  # a Levenberg-Marquardt step that changes ||Phi|| by less than this fraction ends the Newton phase
 PIVOTS = 8  # LQ games: Lemke's method from this many covering vectors after the interior phase's restarts
+SLOW = 60  # iterations without convergence, in the interior phase, after which the line-search phase is tried (once)
+SEARCH_STEPS = 30  # the line-search phase's budget of iterations
 
 
 @dataclass(slots=True, frozen=True, kw_only=True)
 class Memory:
     """What the method keeps between steps (in ``SSNState.search``)."""
 
-    phase: str  # "newton" | "interior"
+    phase: str  # "newton" | "interior" | "search"
     merits: tuple[float, ...]  # ||Phi|| of the last accepted Newton iterates (the nonmonotone reference)
     best: float  # the best ||Phi|| of the current phase
     stalls: int  # steps of the current phase since its best
@@ -87,6 +99,9 @@ class Memory:
     attempt: int = 0  # interior-phase starts so far
     crash: bool = False  # the first step is still to be the affine VI's solution (LQ games, gnerun.solvers.avi)
     answered: bool = False  # z^0 is the players' best answers to the start (gnerun.solvers.response_round)
+    searched: bool = False  # the line-search phase has been tried
+    inner: SSNState | None = None  # the line-search phase's own state (its Phi is the Fischer-Burmeister one)
+    steps: int = 0  # iterations of the line-search phase so far
 
 
 class HybridNewton:
@@ -108,6 +123,10 @@ class HybridNewton:
         # games of several players: a round of best responses after every interior start has failed (not for LQ
         # games, which pivot instead; whether the game is LQ is asked only then)
         self.answers = handover and len(self.game.agent_names) > 1
+        # the line-search phase: the condensed formulation's Newton method on the Fischer-Burmeister function, built
+        # on first use (the sparse formulation takes min-map steps alone; a perturbed method is studied as it is)
+        self.searches = handover and exact and newton.condensed
+        self._searcher = None
 
     def forget(self) -> None:
         """Drop the Newton method's factorisations kept per active set."""
@@ -161,6 +180,8 @@ class HybridNewton:
         memory: Memory = state.search
         if memory.phase == "newton":
             return self._newton_step(state, memory)
+        if memory.phase == "search":
+            return self._search_step(state, memory)
         return self._interior_step(state, memory)
 
     # -------------------------------------------------------------------------------------
@@ -273,10 +294,60 @@ class HybridNewton:
         if new.residual_norm < 0.9 * best:
             best, stalls = new.residual_norm, 0
         memory = replace(memory, interior=it, best=best, stalls=stalls)
+        if (self.searches and not memory.searched and new.k >= SLOW and not self.at_solution(new)
+                and not self.game.piecewise):
+            return self._start_search(new, memory)
         if stalls >= STALL:
             return self._restart(new, memory, Status.STALLED, f"||Phi|| made no progress in {STALL} interior-point "
                                                                "steps")
         return replace(new, search=memory)
+
+    # the line-search phase ------------------------------------------------------------------
+    def _search_method(self):
+        """Semismooth Newton on the Fischer-Burmeister function with Armijo backtracking, on this game (built once)."""
+        if self._searcher is None:
+            from .globalization import LineSearchNewton
+            from .ssn import SemismoothNewton
+
+            options = self.options.model_copy(update={"complementarity": "fischer_burmeister",
+                                                      "globalization": "line_search"})
+            self._searcher = LineSearchNewton(SemismoothNewton(self.game, options))
+        return self._searcher
+
+    def _start_search(self, state: SSNState, memory: Memory) -> SSNState:
+        """The line-search phase from z^0 (this iteration is its first step); the interior iterate is kept to go
+        back to."""
+        method = self._search_method()
+        inner = method.init(memory.origin, state.x)
+        memory = replace(memory, phase="search", searched=True, inner=inner, steps=0)
+        if inner.status in FAILURES:
+            return self._end_search(state, memory)
+        return self._search_step(state, memory)
+
+    def _search_step(self, state: SSNState, memory: Memory) -> SSNState:
+        """One iteration of the line-search phase; the Newton phase once ||Phi|| is small, the interior phase again
+        where the search fails."""
+        method = self._search_method()
+        inner = memory.inner
+        if memory.steps >= SEARCH_STEPS or method.at_solution(inner):
+            return self._end_search(state, memory)
+        inner = method.step(inner)
+        if inner.status in FAILURES:
+            return self._end_search(state, memory)
+        memory = replace(memory, inner=inner, steps=memory.steps + 1)
+        new = self.newton.advance(state, inner.z, search=memory, rcond=inner.rcond)
+        if new.status in FAILURES:
+            return self._end_search(state, memory)
+        if new.residual_norm <= memory.handover and not self.at_solution(new):
+            return replace(new, search=replace(memory, phase="newton", merits=(new.residual_norm,),
+                                               best=new.residual_norm, stalls=0))
+        return new
+
+    def _end_search(self, state: SSNState, memory: Memory) -> SSNState:
+        """Back to the interior phase, at the interior iterate the line-search phase began from."""
+        memory = replace(memory, phase="interior", inner=None, best=math.inf, stalls=0)
+        it = memory.interior
+        return self._interior_step(self.newton.advance(state, it.z, search=memory, k=state.k), memory)
 
     def _restart(self, state: SSNState, memory: Memory, status: Status, why: str) -> SSNState:
         """The interior phase again from z^0 with its next starting point; for an LQ game, then the pivoting
