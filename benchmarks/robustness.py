@@ -3,7 +3,8 @@
 The suite (``benchmarks/problems``): the Facchinei-Kanzow GNEP library A.1-A.18 at the literature's starting
 points, the bounded LQ dynamic game at T = 5, 20, 40 (variational and generalized), ALGAMES's ramp merge and
 T-intersection from random initial states (cold start from zero inputs), the MCPTrajectoryGameSolver demo, and a
-two-car overtaking game in ALGAMES's style from zero inputs and three other starts.
+two-car overtaking game in ALGAMES's style from zero inputs and three other starts, and the six-robot ring formation
+of configs/formation_ring.yaml from 30 random initial positions (``benchmarks/problems/formation.py``).
 Every problem is solved with each method asked for, with default settings otherwise (the configs carry no
 ``solver:`` block, and the iteration limit is the default one). A result counts as **certified** when the solver
 says converged, every agent's best-response gap is at most ``GAP_TOL`` by the problem's own check (written
@@ -100,6 +101,10 @@ def problems(which: set[str], count: int, seed: int) -> list[Problem]:
         out.append(trajectory.mcp_demo_problem())
     if "overtaking" in which:
         out += trajectory.overtaking_problems()
+    if "formation" in which:
+        from .problems import formation
+
+        out += formation.formation_problems(min(count, 30))
     if "nonconvex" in which:
         from .problems import nonconvex
 
@@ -327,7 +332,7 @@ def tables(outcomes: list[Outcome], published: dict[tuple[str, str, str], dict[s
                 lines.append(f"- {m}: FK library {sum(o.certified for o in fk_rows)} of {len(fk_rows)} "
                              "problem/start pairs certified")
         lines.append("")
-    for fam in ("merge", "intersection"):
+    for fam in ("merge", "intersection", "formation"):
         group = [p for p in pairs if p[0] == fam]
         if not group:
             continue
@@ -355,8 +360,9 @@ def main(argv: list[str]) -> int:
     import argparse
 
     parser = argparse.ArgumentParser(prog="python -m benchmarks robustness", description=__doc__.splitlines()[0])
-    parser.add_argument("--families", default="fk,lq,merge,intersection,mcp-demo,overtaking,nonconvex",
-                        help="comma-separated: fk, lq, merge, intersection, mcp-demo, overtaking, nonconvex")
+    parser.add_argument("--families", default="fk,lq,merge,intersection,mcp-demo,overtaking,formation,nonconvex",
+                        help="comma-separated: fk, lq, merge, intersection, mcp-demo, overtaking, formation (at "
+                             "most 30 starts), nonconvex")
     parser.add_argument("--methods", default="default,local,FB + line search",
                         help=f"comma-separated, of: {', '.join(METHODS)}")
     parser.add_argument("--count", type=int, default=100, help="random initial states per trajectory scenario")

@@ -352,72 +352,23 @@ def _formation(**over):
                        overrides={"game.parameters.N": 6, "game.x0": FORMATION_X0, "run.reference": "none", **over})
 
 
-def _formation_cost(cfg, U: np.ndarray, i: int) -> float:
-    """Robot i's cost (0-based) written with numpy: single integrators (RK4 of a constant input is exact), the stage
-    cost at the state its input produces, at the stage's time t = tau dt; U[tau, r] = (ux, uy) of robot r."""
-    g = cfg.game
-    N, rho, dt, T = 6, 0.8, g.dynamics.dt, g.horizon
-    gx, gy, speed = 0.0, 0.0, 0.3
-    P = np.asarray(FORMATION_X0, dtype=float).reshape(N, 2) + dt * np.cumsum(U, axis=0)  # P[tau] = xi(tau + 1)
-    ang = 2 * np.pi * np.arange(1, N + 1) / N
-    j = (i + 1) % N
-    total = 0.0
-    for tau in range(T + 1):
-        t = tau * dt
-        p, q = P[tau, i], P[tau, j]
-        total += (q[0] - p[0] - rho * (np.cos(ang[j]) - np.cos(ang[i]))) ** 2
-        total += (q[1] - p[1] - rho * (np.sin(ang[j]) - np.sin(ang[i]))) ** 2
-        total += 0.5 * ((p[0] - gx - speed * (t + dt) - rho * np.cos(ang[i])) ** 2
-                        + (p[1] - gy - rho * np.sin(ang[i])) ** 2)
-        total += 0.05 * (U[tau, i] @ U[tau, i])
-    return float(total)
-
-
-def _clearances(cfg, U: np.ndarray, i: int) -> np.ndarray:
-    """Robot i's pairwise clearance rows, |p_i - p_j|^2 - D^2 >= 0 at every stage."""
-    P = np.asarray(FORMATION_X0, dtype=float).reshape(6, 2) + cfg.game.dynamics.dt * np.cumsum(U, axis=0)
-    d = P - P[:, i : i + 1]
-    return np.delete((d**2).sum(axis=2), i, axis=1).reshape(-1) - 0.4**2
-
-
 def test_a_long_barrier_path_is_left_for_the_line_search_phase_and_ends_at_an_equilibrium() -> None:
-    from scipy.optimize import minimize
+    from benchmarks.problems.formation import FormationModel
 
     res = solve(_formation())
     assert res.status == "converged", res.message
     assert res.iterations > hybrid.SLOW  # the line-search phase began at SLOW
-    cfg = _formation()
-    T = cfg.game.horizon
-    U = np.stack([np.stack([res.solution[f"robot{r}"][f"ux{r}"], res.solution[f"robot{r}"][f"uy{r}"]], axis=1)
-                  for r in range(1, 7)], axis=1)  # U[tau, robot] = (ux, uy)
-    assert U.shape == (T + 1, 6, 2) and (_clearances(cfg, U, 0) >= -1e-9).all()
-    game = compile_game(cfg)  # the numpy model is gnerun's game: the same costs at the solution and at zero inputs
-    for V in (U, np.zeros_like(U)):
-        a = np.concatenate([V[:, r].reshape(-1) for r in range(6)])
-        assert game.costs(a) == pytest.approx([_formation_cost(cfg, V, i) for i in range(6)], rel=1e-12)
-    # each robot's best response to the others by SLSQP (numpy costs, independent of gnerun), from the solution
-    # and from three random plans: none improves on the equilibrium
-    rng = np.random.default_rng(3)
-    for i in range(6):
-        own = _formation_cost(cfg, U, i)
-
-        def cost(v, i=i):
-            V = U.copy()
-            V[:, i] = v.reshape(T + 1, 2)
-            return _formation_cost(cfg, V, i)
-
-        def rows(v, i=i):
-            V = U.copy()
-            V[:, i] = v.reshape(T + 1, 2)
-            return _clearances(cfg, V, i)
-
-        best = own
-        for start in [U[:, i].reshape(-1), *rng.uniform(-1.5, 1.5, (3, 2 * (T + 1)))]:
-            r = minimize(cost, start, method="SLSQP", bounds=[(-1.5, 1.5)] * (2 * (T + 1)),
-                         constraints=[{"type": "ineq", "fun": rows}], options={"ftol": 1e-12, "maxiter": 500})
-            if r.success and (rows(r.x) >= -1e-8).all():
-                best = min(best, r.fun)
-        assert own - best <= 1e-6, (i, own, best)
+    model = FormationModel(6, np.asarray(FORMATION_X0))
+    U = model.plans(res.a)
+    assert U[:, 0, 0].tolist() == pytest.approx(res.solution["robot1"]["ux1"], abs=0)
+    assert all((model.clearances(U, i) >= -1e-9).all() for i in range(6))
+    game = compile_game(_formation())  # the numpy model is gnerun's game: the same costs at the solution and at zero
+    for a in (res.a, np.zeros_like(res.a)):
+        assert game.costs(a) == pytest.approx([model.cost(model.plans(a), i) for i in range(6)], rel=1e-12)
+    # each robot's best response to the others by SLSQP (numpy, independent of gnerun): none improves
+    assert max(model.best_response_gaps(res.a).values()) <= 1e-6
+    # the check finds the improvement where there is one: at zero inputs every robot gains
+    assert min(model.best_response_gaps(np.zeros_like(res.a)).values()) > 1e-2
 
 
 def test_without_the_line_search_phase_that_start_is_not_solved(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -17,7 +17,7 @@ import numpy as np
 class Problem:
     """One problem and one start point."""
 
-    family: str  # "fk" | "lq" | "merge" | "intersection" | "mcp-demo" | "overtaking" | "nonconvex"
+    family: str  # "fk" | "lq" | "merge" | "intersection" | "mcp-demo" | "overtaking" | "formation" | "nonconvex"
     name: str  # e.g. "A.1"
     start: str  # e.g. "x0 = 0.01" (the literature's label of the start point)
     config_yaml: str  # a complete gnerun config; the start point is in its start values
