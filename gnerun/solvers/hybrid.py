@@ -307,7 +307,6 @@ class HybridNewton:
         """Semismooth Newton on the Fischer-Burmeister function with Armijo backtracking, on this game (built once)."""
         if self._searcher is None:
             from .globalization import LineSearchNewton
-            from .ssn import SemismoothNewton
 
             options = self.options.model_copy(update={"complementarity": "fischer_burmeister",
                                                       "globalization": "line_search"})
