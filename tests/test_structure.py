@@ -27,8 +27,6 @@ LAYERS = {
 
 # (importer, imported) -> why the import is made inside a function
 DEFERRED = {
-    ("gnerun.solvers.hybrid", "gnerun.solvers.globalization"): "the globalizations' table builds the hybrid method; "
-                                                                 "its line-search phase takes one, on first use",
     ("gnerun.cli", "*"): "the CLI loads a command's modules when it runs, so that `gnerun --help` is fast",
     ("gnerun.runs.sweep", "gnerun.runs.closed_loop"): "a sweep worker loads the run it makes",
     ("gnerun.runs.sweep", "gnerun.runs.solving"): "a sweep worker loads the run it makes",

@@ -65,6 +65,7 @@ from .avi import AffineVI
 from .interior_point import STARTS, InteriorIterate, InteriorPoint
 from .josephy_newton import kkt_lcp_point
 from .linalg import norm
+from .line_search_newton import LineSearchNewton
 from .response_round import response_round
 from .ssn import SemismoothNewton
 from .status import FAILURES, SSNState, Status
@@ -306,8 +307,6 @@ class HybridNewton:
     def _search_method(self):
         """Semismooth Newton on the Fischer-Burmeister function with Armijo backtracking, on this game (built once)."""
         if self._searcher is None:
-            from .globalization import LineSearchNewton
-
             options = self.options.model_copy(update={"complementarity": "fischer_burmeister",
                                                       "globalization": "line_search"})
             self._searcher = LineSearchNewton(SemismoothNewton(self.game, options))
