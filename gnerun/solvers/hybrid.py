@@ -56,6 +56,7 @@ so logs, tolerances and closed loops read the same.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, replace
 
@@ -127,7 +128,6 @@ class HybridNewton:
         # the line-search phase: the condensed formulation's Newton method on the Fischer-Burmeister function, built
         # on first use (the sparse formulation takes min-map steps alone; a perturbed method is studied as it is)
         self.searches = handover and exact and newton.condensed
-        self._searcher = None
 
     def forget(self) -> None:
         """Drop the Newton method's factorisations kept per active set."""
@@ -304,18 +304,17 @@ class HybridNewton:
         return replace(new, search=memory)
 
     # the line-search phase ------------------------------------------------------------------
-    def _search_method(self):
+    @functools.cached_property
+    def _search_method(self) -> LineSearchNewton:
         """Semismooth Newton on the Fischer-Burmeister function with Armijo backtracking, on this game (built once)."""
-        if self._searcher is None:
-            options = self.options.model_copy(update={"complementarity": "fischer_burmeister",
-                                                      "globalization": "line_search"})
-            self._searcher = LineSearchNewton(SemismoothNewton(self.game, options))
-        return self._searcher
+        options = self.options.model_copy(update={"complementarity": "fischer_burmeister",
+                                                  "globalization": "line_search"})
+        return LineSearchNewton(SemismoothNewton(self.game, options))
 
     def _start_search(self, state: SSNState, memory: Memory) -> SSNState:
         """The line-search phase from z^0 (this iteration is its first step); the interior iterate is kept to go
         back to."""
-        method = self._search_method()
+        method = self._search_method
         inner = method.init(memory.origin, state.x)
         memory = replace(memory, phase="search", searched=True, inner=inner, steps=0)
         if inner.status in FAILURES:
@@ -325,7 +324,7 @@ class HybridNewton:
     def _search_step(self, state: SSNState, memory: Memory) -> SSNState:
         """One iteration of the line-search phase; the Newton phase once ||Phi|| is small, the interior phase again
         where the search fails."""
-        method = self._search_method()
+        method = self._search_method
         inner = memory.inner
         if memory.steps >= SEARCH_STEPS or method.at_solution(inner):
             return self._end_search(state, memory)
@@ -333,7 +332,7 @@ class HybridNewton:
         if inner.status in FAILURES:
             return self._end_search(state, memory)
         memory = replace(memory, inner=inner, steps=memory.steps + 1)
-        new = self.newton.advance(state, inner.z, search=memory, rcond=inner.rcond)
+        new = self.newton.advance(state, inner.z, search=memory, rcond=inner.rcond, parts=inner.parts)
         if new.status in FAILURES:
             return self._end_search(state, memory)
         if new.residual_norm <= memory.handover and not self.at_solution(new):

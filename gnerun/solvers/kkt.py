@@ -189,12 +189,16 @@ class KKTSystem:
         return state.residual_norm <= self.options.tol
 
     def advance(self, state: SSNState, z: np.ndarray, *, rcond: float = math.nan, search: Memory | None = None,
-                k: int | None = None) -> SSNState:
+                k: int | None = None, parts: KKTParts | None = None) -> SSNState:
         """The iterate after ``state``: z evaluated once (Phi, the parts for the next step), checked for NaN and
         divergence, carrying the globalization's ``search`` memory. With ``k``, z takes ``state``'s place as iterate
-        k instead (a new start of the globalized method: the iterate before it stays ``state``'s). Every method's
-        step ends here."""
-        parts, phi, active = self.evaluate(z, state.x)
+        k instead (a new start of the globalized method: the iterate before it stays ``state``'s). ``parts``: the
+        condensed parts at z already evaluated by another method on this game (``game.kkt_parts``), taken as they
+        are where this method would evaluate the same. Every method's step ends here."""
+        if parts is not None and self.condensed and not self._affine:
+            phi, active = self.residual(parts, z)
+        else:
+            parts, phi, active = self.evaluate(z, state.x)
         moved = k is not None
         new = SSNState(z=z, x=state.x, k=k if moved else state.k + 1, phi=phi, residual_norm=norm(phi), parts=parts,
                        active=active, z_prev=state.z_prev if moved else state.z,
