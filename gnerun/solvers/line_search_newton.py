@@ -26,10 +26,10 @@ class LineSearchNewton:
         self.disturbance = newton.disturbance
         self.condensed = newton.condensed
 
-
     def forget(self) -> None:
         """Drop the Newton method's factorisations kept per active set."""
         self.newton.forget()
+
     def init(self, z0: np.ndarray | None = None, x: np.ndarray | None = None,
              rng: np.random.Generator | None = None) -> SSNState:
         return self.newton.init(z0, x, rng)
