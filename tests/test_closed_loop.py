@@ -470,3 +470,57 @@ def test_a_converged_sampling_times_reference_is_its_own_iterate(monkeypatch: py
     disturbed = load_config(CONFIGS / "paper_study1_disturbed.yaml", {"run.K": [7], "run.steps": 3})
     simulate(disturbed)
     assert len(solved) == 3
+
+
+@pytest.mark.parametrize("config, overrides, z_star_solves", [
+    # z*(0) is the loop's own converged iterate: not solved for
+    ("formation_ring.yaml", {"run.K": [1, 3, 10], "run.steps": 4}, 0),
+    # a perturbed solver: the loops of K > 1 go on with the random state the t = 0 solve left; z*(0) solved apart
+    ("paper_study2.yaml", {"run.K": [1, 2, 5], "run.steps": 4, "run.initial": "solve",
+                           "disturbance": {"kind": "jacobian_noise", "scale": 1e-2, "seed": 3}}, 1),
+])
+def test_the_first_sampling_time_is_solved_once_for_every_K(config: str, overrides: dict, z_star_solves: int,
+                                                            monkeypatch, tmp_path: Path) -> None:
+    """With run.initial: solve, t = 0 (a solve to tolerance from the start values, which does not depend on K) is
+    solved by the first loop and taken by the others; each K's loop is, bit for bit, the loop of that K run alone,
+    and its log holds the same t = 0 iterates."""
+    import gnerun.runs.closed_loop as closed_loop
+
+    cfg = load_config(CONFIGS / config, overrides)
+    solves: list[int] = []  # the budgets of the solver's step loops
+
+    def counted(solver, state, max_steps=None, *args, **kwargs):
+        solves.append(max_steps)
+        return iterate(solver, state, max_steps, *args, **kwargs)
+
+    iterate = closed_loop.iterate
+    monkeypatch.setattr(closed_loop, "iterate", counted)
+    at_x0: list[bool] = []  # z*(t) solves: at x(0) or not
+    track = closed_loop.ReferenceSolver.track
+
+    def tracked(self, z_warm, z_previous, x, interrupt=None):
+        at_x0.append(np.array_equal(x, cfg.game.x0))
+        return track(self, z_warm, z_previous, x, interrupt)
+
+    monkeypatch.setattr(closed_loop.ReferenceSolver, "track", tracked)
+    together = simulate(cfg, out=tmp_path / "together")
+    assert solves.count(cfg.solver.max_iter) == 1 and together.first.solves == 1
+    assert at_x0.count(True) == z_star_solves
+    assert [r.shares_first for r in together.values()] == [False, True, True]
+    steps = cfg.run.steps
+    assert len(solves) == 1 + (steps - 1) * len(cfg.run.K)
+    for K, r in together.items():
+        solves.clear()
+        alone = simulate(load_config(CONFIGS / config, {**overrides, "run.K": [K]}))[K]
+        assert solves.count(cfg.solver.max_iter) == 1
+        for name in ("x", "u", "w", "e_norm", "residual_norm", "iterations", "z", "z_star", "constraint_violation",
+                     "fallback"):
+            assert np.array_equal(getattr(r, name), getattr(alone, name), equal_nan=True), (K, name)
+        assert r.status == alone.status and r.reference_status == alone.reference_status
+        assert r.solve_time_s[0] == together[cfg.run.K[0]].solve_time_s[0]  # the one t = 0 solve's time
+    at_0 = defaultdict(list)
+    for topic, msg, _ in read_messages(tmp_path / "together" / "run.mcap"):
+        if topic.endswith("/mpc/iterate") and msg["t"] == 0:
+            at_0[topic].append(msg)
+    assert len(at_0) == len(cfg.run.K) and len({json.dumps(v) for v in at_0.values()}) == 1
+    assert len(at_0["/K1/mpc/iterate"]) == together[1].iterations[0] + 1

@@ -10,10 +10,14 @@ track, which is the one equilibrium when it is unique.
 
 The budget K is a maximum: once ||Phi|| <= tol the remaining steps are skipped, because a solution
 is a fixed point of the Newton step.
+
+With ``run.initial: solve`` the first sampling time is solved to tolerance from the start values, which does not
+depend on K: the loops of one run share that solve and z*(0) (:class:`FirstSamplingTime`), made once.
 """
 
 from __future__ import annotations
 
+import copy
 import math
 import time
 from collections.abc import Callable, Mapping
@@ -30,7 +34,7 @@ from ..language.runtime import References
 from ..log import topics
 from ..log.mcap_log import json_ready
 from ..log.messages import MpcError, MpcIterate, MpcState, RuntimeValues
-from ..solvers.driver import iterate
+from ..solvers.driver import IterateRow, iterate
 from ..solvers.factory import make_solver
 from ..solvers.status import FAILURES, Status
 from .interrupt import Interrupt, Stopped
@@ -67,6 +71,8 @@ class ClosedLoopResult:
     message: str = ""  # why a loop ended early (diverged, error)
     parameters: list[dict] = field(default_factory=list)  # per t: the runtime values in force (games with any)
     references: list[dict] = field(default_factory=list)  # per t: r(t) of the states with a reference
+    reference_time_s: float = 0.0  # the time of the z*(t) solves this loop made (not in the summary: a timing)
+    shares_first: bool = False  # t = 0 was another loop's solve (FirstSamplingTime): solve_time_s[0] is its time
 
     @property
     def steps(self) -> int:
@@ -149,6 +155,19 @@ class Simulation(dict[int, ClosedLoopResult]):
     interrupted: bool = False
 
     error: str | None = None  # what ended the run, if an exception did (status error)
+    first: FirstSamplingTime | None = None  # sampling time 0, shared by the loops (its solve made once)
+    compile_time_s: float = 0.0  # the game, its stage constraints and the solver's system, built before the loops
+    log_time_s: float = 0.0  # writing the run directory (0 without one)
+
+    @property
+    def solver_time_s(self) -> float:
+        """The solver's time over every loop, the shared t = 0 solve counted once."""
+        return float(sum(r.solve_time_s[int(r.shares_first):r.done].sum() for r in self.values()))
+
+    @property
+    def reference_time_s(self) -> float:
+        """The time of the z*(t) solves over every loop (z*(0) counted once where it was shared)."""
+        return float(sum(r.reference_time_s for r in self.values()))
 
     @property
     def status(self) -> str:
@@ -310,23 +329,46 @@ class LoopLog:
     def sampling_time(self, t: int, trace: list, z_star: np.ndarray | None, x: np.ndarray, u: np.ndarray | None,
                       sample: Sample) -> None:
         """Sampling time t (flushed): its iterates, the state with the inputs applied, the error."""
-        for k, r, zk in trace:
-            err = None if z_star is None else float(np.linalg.norm(zk - z_star))
-            self.run.write(topics.mpc(self.K, "iterate"), MpcIterate(t=t, k=k, residual_norm=r, error_norm=err))
-        self.run.write(topics.mpc(self.K, "state"), MpcState(
-            t=t, x=x.tolist(), u=None if u is None else u.tolist(), status=sample.status,
-            fallback=bool(sample.fallback), constraint_violation=float(sample.constraint_violation)))
-        self.run.write(topics.mpc(self.K, "error"), MpcError(t=t, e_norm=sample.e_norm,
-                                                              e_norm_agent=dict(sample.e_norm_agent)))
-        self.run.flush()
+        with self.run.timed():
+            for k, r, zk in trace:
+                err = None if z_star is None else float(np.linalg.norm(zk - z_star))
+                self.run.write(topics.mpc(self.K, "iterate"), MpcIterate(t=t, k=k, residual_norm=r, error_norm=err))
+            self.run.write(topics.mpc(self.K, "state"), MpcState(
+                t=t, x=x.tolist(), u=None if u is None else u.tolist(), status=sample.status,
+                fallback=bool(sample.fallback), constraint_violation=float(sample.constraint_violation)))
+            self.run.write(topics.mpc(self.K, "error"), MpcError(t=t, e_norm=sample.e_norm,
+                                                                  e_norm_agent=dict(sample.e_norm_agent)))
+            self.run.flush()
 
     def parameters(self, t: int, values: dict, references: dict) -> None:
-        self.run.write(topics.mpc(self.K, topics.MPC_PARAMETERS), RuntimeValues.of(t, values, references))
+        with self.run.timed():
+            self.run.write(topics.mpc(self.K, topics.MPC_PARAMETERS), RuntimeValues.of(t, values, references))
 
     def last_state(self, t: int, x: np.ndarray, status: str) -> None:
         """The state the loop ended in, which no solver step produced (status: '' or diverged)."""
-        self.run.write(topics.mpc(self.K, "state"), MpcState(t=t, x=x.tolist(), u=None, status=status,
-                                                              fallback=False, constraint_violation=None))
+        with self.run.timed():
+            self.run.write(topics.mpc(self.K, "state"), MpcState(t=t, x=x.tolist(), u=None, status=status,
+                                                                  fallback=False, constraint_violation=None))
+
+
+class FirstSamplingTime:
+    """The first sampling time's solve, which does not depend on K: with ``run.initial: solve`` the solve to tolerance
+    from the start values, and z*(0) where it is solved for. The first loop makes them, the loops of the other K take
+    them as they are (its iterates, its time, the solver's random state after it), so that a run of several K solves
+    at t = 0 once. Shared only between loops whose t = 0 is the same: the same x(0) and runtime values."""
+
+    def __init__(self) -> None:
+        self.key: str | None = None  # x(0) and the runtime values at t = 0 of the loop that made them
+        self.solved: tuple | None = None  # (state, trace, time) of the t = 0 solve to tolerance, as it ended
+        self.states: list = []  # its iterates (IterateRow), for a caller that shows them
+        self.reference = None  # z*(0) where it was solved for (a Reference)
+        self.solves = 0  # t = 0 solves to tolerance made (one per run whatever the number of K)
+
+    def matches(self, key: str) -> bool:
+        """Whether what was made at t = 0 is for this loop's t = 0 (the first loop to ask sets the key)."""
+        if self.key is None:
+            self.key = key
+        return self.key == key
 
 
 class ClosedLoop:
@@ -340,8 +382,11 @@ class ClosedLoop:
     def __init__(self, cfg: Config, game: CompiledGame, K: int, run: RunDirectory | None = None,
                  progress: Progress | None = None, interrupt: Interrupt | None = None,
                  stage: StageConstraints | None = None, record: LoopRecord | None = None,
-                 parameters: RuntimeCallback | None = None):
+                 parameters: RuntimeCallback | None = None, first: FirstSamplingTime | None = None):
         self.cfg, self.game, self.K = cfg, game, K
+        self.first = first if first is not None else FirstSamplingTime()
+        self.shares_first = False  # t = 0 was taken from another loop's (its time is not this loop's)
+        self.reference_time_s = 0.0  # the time of the z*(t) solves this loop made
         self.parameters = parameters
         self.references = References(cfg, game.runtime)
         self.solver = make_solver(cfg, game)
@@ -361,12 +406,15 @@ class ClosedLoop:
         self.own_reference = cfg.disturbance.kind == "none" and cfg.solver.kind != "distributed"
         self.rng = None  # the solver's random state, from one sampling time to the next
 
-    def _iterate(self, state, budget: int) -> tuple[object, list, float]:
+    def _iterate(self, state, budget: int, seen: list | None = None) -> tuple[object, list, float]:
         """Up to ``budget`` solver steps from ``state``, stopped at convergence or a failed step (whose iterate is
-        not kept): the last state, the iterates as (k, ||Phi||, z^k) from the start on, the steps' time."""
+        not kept): the last state, the iterates as (k, ||Phi||, z^k) from the start on, the steps' time. ``seen``
+        receives every state made (:class:`~gnerun.solvers.driver.IterateRow`)."""
         trace: list = []
 
         def keep(s) -> None:  # a failed step's iterate is not kept
+            if seen is not None:
+                seen.append(IterateRow.of(s))
             if s.status not in FAILURES:
                 trace.append((s.k, s.residual_norm, s.z))
 
@@ -388,8 +436,14 @@ class ClosedLoop:
             return None, "skipped"
         if solved is not None:
             ref = self.reference.reached(solved)
+        elif t == 0 and self.first.reference is not None and self.first.matches(self._first_key(x)):
+            ref = self.first.reference  # z*(0), from the start values: the same for every K
         else:
+            t0 = time.perf_counter()
             ref = self.reference.track(z_warm, self.z_star_prev, x, self.interrupt)
+            self.reference_time_s += time.perf_counter() - t0
+            if t == 0 and self.first.matches(self._first_key(x)):
+                self.first.reference = ref
         if ref.converged:
             self.z_star_prev = ref.z
         elif self.log is not None:
@@ -397,7 +451,7 @@ class ClosedLoop:
                                     "e(t) is not available")
         return (ref.z if ref.converged else None), str(ref.status)
 
-    def _solve(self, t: int, x: np.ndarray, z_warm: np.ndarray) -> tuple[object, list, float]:
+    def _solve(self, t: int, x: np.ndarray, z_warm: np.ndarray, seen: list | None = None) -> tuple[object, list, float]:
         """The solver steps of sampling time t from z_warm: at most K (at t = 0 with run.initial: solve, the solver's
         max_iter); the last state, the iterates (:meth:`_iterate`) and the time of init and steps."""
         cfg = self.cfg
@@ -405,9 +459,32 @@ class ClosedLoop:
         t0 = time.perf_counter()
         state = self.solver.init(z_warm, x, self.rng)
         elapsed = time.perf_counter() - t0
-        state, trace, stepping = self._iterate(state, budget)
+        state, trace, stepping = self._iterate(state, budget, seen)
         self.rng = state.rng
         return state, trace, elapsed + stepping
+
+    def _first_solve(self, x: np.ndarray, z_warm: np.ndarray) -> tuple[object, list, float]:
+        """Sampling time 0. With ``run.initial: solve`` its solve to tolerance from the start values does not depend
+        on K: the first loop makes it (:class:`FirstSamplingTime`), the others take a copy of it as it ended, the
+        solver's random state included, and go on from there as if they had made it."""
+        first = self.first
+        if self.cfg.run.initial != "solve" or not first.matches(self._first_key(x)):
+            return self._solve(0, x, z_warm)
+        if first.solved is None:
+            seen: list = []
+            state, trace, elapsed = self._solve(0, x, z_warm, seen)
+            first.solved, first.states = copy.deepcopy((state, trace, elapsed)), seen
+            first.solves += 1
+            return state, trace, elapsed
+        state, trace, elapsed = copy.deepcopy(first.solved)
+        self.rng = state.rng
+        self.shares_first = True
+        return state, trace, elapsed
+
+    def _first_key(self, x: np.ndarray) -> str:
+        """What sampling time 0 depends on besides the config: x(0) and the runtime values in force."""
+        values = self.record.parameters[0] if self.record.parameters else {}
+        return repr((np.asarray(x, dtype=float).tobytes(), json_ready(values)))
 
     def _runtime_values(self, t: int, x: np.ndarray) -> None:
         """The runtime values of sampling time t in force (the declared ones at its time, data files interpolated at
@@ -463,7 +540,7 @@ class ClosedLoop:
                 break
             rec.xs.append(x)
             self._runtime_values(t, x)
-            state, trace, elapsed = self._solve(t, x, z_warm)
+            state, trace, elapsed = self._first_solve(x, z_warm) if t == 0 else self._solve(t, x, z_warm)
             _, final = self.solver.terminate(state)
             try:
                 z_star, ref_status = self._z_star(t, x, z_warm, state if final == Status.CONVERGED
@@ -517,7 +594,9 @@ class ClosedLoop:
                 log.last_state(steps, x, "")
                 log.run.flush()
 
-        return rec.result(ended, completed, message)
+        result = rec.result(ended, completed, message)
+        result.reference_time_s, result.shares_first = self.reference_time_s, self.shares_first
+        return result
 
     def _solved(self, state, final: Status, failed: bool, z_star: np.ndarray | None, ref_status: str,
                 elapsed: float) -> dict:
@@ -564,7 +643,8 @@ class ClosedLoop:
 def closed_loop(cfg: Config, game: CompiledGame, K: int, run: RunDirectory | None = None,
                 progress: Progress | None = None, interrupt: Interrupt | None = None,
                 stage: StageConstraints | None = None, record: LoopRecord | None = None,
-                parameters: RuntimeCallback | None = None) -> ClosedLoopResult:
+                parameters: RuntimeCallback | None = None, first: FirstSamplingTime | None = None
+                ) -> ClosedLoopResult:
     """One closed loop of ``cfg.run.steps`` sampling times with at most K solver steps each.
 
     ``run.initial`` says whether the first sampling time is solved without a budget, ``run.safeguard`` which plan
@@ -578,8 +658,10 @@ def closed_loop(cfg: Config, game: CompiledGame, K: int, run: RunDirectory | Non
     A plant state that is not finite, or beyond ``solver.divergence_limit``, ends the loop there (``ended``: diverged),
     with the state it reached. ``record`` (a :class:`LoopRecord`) receives the loop's progress as it is made.
     At every sampling time the game's runtime values are put in force (``parameters(t, x)`` gives any of them).
+    ``first`` (a :class:`FirstSamplingTime`) shares sampling time 0's solve to tolerance and z*(0) between the loops
+    of several K: the loop that finds it made takes it instead of solving again.
     """
-    return ClosedLoop(cfg, game, K, run, progress, interrupt, stage, record, parameters).run()
+    return ClosedLoop(cfg, game, K, run, progress, interrupt, stage, record, parameters, first).run()
 
 
 def simulate(cfg: Config, out: str | Path | None = None, *, force: bool = False,
@@ -594,6 +676,7 @@ def simulate(cfg: Config, out: str | Path | None = None, *, force: bool = False,
         raise InputError(f"{cfg.source or cfg.name}: simulate needs a dynamic game (game.kind: dynamic); "
                          "solve a static game with gnerun.solve", cli=f"{cfg.source or cfg.name}: simulate needs a "
                          "dynamic game (game.kind: dynamic); use `gnerun solve` for a static game")
+    started = time.perf_counter()
     with polled(no_check):  # built in a helper thread: a signal reaches this one at once (KeyboardInterrupt)
         if game is None:
             game = compile_game(cfg)
@@ -605,9 +688,11 @@ def simulate(cfg: Config, out: str | Path | None = None, *, force: bool = False,
         make_solver(cfg, game)  # the sparse system, where the loops take it, is built now: once, before the run
         if cfg.run.warm_start == "shift":
             game.shift_changed_rows  # noqa: B018 (found once, before the loop: it evaluates c at a test point)
-    run = RunDirectory.create(out, cfg, command="simulate", force=force) if out is not None else None
     sim = Simulation()
+    sim.compile_time_s = time.perf_counter() - started
+    run = RunDirectory.create(out, cfg, command="simulate", force=force) if out is not None else None
     sim.game = game
+    sim.first = first = FirstSamplingTime()
     sim.run_dir = run.path if run is not None else None
     interrupt = Interrupt()
 
@@ -635,7 +720,7 @@ def simulate(cfg: Config, out: str | Path | None = None, *, force: bool = False,
                 break
             record = LoopRecord(K, cfg.run.steps, game)
             try:
-                sim[K] = r = closed_loop(cfg, game, K, run, progress, interrupt, stage, record, parameters)
+                sim[K] = r = closed_loop(cfg, game, K, run, progress, interrupt, stage, record, parameters, first)
             except Stopped:  # a stop request while something was built: the loop as far as it went
                 sim[K] = record.result("interrupted")
                 break
@@ -651,7 +736,10 @@ def simulate(cfg: Config, out: str | Path | None = None, *, force: bool = False,
                                 f"violation {r.max_constraint_violation:.3e}")
         sim.interrupted = interrupt.requested
         if run is not None:
-            run.write_summary(sim.summary())
+            with run.timed():
+                run.write_summary(sim.summary())
+    if run is not None:
+        sim.log_time_s = run.time_s  # closed: the log's last chunk written
     if sim.interrupted:
         raise KeyboardInterrupt  # after the summary and a finished log: the caller decides what it means
     return sim

@@ -9,6 +9,7 @@ import json
 import math
 import shutil
 import subprocess
+import time
 import warnings
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -90,9 +91,30 @@ class RunDirectory:
         self.log_sink = log
         self._lock = lock
         self.summary_written = False
+        self.time_s = 0.0  # the time spent writing the directory (messages made, log, summary; :meth:`timed`)
+        self._depth = 0
+
+    @contextlib.contextmanager
+    def timed(self) -> Iterator[None]:
+        """Count the time of the block in :attr:`time_s` (a block inside another is counted once)."""
+        self._depth += 1
+        t0 = time.perf_counter()
+        try:
+            yield
+        finally:
+            self._depth -= 1
+            if not self._depth:
+                self.time_s += time.perf_counter() - t0
 
     @classmethod
     def create(cls, out: str | Path, cfg: Config, *, command: str, force: bool = False) -> RunDirectory:
+        t0 = time.perf_counter()
+        run = cls._create(out, cfg, command=command, force=force)
+        run.time_s += time.perf_counter() - t0
+        return run
+
+    @classmethod
+    def _create(cls, out: str | Path, cfg: Config, *, command: str, force: bool) -> RunDirectory:
         path = Path(out)
         shown = shorten(str(path), 100)
         try:
@@ -144,44 +166,51 @@ class RunDirectory:
 
     def write_iterate(self, state, error_norm: float | None) -> None:
         """Iterate k at log_time k seconds (and what follows, until the next iterate)."""
-        self.at(state.k)
-        r = state.residual_norm
-        self.log_sink.write(SOLVE_ITERATE, SolveIterate(
-            k=state.k,
-            z=state.z.tolist(),
-            residual_norm=r,
-            log10_residual_norm=math.log10(r) if r > 0 and math.isfinite(r) else None,
-            error_norm=error_norm,
-            step_norm=state.step_norm,
-            active_set_changes=state.active_set_changes,
-        ))
-        self.log_sink.flush()
+        with self.timed():
+            self.at(state.k)
+            r = state.residual_norm
+            self.log_sink.write(SOLVE_ITERATE, SolveIterate(
+                k=state.k,
+                z=state.z.tolist(),
+                residual_norm=r,
+                log10_residual_norm=math.log10(r) if r > 0 and math.isfinite(r) else None,
+                error_norm=error_norm,
+                step_norm=state.step_norm,
+                active_set_changes=state.active_set_changes,
+            ))
+            self.log_sink.flush()
 
     def write(self, topic: str, message: Message) -> None:
-        self.log_sink.write(topic, message)
+        with self.timed():
+            self.log_sink.write(topic, message)
 
     def flush(self) -> None:
-        self.log_sink.flush()
+        with self.timed():
+            self.log_sink.flush()
 
     def at(self, seconds: float) -> None:
         """Stamp what follows (messages and /log) with this simulated time."""
         self.log_sink.set_time(round(seconds * 1e9))
 
     def log(self, level: str, text: str) -> None:
-        self.log_sink.log(level, text)
-        self.log_sink.flush()
+        with self.timed():
+            self.log_sink.log(level, text)
+            self.log_sink.flush()
 
     def write_summary(self, summary: dict) -> None:
-        try:
-            replace_text(self.path / "summary.json", json.dumps(json_ready(summary), indent=2, allow_nan=False) + "\n")
-            self.summary_written = True
-        except OSError as e:
-            raise WriteError(f"{self.path / 'summary.json'}: cannot write the summary: {e.strerror or e} "
-                             "(is the disk full?); the run log holds every flushed step") from None
+        with self.timed():
+            try:
+                text = json.dumps(json_ready(summary), indent=2, allow_nan=False) + "\n"
+                replace_text(self.path / "summary.json", text)
+                self.summary_written = True
+            except OSError as e:
+                raise WriteError(f"{self.path / 'summary.json'}: cannot write the summary: {e.strerror or e} "
+                                 "(is the disk full?); the run log holds every flushed step") from None
 
     def close(self) -> None:
         try:
-            self.log_sink.close()
+            with self.timed():
+                self.log_sink.close()
         finally:
             if self._lock is not None:
                 self._lock.release()

@@ -310,6 +310,8 @@ class SolveResult:
     run_dir: Path | None = None
     parameters: dict = field(default_factory=dict)  # the runtime values the game was solved with
     certificate_time_s: float = 0.0  # the certificate's best responses (excluded from time_s)
+    reference_time_s: float = 0.0  # the exact solution z* of the error history (excluded from time_s)
+    logging_time_s: float = 0.0  # writing the run directory: log, summary (excluded from time_s)
 
     @property
     def success(self) -> bool:
@@ -398,6 +400,8 @@ def solve(cfg: Config, out: str | Path | None = None, *, force: bool = False,
 
     with recording(run, failed), interrupt.installed(), polled(interrupt.check):  # builds (the certificate's) stop too
         result = _solve(cfg, game, solver, run, compile_time, watched, interrupt, stage)
+    if run is not None:
+        result.logging_time_s = run.time_s  # closed: the log's last chunk written
     if result.status == INTERRUPTED:
         raise KeyboardInterrupt  # after the summary and a finished log: the caller decides what it means
     return result
@@ -436,7 +440,7 @@ def _solve(cfg: Config, game: CompiledGame, solver: Solver, run: RunDirectory | 
     z0 = game.z_start()
     exact = cfg.run.reference == "exact"
     history: list[SSNState] = []
-    sink_time = 0.0
+    sink_time = reference_time = 0.0
     ref, z_star = None, None
 
     def record(state: SSNState) -> None:
@@ -465,7 +469,9 @@ def _solve(cfg: Config, game: CompiledGame, solver: Solver, run: RunDirectory | 
         if exact:
             if on_stage is not None:
                 on_stage("solving for the exact solution z* of the error norms (run.reference: none skips it)")
+            t = time.perf_counter()
             ref = reference_solution(game, cfg, z0, x, interrupt=interrupt)
+            reference_time = time.perf_counter() - t
             z_star = ref.z if ref.converged else None
             if run is not None and not ref.converged:
                 run.log("warning", f"the undisturbed reference solve did not converge ({ref.message}); "
@@ -485,14 +491,18 @@ def _solve(cfg: Config, game: CompiledGame, solver: Solver, run: RunDirectory | 
     state, cert = outcome.state, outcome.certificate
     elapsed = outcome.time_s - sink_time  # the solver alone: the sink's I/O and the certificate are excluded
     if exact and outcome.restarts and state.status == Status.CONVERGED:  # the equilibrium reached, polished
+        t = time.perf_counter()
         ref = reference_solution(game, cfg, state.z, x)
+        reference_time += time.perf_counter() - t
         z_star = ref.z if ref.converged else None
     if outcome.diagnosis:
         cert = {**cert, **outcome.diagnosis}
     result = _result(game, outcome, history, z_star, ref, cert, elapsed, compile_time, x, run)
+    result.reference_time_s = reference_time
     if run is not None:
         run.log("info" if result.success else "warning", f"status {result.status}: {result.message}")
-        run.write_summary(result.summary())
+        with run.timed():
+            run.write_summary(result.summary())
     return result
 
 

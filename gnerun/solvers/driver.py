@@ -10,6 +10,7 @@ agent's proximal response, a best response of the certificate, the benchmarks. A
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
 import numpy as np
@@ -29,6 +30,28 @@ class Solver(Protocol):
     def terminate(self, state: SSNState) -> tuple[bool, Status]: ...
 
     def finish(self, state: SSNState) -> SSNState: ...
+
+
+@dataclass(frozen=True, slots=True)
+class IterateRow:
+    """What a table of iterates shows of one: k, ||Phi||, ||z^k - z^{k-1}||, the active-set changes, the phase of a
+    method that has phases (gnerun.solvers.hybrid: newton, interior, search; None otherwise), and z^k."""
+
+    k: int
+    residual_norm: float
+    step_norm: float
+    active_set_changes: int
+    phase: str | None
+    z: np.ndarray
+
+    @classmethod
+    def of(cls, state: SSNState) -> IterateRow:
+        return cls(state.k, state.residual_norm, state.step_norm, state.active_set_changes, phase(state), state.z)
+
+
+def phase(state: SSNState) -> str | None:
+    """The phase of the method that made ``state`` (None for a method without phases)."""
+    return getattr(state.search, "phase", None)
 
 
 def iterate(solver: Solver, state: SSNState, max_steps: int | None = None,
