@@ -12,6 +12,7 @@ import contextlib
 import errno
 import os
 import sys
+import time
 import traceback
 from collections.abc import Iterator
 from pathlib import Path
@@ -23,6 +24,8 @@ from typer.core import TyperCommand
 from . import __version__
 from .errors import MAX_MESSAGE, InputError, Unavailable, one_line, shorten
 from .threads import single_threaded_blas
+
+IMPORTED = time.perf_counter()  # the wall clock's start where the process's own is unknown (see _wall_s)
 
 EXAMPLES = """Examples:
 
@@ -80,6 +83,8 @@ OutOpt = Annotated[
                  metavar="DIR"),
 ]
 QuietOpt = Annotated[bool, typer.Option("--quiet", "-q", help="Print nothing but errors.")]
+VerboseOpt = Annotated[bool, typer.Option("--verbose", "-v", help="Print every iterate row (past 20 rows the table "
+                                          "is thinned: every 10th iterate, each phase change, the last).")]
 ForceOpt = Annotated[bool, typer.Option("--force", help="Write into an existing, non-empty run directory.")]
 
 
@@ -126,10 +131,12 @@ def _reported() -> Iterator[None]:
         _fail(e)
 
 
-def _load(config: Path, overrides: list[str] | None):
-    from .language.config import load_config
-
-    return load_config(config, overrides or [])
+def _load(config: Path, overrides: list[str] | None, clock: _Clock | None = None):
+    clock = clock if clock is not None else _Clock()
+    with clock("imports"):
+        from .language.config import load_config
+    with clock("load"):
+        return load_config(config, overrides or [])
 
 
 def _fmt(v: float | None, spec: str = ".3e") -> str:
@@ -187,6 +194,105 @@ def _solution_lines(solution: dict) -> list[str]:
     if len(rows) > SOLUTION_ROWS:
         lines.append(f"  ... {len(rows) - SOLUTION_ROWS} more (summary.json holds the whole solution)")
     return lines
+
+
+ROWS_IN_FULL = 20  # iterate rows printed before the table is thinned (--verbose prints every row)
+ROWS_EVERY = 10  # past them: the iterates k = 0 mod 10, each phase change, and the last
+
+
+class _IterateTable:
+    """The iterate rows of a solve, printed as they are made. Past ``ROWS_IN_FULL`` rows only every ``ROWS_EVERY``-th
+    iterate, the first of each phase (gnerun.solvers.hybrid) and the last are printed, then a line says how many
+    were left out; ``verbose`` prints every row."""
+
+    def __init__(self, verbose: bool):
+        self.verbose = verbose
+        self.rows = self.hidden = 0
+        self.phase: str | None = None
+        self.withheld: str | None = None  # the last row not printed: printed at the end if it is the last row
+        self.seconds = 0.0  # time spent printing
+
+    @staticmethod
+    def header(phases: bool) -> str:
+        return (f"{'k':>4}  {'||Phi||':>10}  {'||z-z*||':>10}  {'||dz||':>10}  {'changes':>7}"
+                + (f"  {'phase':<8}" if phases else "")).rstrip()
+
+    def add(self, k: int, residual_norm: float, error_norm: float | None, step_norm: float, changes: int,
+            phase: str | None) -> None:
+        t0 = time.perf_counter()
+        line = (f"{k:>4}  {_fmt(residual_norm):>10}  {_fmt(error_norm):>10}  {_fmt(step_norm):>10}  {changes:>7}"
+                + (f"  {phase}" if phase is not None else ""))
+        shown = (self.verbose or self.rows < ROWS_IN_FULL or k % ROWS_EVERY == 0
+                 or (self.rows > 0 and phase != self.phase))
+        self.rows += 1
+        self.phase = phase
+        if shown:
+            typer.echo(line)
+            self.withheld = None
+        else:
+            self.hidden += 1
+            self.withheld = line
+        self.seconds += time.perf_counter() - t0
+
+    def close(self) -> None:
+        """The last row if it was not printed, and how many rows were left out."""
+        t0 = time.perf_counter()
+        if self.withheld is not None:
+            typer.echo(self.withheld)
+            self.hidden -= 1
+            self.withheld = None
+        if self.hidden:
+            typer.echo(f"  ... {_plural(self.hidden, 'row')} not shown; --verbose shows all")
+        self.seconds += time.perf_counter() - t0
+
+
+def _wall_s() -> float:
+    """Seconds since this process started (Linux: /proc; elsewhere since the CLI was imported)."""
+    try:
+        stat = Path("/proc/self/stat").read_text().rsplit(")", 1)[1].split()  # fields 3.. (the name may hold spaces)
+        uptime = float(Path("/proc/uptime").read_text().split()[0])
+        return uptime - int(stat[19]) / os.sysconf("SC_CLK_TCK")  # field 22: the start, in clock ticks since boot
+    except (OSError, ValueError, IndexError, AttributeError):
+        return time.perf_counter() - IMPORTED
+
+
+class _Clock:
+    """Where a command's wall time goes: the parts measured, in the order first measured, and the rest."""
+
+    def __init__(self) -> None:
+        self.parts: dict[str, float] = {}
+
+    @classmethod
+    def started(cls) -> _Clock:
+        """A clock whose first part is the startup: the interpreter, the CLI's import, the command line read."""
+        clock = cls()
+        clock.add("startup", _wall_s())
+        return clock
+
+    def add(self, name: str, seconds: float) -> None:
+        self.parts[name] = self.parts.get(name, 0.0) + seconds
+
+    @contextlib.contextmanager
+    def __call__(self, name: str) -> Iterator[None]:
+        t0 = time.perf_counter()
+        try:
+            yield
+        finally:
+            self.add(name, time.perf_counter() - t0)
+
+    def line(self, order: tuple[str, ...]) -> str:
+        """``wall W s: part p, ..., other o``: the parts in ``order`` (then any other measured), ``other`` the wall
+        time none of them measured (the interpreter's start, the command line, printing the results)."""
+        wall = _wall_s()
+        parts = [(name, self.parts[name]) for name in order if name in self.parts]
+        parts += [(name, v) for name, v in self.parts.items() if name not in order]
+        parts.append(("other", wall - sum(v for _, v in parts)))
+        spec = ".2f" if wall < 10 else ".1f"
+        return f"wall {wall:{spec}} s: " + ", ".join(f"{name} {v:{spec}}" for name, v in parts)
+
+
+# the timing line's parts, in this order (other last): what the command does, first to last
+TIMING_ORDER = ("startup", "imports", "load", "compile", "reference", "solve", "certificate", "logging")
 
 
 ExpandOpt = Annotated[bool, typer.Option("--expand", help="Print the config as it runs: families, templates, "
@@ -248,15 +354,20 @@ def _warn(config: Path, warnings: list[str], quiet: bool) -> None:
 
 @app.command(cls=_Command, short_help="Solve one equilibrium problem and print the solution.")
 def solve(config: ConfigArg, out: OutOpt = None, set_: SetOpt = None, quiet: QuietOpt = False,
-          force: ForceOpt = False) -> None:
+          force: ForceOpt = False, verbose: VerboseOpt = False) -> None:
     """Solve one equilibrium problem (a static game, or a dynamic game at its x0)."""
+    clock = _Clock.started()
     with _reported():
-        cfg = _load(config, set_)
+        cfg = _load(config, set_, clock)
         _warn(config, cfg.size_warnings("solve"), quiet)
-        from .runs.rundir import claim_default_run_dir, remove_if_empty
-        from .runs.solving import solve as run_solve
+        with clock("imports"):
+            from .runs.rundir import claim_default_run_dir, remove_if_empty
+            from .runs.solving import solve as run_solve
+            from .solvers import certificate  # noqa: F401 - loaded by every solve's end: its time is the imports'
+            from .solvers.driver import phase
 
         out_dir = out if out is not None else claim_default_run_dir(cfg)
+        table = _IterateTable(verbose)
 
         def show(state, error_norm: float | None) -> None:
             if quiet:
@@ -264,13 +375,17 @@ def solve(config: ConfigArg, out: OutOpt = None, set_: SetOpt = None, quiet: Qui
             if state.k == 0:
                 typer.echo(f"gnerun solve {config}: {_method(cfg)}, tol {cfg.solver.tol:.0e}, disturbance "
                            f"{cfg.disturbance.kind}")
-                typer.echo(f"{'k':>4}  {'||Phi||':>10}  {'||z-z*||':>10}  {'||dz||':>10}  {'changes':>7}")
-            typer.echo(f"{state.k:>4}  {_fmt(state.residual_norm):>10}  {_fmt(error_norm):>10}  "
-                       f"{_fmt(state.step_norm):>10}  {state.active_set_changes:>7}")
+                typer.echo(table.header(phase(state) is not None))
+            table.add(state.k, state.residual_norm, error_norm, state.step_norm, state.active_set_changes,
+                      phase(state))
 
         try:
             stage = (lambda text: typer.echo(f"... {text}", err=True)) if not quiet and sys.stderr.isatty() else None
             result = run_solve(cfg, out=out_dir, force=force, on_iterate=show, on_stage=stage)
+            for name, seconds in (("compile", result.compile_time_s), ("reference", result.reference_time_s),
+                                  ("solve", result.time_s), ("certificate", result.certificate_time_s),
+                                  ("logging", result.logging_time_s + table.seconds)):
+                clock.add(name, seconds)
         except KeyboardInterrupt:
             typer.echo(_interrupted(out_dir), err=True)
             raise typer.Exit(130) from None
@@ -279,6 +394,7 @@ def solve(config: ConfigArg, out: OutOpt = None, set_: SetOpt = None, quiet: Qui
                 remove_if_empty(out_dir)
     if quiet:
         return
+    table.close()
     cert = result.certificate
     typer.echo(f"status: {result.status}: {result.message}")
     for line in _solution_lines(result.solution):
@@ -295,20 +411,25 @@ def solve(config: ConfigArg, out: OutOpt = None, set_: SetOpt = None, quiet: Qui
     typer.echo(f"solver time {result.time_s * 1e3:.2f} ms ({_plural(result.iterations, 'iteration')}); {checking}"
                f"compile {result.compile_time_s * 1e3:.0f} ms")
     typer.echo(f"run directory: {result.run_dir}")
+    typer.echo(clock.line(TIMING_ORDER))
 
 
 @app.command(cls=_Command, short_help="Run the closed loop (time-distributed CG-MPC) once per K.")
 def simulate(config: ConfigArg, out: OutOpt = None, set_: SetOpt = None, quiet: QuietOpt = False,
-             force: ForceOpt = False) -> None:
+             force: ForceOpt = False, verbose: Annotated[bool, typer.Option(
+                 "--verbose", "-v", help="Print the iterate rows of the solve at t = 0 (run.initial: solve).")] = False
+             ) -> None:
     """Run the closed loop (time-distributed CG-MPC) for every K in run.K."""
+    clock = _Clock.started()
     with _reported():
-        cfg = _load(config, set_)
+        cfg = _load(config, set_, clock)
         if cfg.game.kind != "dynamic":  # before the header: nothing runs
             raise InputError(f"{config}: simulate needs a dynamic game (game.kind: dynamic); use `gnerun solve` "
                              "for a static game")
         _warn(config, cfg.size_warnings("simulate"), quiet)
-        from .runs.closed_loop import simulate as run_simulate
-        from .runs.rundir import claim_default_run_dir, remove_if_empty
+        with clock("imports"):
+            from .runs.closed_loop import simulate as run_simulate
+            from .runs.rundir import claim_default_run_dir, remove_if_empty
 
         out_dir = out if out is not None else claim_default_run_dir(cfg)
         if not quiet:
@@ -318,6 +439,9 @@ def simulate(config: ConfigArg, out: OutOpt = None, set_: SetOpt = None, quiet: 
         try:
             with _progress(cfg, enabled=not quiet and sys.stdout.isatty()) as progress:
                 sim = run_simulate(cfg, out=out_dir, force=force, progress=progress)
+            for name, seconds in (("compile", sim.compile_time_s), ("reference", sim.reference_time_s),
+                                  ("solve", sim.solver_time_s), ("logging", sim.log_time_s)):
+                clock.add(name, seconds)
         except KeyboardInterrupt:
             typer.echo(_interrupted(out_dir), err=True)
             raise typer.Exit(130) from None
@@ -326,15 +450,18 @@ def simulate(config: ConfigArg, out: OutOpt = None, set_: SetOpt = None, quiet: 
                 remove_if_empty(out_dir)
     if quiet:
         return
-    typer.echo(f"{'K':>4}  {'max e':>10}  {'final e':>10}  {'median step':>12}  {'max step':>10}  {'failed':>6}"
-               f"  {'fallback':>8}  {'max violation':>13}")
+    first = _first_sampling_time(cfg, sim, verbose)
+    steps = "t>=1" if first else "step"  # with t = 0 solved to tolerance, the step times are those of the MPC steps
+    typer.echo(f"{'K':>4}  {'max e':>10}  {'final e':>10}  {'median ' + steps:>12}  {'max ' + steps:>10}  "
+               f"{'failed':>6}  {'fallback':>8}  {'max violation':>13}")
     for K, r in sim.items():
         failed = len(r.failed_steps)
         finite = r.e_norm[r.e_norm == r.e_norm]
+        times = sorted(r.solve_time_s[1 if first else 0:r.done])
+        median = _ms(float(times[len(times) // 2])) if times else "-"
         typer.echo(f"{K:>4}  {_fmt(float(finite.max()) if finite.size else None):>10}  {_fmt(float(r.e_norm[-1])):>10}"
-                   f"  {_ms(float(sorted(r.solve_time_s)[len(r.solve_time_s) // 2])):>12}"
-                   f"  {_ms(float(r.solve_time_s.max())):>10}  {failed:>6}  {len(r.fallback_steps):>8}"
-                   f"  {_fmt(r.max_constraint_violation):>13}")
+                   f"  {median:>12}  {_ms(float(times[-1])) if times else '-':>10}  {failed:>6}"
+                   f"  {len(r.fallback_steps):>8}  {_fmt(r.max_constraint_violation):>13}")
     worst = {K: r for K, r in sim.items() if r.max_constraint_violation > 1e-9}  # above rounding
     for K, r in worst.items():
         v = r.constraint_violation
@@ -344,6 +471,36 @@ def simulate(config: ConfigArg, out: OutOpt = None, set_: SetOpt = None, quiet: 
         if r.message:  # a loop that ended early: why
             typer.echo(one_line(r.message))
     typer.echo(f"run directory: {sim.run_dir}")
+    typer.echo(clock.line(TIMING_ORDER))
+
+
+def _first_sampling_time(cfg, sim, verbose: bool) -> bool:
+    """The line on sampling time 0 when it was solved to tolerance (run.initial: solve), made once for every K (and
+    with ``verbose`` its iterate rows); False where there is none to report (t = 0 is then a step like the others)."""
+    first = sim.first
+    if cfg.run.initial != "solve" or first is None or not first.solves or not sim:
+        return False
+    r = next(r for r in sim.values() if not r.shares_first)
+    if not r.done:  # stopped before t = 0 was done
+        return False
+    if verbose:
+        import numpy as np
+
+        z_star = r.z_star[0]
+        table = _IterateTable(verbose=True)
+        typer.echo("t = 0, the solve to tolerance:")
+        typer.echo(table.header(any(row.phase is not None for row in first.states)))
+        for row in first.states:
+            error = None if z_star is None or not np.all(np.isfinite(z_star)) else float(np.linalg.norm(row.z - z_star))
+            table.add(row.k, row.residual_norm, error, row.step_norm, row.active_set_changes, row.phase)
+        table.close()
+    makers = [K for K, s in sim.items() if not s.shares_first]  # the loops that solved t = 0 (one, unless a
+    # parameters callback gave the loops different runtime values at t = 0)
+    by = (f"once for K = {', '.join(str(K) for K in sim)}" if len(makers) == 1 else
+          f"{_plural(len(makers), 'time')} (by K = {', '.join(str(K) for K in makers)}: different runtime values)")
+    typer.echo(f"t = 0, solved to tolerance {by}: {r.status[0]}, {_plural(int(r.iterations[0]), 'iteration')}, "
+               f"{_ms(float(r.solve_time_s[0]))}; step times below: t >= 1")
+    return True
 
 
 @app.command(cls=_Command, short_help="Run a grid of runs and write their index table (resumable).")

@@ -295,3 +295,105 @@ def test_no_docstring_cites_the_specification() -> None:
                 doc = ast.get_docstring(node) or ""
                 assert "SPEC" not in doc, (path, getattr(node, "name", "module"))
         assert "SPEC §" not in path.read_text(), path
+
+
+SIX_ROBOTS = ["--set", "game.parameters.N=6",
+              "--set", "game.x0=[0.3,-0.2,-0.4,0.5,-0.9,-0.6,0.6,-1.1,1.2,0.1,-1.3,0.9]"]
+ROW = re.compile(r"^\s+\d+\s")
+TIMING = re.compile(r"^wall (?P<wall>\d+\.\d+) s: (?P<parts>.*)$")
+
+
+def _timing(stdout: str) -> tuple[float, dict[str, float]]:
+    """The timing line (the last line): the wall time and its parts, in order."""
+    m = TIMING.match(stdout.splitlines()[-1])
+    assert m, stdout.splitlines()[-1]
+    parts = {name: float(v) for name, v in (p.split() for p in m["parts"].split(", "))}
+    return float(m["wall"]), parts
+
+
+def _assert_sums_to_wall(wall: float, parts: dict[str, float]) -> None:
+    # each number is rounded to 0.01 s (below 10 s) or 0.1 s; "other" is the wall time less the parts measured
+    step = 0.01 if wall < 10 else 0.1
+    assert abs(sum(parts.values()) - wall) <= step / 2 * (len(parts) + 1) + 1e-9
+    assert parts["other"] >= -0.02 and all(v >= 0 for name, v in parts.items() if name != "other")
+
+
+def test_long_solves_thin_their_rows_and_verbose_shows_all(tmp_path: Path) -> None:
+    """71 iterations of the 6-robot formation: the first 20 rows, then every 10th iterate, the first row of each phase
+    of the default method and the last row, and a line that counts the rows left out; --verbose prints them all."""
+    full = run_cli("solve", str(CONFIGS / "formation_ring.yaml"), *SIX_ROBOTS, "--out", str(tmp_path / "v"),
+                   "--verbose")
+    assert full.returncode == 0, full.stderr
+    iterates = [m for t, m, _ in read_messages(tmp_path / "v" / "run.mcap") if t == "/solve/iterate"]
+    rows = [line.split() for line in full.stdout.splitlines() if ROW.match(line)]
+    assert [int(r[0]) for r in rows] == [m["k"] for m in iterates] and len(rows) > 40
+    assert full.stdout.splitlines()[1].split() == ["k", "||Phi||", "||z-z*||", "||dz||", "changes", "phase"]
+    assert "not shown" not in full.stdout
+    phases = [r[-1] for r in rows]
+    assert {"newton", "interior"} <= set(phases)
+    expected = [r for i, r in enumerate(rows) if i < 20 or int(r[0]) % 10 == 0 or i == len(rows) - 1
+                or phases[i] != phases[i - 1]]
+
+    thin = run_cli("solve", str(CONFIGS / "formation_ring.yaml"), *SIX_ROBOTS, "--out", str(tmp_path / "t"))
+    assert thin.returncode == 0, thin.stderr
+    shown = [line.split() for line in thin.stdout.splitlines() if ROW.match(line)]
+    assert [r[0] for r in shown] == [r[0] for r in expected]
+    assert shown[-1][0] == str(iterates[-1]["k"])
+    lines = thin.stdout.splitlines()
+    notice = lines.index(f"  ... {len(rows) - len(shown)} rows not shown; --verbose shows all")
+    assert lines[notice - 1].split() == shown[-1] and lines[notice + 1].startswith("status: converged")
+
+
+def test_a_short_solve_prints_every_row(tmp_path: Path) -> None:
+    proc = run_cli("solve", str(CONFIGS / "paper_study1.yaml"), "--out", str(tmp_path / "s"))
+    assert proc.returncode == 0, proc.stderr
+    iterations = json.loads((tmp_path / "s" / "summary.json").read_text())["iterations"]
+    assert len([line for line in proc.stdout.splitlines() if ROW.match(line)]) == iterations + 1
+    assert "not shown" not in proc.stdout
+
+
+def test_solve_ends_with_where_the_wall_time_went(tmp_path: Path) -> None:
+    proc = run_cli("solve", str(CONFIGS / "paper_study1.yaml"), "--out", str(tmp_path / "s"))
+    assert proc.returncode == 0, proc.stderr
+    wall, parts = _timing(proc.stdout)
+    assert list(parts) == ["startup", "imports", "load", "compile", "reference", "solve", "certificate", "logging",
+                           "other"]
+    _assert_sums_to_wall(wall, parts)
+    summary = json.loads((tmp_path / "s" / "summary.json").read_text())
+    for name, key in (("solve", "time_s"), ("certificate", "certificate_time_s"), ("compile", "compile_time_s")):
+        assert parts[name] == pytest.approx(summary[key], abs=0.006)
+    assert proc.stdout.splitlines()[-2] == f"run directory: {tmp_path / 's'}"
+    assert run_cli("solve", str(CONFIGS / "paper_study1.yaml"), "--out", str(tmp_path / "q"), "-q").stdout == ""
+
+
+def test_simulate_reports_t0_apart_and_ends_with_its_timing(tmp_path: Path) -> None:
+    """t = 0, solved to tolerance once for every K, is a line of its own; the table's step times are those of t >= 1;
+    --verbose adds the iterate rows of the t = 0 solve; the last line is the timing."""
+    out = tmp_path / "run"
+    proc = run_cli("simulate", str(CONFIGS / "formation_ring.yaml"), "--out", str(out), "--set", "run.K=[1,3,10]",
+                   "--set", "run.steps=5", "--verbose")
+    assert proc.returncode == 0, proc.stderr
+    by_K = json.loads((out / "summary.json").read_text())["by_K"]
+    lines = proc.stdout.splitlines()
+    first = by_K["1"]
+    i = lines.index("t = 0, the solve to tolerance:")
+    rows = [line.split() for line in lines[i + 2: i + 2 + first["iterations"][0] + 1]]
+    assert [int(r[0]) for r in rows] == list(range(first["iterations"][0] + 1))
+    assert [float(r[1]) for r in rows][-1] == pytest.approx(first["residual_norm"][0], rel=1e-3)
+    line = next(s for s in lines if s.startswith("t = 0, solved"))
+    assert line == (f"t = 0, solved to tolerance once for K = 1, 3, 10: converged, {first['iterations'][0]} "
+                    f"iterations, {first['solve_time_s'][0] * 1e3:.3f} ms; step times below: t >= 1")
+    header = lines.index(line) + 1
+    assert lines[header].split() == ["K", "max", "e", "final", "e", "median", "t>=1", "max", "t>=1", "failed",
+                                     "fallback", "max", "violation"]
+    for row in (s.split() for s in lines[header + 1: header + 4]):
+        steps = sorted(by_K[row[0]]["solve_time_s"][1:])  # t >= 1
+        assert row[4] == row[6] == "ms"
+        assert float(row[3]) == pytest.approx(steps[len(steps) // 2] * 1e3, abs=1e-3)
+        assert float(row[5]) == pytest.approx(steps[-1] * 1e3, abs=1e-3)
+    wall, parts = _timing(proc.stdout)
+    assert list(parts) == ["startup", "imports", "load", "compile", "reference", "solve", "logging", "other"]
+    _assert_sums_to_wall(wall, parts)
+    quiet = run_cli("simulate", str(CONFIGS / "formation_ring.yaml"), "--out", str(tmp_path / "q"), "--set",
+                    "run.steps=2")
+    assert "t = 0, the solve to tolerance:" not in quiet.stdout and "t = 0, solved to tolerance once" in quiet.stdout
