@@ -524,3 +524,17 @@ def test_the_first_sampling_time_is_solved_once_for_every_K(config: str, overrid
             at_0[topic].append(msg)
     assert len(at_0) == len(cfg.run.K) and len({json.dumps(v) for v in at_0.values()}) == 1
     assert len(at_0["/K1/mpc/iterate"]) == together[1].iterations[0] + 1
+
+
+def test_loops_whose_first_sampling_time_differs_solve_it_each() -> None:
+    """A parameters callback that gives each loop other runtime values at t = 0 (here: the goal moves on every call)
+    makes t = 0 a different problem per K: each loop solves its own; one that gives the same values shares it."""
+    cfg = load_config(CONFIGS / "formation_ring.yaml", {"run.K": [1, 3], "run.steps": 2})
+    calls = iter(range(100))
+    moving = simulate(cfg, parameters=lambda t, x: {"gx": 0.1 * next(calls)})
+    assert [r.shares_first for r in moving.values()] == [False, False]
+    assert moving[1].parameters[0] != moving[3].parameters[0]
+    assert not np.array_equal(moving[1].z[0], moving[3].z[0])
+    fixed = simulate(cfg, parameters=lambda t, x: {"gx": 0.5})
+    assert [r.shares_first for r in fixed.values()] == [False, True] and fixed.first.solves == 1
+    assert np.array_equal(fixed[1].z[0], fixed[3].z[0])
