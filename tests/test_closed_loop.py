@@ -478,6 +478,8 @@ def test_a_converged_sampling_times_reference_is_its_own_iterate(monkeypatch: py
     # a perturbed solver: the loops of K > 1 go on with the random state the t = 0 solve left; z*(0) solved apart
     ("paper_study2.yaml", {"run.K": [1, 2, 5], "run.steps": 4, "run.initial": "solve",
                            "disturbance": {"kind": "jacobian_noise", "scale": 1e-2, "seed": 3}}, 1),
+    # the distributed method, whose solvers keep factorisations from one sampling time to the next; z*(0) by SSN
+    ("paper_study3.yaml", {"run.K": [2, 5], "run.steps": 4, "run.initial": "solve"}, 1),
 ])
 def test_the_first_sampling_time_is_solved_once_for_every_K(config: str, overrides: dict, z_star_solves: int,
                                                             monkeypatch, tmp_path: Path) -> None:
@@ -506,13 +508,17 @@ def test_the_first_sampling_time_is_solved_once_for_every_K(config: str, overrid
     together = simulate(cfg, out=tmp_path / "together")
     assert solves.count(cfg.solver.max_iter) == 1 and together.first.solves == 1
     assert at_x0.count(True) == z_star_solves
-    assert [r.shares_first for r in together.values()] == [False, True, True]
+    assert [r.shares_first for r in together.values()] == [False] + [True] * (len(cfg.run.K) - 1)
     steps = cfg.run.steps
     assert len(solves) == 1 + (steps - 1) * len(cfg.run.K)
+    def logged(run: Path, K: int) -> list:
+        return [(t, m) for t, m, _ in read_messages(run / "run.mcap") if t.startswith(f"/K{K}/")]
+
     for K, r in together.items():
         solves.clear()
-        alone = simulate(load_config(CONFIGS / config, {**overrides, "run.K": [K]}))[K]
+        alone = simulate(load_config(CONFIGS / config, {**overrides, "run.K": [K]}), out=tmp_path / f"K{K}")[K]
         assert solves.count(cfg.solver.max_iter) == 1
+        assert logged(tmp_path / "together", K) == logged(tmp_path / f"K{K}", K)  # every iterate, bit for bit
         for name in ("x", "u", "w", "e_norm", "residual_norm", "iterations", "z", "z_star", "constraint_violation",
                      "fallback"):
             assert np.array_equal(getattr(r, name), getattr(alone, name), equal_nan=True), (K, name)
@@ -523,7 +529,8 @@ def test_the_first_sampling_time_is_solved_once_for_every_K(config: str, overrid
         if topic.endswith("/mpc/iterate") and msg["t"] == 0:
             at_0[topic].append(msg)
     assert len(at_0) == len(cfg.run.K) and len({json.dumps(v) for v in at_0.values()}) == 1
-    assert len(at_0["/K1/mpc/iterate"]) == together[1].iterations[0] + 1
+    K = cfg.run.K[0]
+    assert len(at_0[f"/K{K}/mpc/iterate"]) == together[K].iterations[0] + 1
 
 
 def test_loops_whose_first_sampling_time_differs_solve_it_each() -> None:

@@ -406,10 +406,10 @@ class ClosedLoop:
         self.own_reference = cfg.disturbance.kind == "none" and cfg.solver.kind != "distributed"
         self.rng = None  # the solver's random state, from one sampling time to the next
 
-    def _iterate(self, state, budget: int, seen: list | None = None) -> tuple[object, list, float]:
+    def _iterate(self, state, budget: int, seen: list | None = None, solver=None) -> tuple[object, list, float]:
         """Up to ``budget`` solver steps from ``state``, stopped at convergence or a failed step (whose iterate is
         not kept): the last state, the iterates as (k, ||Phi||, z^k) from the start on, the steps' time. ``seen``
-        receives every state made (:class:`~gnerun.solvers.driver.IterateRow`)."""
+        receives every state made (:class:`~gnerun.solvers.driver.IterateRow`); ``solver``: another than the loop's."""
         trace: list = []
 
         def keep(s) -> None:  # a failed step's iterate is not kept
@@ -419,7 +419,7 @@ class ClosedLoop:
                 trace.append((s.k, s.residual_norm, s.z))
 
         t0 = time.perf_counter()
-        state = iterate(self.solver, state, budget, keep, finish=False, ends=FAILURES | {Status.CONVERGED})
+        state = iterate(solver or self.solver, state, budget, keep, finish=False, ends=FAILURES | {Status.CONVERGED})
         return state, trace, time.perf_counter() - t0
 
     def _interrupted(self, t: int, plural: bool = False) -> None:
@@ -451,28 +451,33 @@ class ClosedLoop:
                                     "e(t) is not available")
         return (ref.z if ref.converged else None), str(ref.status)
 
-    def _solve(self, t: int, x: np.ndarray, z_warm: np.ndarray, seen: list | None = None) -> tuple[object, list, float]:
+    def _solve(self, t: int, x: np.ndarray, z_warm: np.ndarray, seen: list | None = None,
+               solver=None) -> tuple[object, list, float]:
         """The solver steps of sampling time t from z_warm: at most K (at t = 0 with run.initial: solve, the solver's
-        max_iter); the last state, the iterates (:meth:`_iterate`) and the time of init and steps."""
+        max_iter); the last state, the iterates (:meth:`_iterate`) and the time of init and steps. ``solver``: another
+        than the loop's (the t = 0 solve's own)."""
         cfg = self.cfg
+        solver = solver or self.solver
         budget = cfg.solver.max_iter if t == 0 and cfg.run.initial == "solve" else self.K
         t0 = time.perf_counter()
-        state = self.solver.init(z_warm, x, self.rng)
+        state = solver.init(z_warm, x, self.rng)
         elapsed = time.perf_counter() - t0
-        state, trace, stepping = self._iterate(state, budget, seen)
+        state, trace, stepping = self._iterate(state, budget, seen, solver)
         self.rng = state.rng
         return state, trace, elapsed + stepping
 
     def _first_solve(self, x: np.ndarray, z_warm: np.ndarray) -> tuple[object, list, float]:
         """Sampling time 0. With ``run.initial: solve`` its solve to tolerance from the start values does not depend
         on K: the first loop makes it (:class:`FirstSamplingTime`), the others take a copy of it as it ended, the
-        solver's random state included, and go on from there as if they had made it."""
+        solver's random state included, and go on from there as if they had made it. It is made by a solver of its
+        own, so that every loop's solver starts t = 1 alike, with nothing kept from a solve before (a factorisation
+        kept per active set reproduces a step to rounding, not bit for bit): each K's loop is that of K run alone."""
         first = self.first
         if self.cfg.run.initial != "solve" or not first.matches(self._first_key(x)):
             return self._solve(0, x, z_warm)
         if first.solved is None:
             seen: list = []
-            state, trace, elapsed = self._solve(0, x, z_warm, seen)
+            state, trace, elapsed = self._solve(0, x, z_warm, seen, make_solver(self.cfg, self.game))
             first.solved, first.states = copy.deepcopy((state, trace, elapsed)), seen
             first.solves += 1
             return state, trace, elapsed

@@ -51,7 +51,7 @@ class IterateRow:
 
 def phase(state: SSNState) -> str | None:
     """The phase of the method that made ``state`` (None for a method without phases)."""
-    return getattr(state.search, "phase", None)
+    return getattr(getattr(state, "search", None), "phase", None)
 
 
 def iterate(solver: Solver, state: SSNState, max_steps: int | None = None,
