@@ -32,12 +32,13 @@ def panels(n: int):
     return fig, axes, width / cols
 
 
-def legend(ax, width: float, notes: list = ()) -> None:
+def legend(ax, width: float, notes: list = (), own: bool = True) -> None:
     """The legend of ``ax`` below it (under its x label: outside the data), in as many columns as fit its
-    panel's ``width`` (inches); ``notes`` (the floor band's entry) last."""
+    panel's ``width`` (inches); ``notes`` (the floor band's entry) last. ``own=False``: the notes alone, not the
+    labels of the panel's lines (a figure whose lines are labelled per series and whose legend is per group)."""
     from matplotlib.transforms import offset_copy
 
-    handles, labels = ax.get_legend_handles_labels()
+    handles, labels = ax.get_legend_handles_labels() if own else ([], [])
     found = dict(zip(labels, handles, strict=True))
     # the series first, then the marks of failed and fallback steps, then the notes
     entries = {k: v for k, v in found.items() if k not in MARK_LABELS}
