@@ -34,7 +34,7 @@ from ..files import open_for_writing, output_directory, read_json_object
 from ..log.mcap_log import RunRecord, read_run
 from ..log.sweep_index import SEED_AXES, SWEEP_JSON, loglog_slope, read_index
 from ..log.topics import LOG, SOLVE_ITERATE, parse_mpc
-from .panels import FAILED_LABEL, FALLBACK_LABEL, failed_steps, fallback_steps, legend, panels
+from .panels import FAILED_LABEL, FALLBACK_LABEL, K_STYLES, failed_steps, fallback_steps, k_line, legend, panels
 from .paths import has_positions, paths_figure
 from .states import KIND_STYLES, selected_states, state_groups
 
@@ -397,7 +397,9 @@ def study2_figure(run: RunRecord, states: list[str] | None = None):
         handles.append(Line2D([], [], ls="none", label=f"not drawn: {', '.join(clocks)} (clock)"))
     if tracked:
         for i, (K, topics) in enumerate(loops.items()):
-            ax_r.plot(*tracking_errors(topics, names), label=f"K = {K}", color=f"C{i % 10}")
+            lw, alpha = k_line(i, len(loops))  # equal errors of several K (they often are) all show
+            ax_r.plot(*tracking_errors(topics, names), label=f"K = {K}", color=f"C{i % 10}", lw=lw, alpha=alpha,
+                      ls=K_STYLES[i % len(K_STYLES)])
         ax_r.set_xlabel("t")
         ax_r.set_ylabel(r"$|x(t) - r(t)|$")
         ax_r.set_title(f"(b) tracking error to the reference ({', '.join(tracked)})")

@@ -65,6 +65,16 @@ def legend(ax, width: float, notes: list = (), own: bool = True) -> None:
         fig._legend_growth = excess
 
 
+K_STYLES = ["-", "--", ":", "-."]  # a line style per K, where a colour means something else (an agent)
+
+
+def k_line(n: int, count: int) -> tuple[float, float | None]:
+    """Line width and opacity of the n-th of ``count`` K: the first widest and lightest, each later one narrower and
+    drawn over it, the last opaque (no opacity set), so that equal curves of several K all show."""
+    share = (count - 1 - n) / max(count - 1, 1)
+    return 1.0 + 0.8 * share, (1.0 - 0.5 * share) if share else None
+
+
 def failed_steps(states: list[dict]) -> list[int]:
     """Sampling times whose status is a failure (logs that do not record statuses have none; the last state, which
     no solver step produced, has an empty one)."""

@@ -16,7 +16,7 @@ import re
 
 from ..language.expr import CONSTANTS, Constraint, evaluate, numpy_functions, parse_constraint
 from ..log.mcap_log import RunRecord
-from .panels import failed_steps, fallback_steps, legend, panels
+from .panels import K_STYLES, failed_steps, fallback_steps, k_line, legend, panels
 from .states import agent_numbers, parameters
 
 _X = re.compile(r"^p?x(\d+)$")
@@ -93,9 +93,6 @@ def vehicle_names(config: dict, cars: list[tuple[str, int, int]]) -> list[str]:
     return [by_number.get(number, f"vehicle {number}") for number, _, _ in cars]
 
 
-STYLES = ["-", "--", ":", "-."]  # a line style per K
-
-
 def paths_figure(run: RunRecord, loops: dict[int, dict[str, list[dict]]]):
     """Panel (a): every vehicle's path per K (a colour per vehicle, a line style per K); panel (b): each vehicle's
     distance to the nearest other per K (the pair's distance for two vehicles) against the required one, with the
@@ -115,9 +112,9 @@ def paths_figure(run: RunRecord, loops: dict[int, dict[str, list[dict]]]):
     closest = None  # (distance, K, t, a, b) over every K and sampling time
     for n, (K, topics) in enumerate(loops.items()):
         states = [m for m in topics.get("state", []) if m.get("x") is not None]
-        ls = STYLES[n % len(STYLES)]
+        ls = K_STYLES[n % len(K_STYLES)]
         # the first K widest and lightest, each later one narrower on top of it: equal paths show both
-        lw, alpha = _k_line(n, len(loops))
+        lw, alpha = k_line(n, len(loops))
         steps = set(failed_steps(states)) | set(fallback_steps(states))  # shows
         marked = [m for m in states if m["t"] in steps]
         any_marked = any_marked or bool(marked)
@@ -151,8 +148,8 @@ def paths_figure(run: RunRecord, loops: dict[int, dict[str, list[dict]]]):
     # one entry per vehicle, per K, then what is drawn on both panels
     handles = [Line2D([], [], color=colors[c % len(colors)], lw=1.2, label=label) for c, label in enumerate(who)]
     if many:
-        handles += [Line2D([], [], color="0.3", ls=STYLES[n % len(STYLES)], lw=_k_line(n, len(loops))[0],
-                           alpha=_k_line(n, len(loops))[1], label=f"K = {K}") for n, K in enumerate(loops)]
+        handles += [Line2D([], [], color="0.3", ls=K_STYLES[n % len(K_STYLES)], lw=k_line(n, len(loops))[0],
+                           alpha=k_line(n, len(loops))[1], label=f"K = {K}") for n, K in enumerate(loops)]
     if any_marked:
         handles.append(Line2D([], [], ls="none", marker="x", color="k", ms=3, mew=0.6,
                               label="fallback / failed step"))
@@ -188,16 +185,11 @@ def paths_figure(run: RunRecord, loops: dict[int, dict[str, list[dict]]]):
     return fig
 
 
-def _k_line(n: int, count: int) -> tuple[float, float | None]:
-    """Line width and opacity of the n-th of ``count`` K: the first widest and lightest, the last narrow and opaque."""
-    share = (count - 1 - n) / max(count - 1, 1)
-    return 1.0 + 0.8 * share, (1.0 - 0.5 * share) if share else None
-
-
 def _when(run: RunRecord, t: int) -> str:
     """A sampling time, and in seconds where the log's config gives the sampling time."""
     seconds = (run.config.get("run") or {}).get("sampling_time")
-    return f"t = {t}" + (f" ({t * seconds:.3g} s)" if isinstance(seconds, int | float) and seconds > 0 else "")
+    shown = isinstance(seconds, int | float) and seconds > 0 and seconds != 1 and t > 0  # (not where it is t itself)
+    return f"t = {t}" + (f" ({t * seconds:.3g} s)" if shown else "")
 
 
 GRID = 600  # points per side of the grid the edges are traced on
