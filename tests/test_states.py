@@ -132,3 +132,26 @@ def test_agents_are_found_by_the_number_their_inputs_end_in() -> None:
     assert agent_numbers(game(plain, ["x1", "y1"])) == {}
     mixed = [{"name": "both", "inputs": {"u1": {}, "u2": {}}}]
     assert agent_numbers(game(mixed, ["x1"])) == {"1": "both"}
+
+
+def test_a_grouped_legend_keeps_the_reference_overlay(tmp_path: Path) -> None:
+    """Three vehicles with p, v, w states (9 states: 3 agents + 3 kinds = 6 entries) and a reference on p2: r(t) is
+    drawn dashed in p2's colour, with one legend entry for it."""
+    from gnerun.log.mcap_log import RunLog
+    from gnerun.log.messages import MpcError, MpcState, RuntimeValues
+
+    states = [f"{k}{i}" for i in (1, 2, 3) for k in "pvw"]
+    agents = ", ".join(f"{{name: car{i}, inputs: {{u{i}: {{}}}}}}" for i in (1, 2, 3))
+    config = f"name: refs\nsolver: {{kind: ssn}}\ngame: {{kind: dynamic, states: [{', '.join(states)}], " \
+             f"agents: [{agents}]}}\n"
+    with RunLog(tmp_path / "r.mcap", config_yaml=config, metadata={"version": "0", "log_time": "simulated"}) as log:
+        for t in range(10):
+            log.write("/K1/mpc/state", MpcState(t=t, x=[0.1 * j * t for j in range(9)], u=[0.0]), log_time=t * 10**9)
+            log.write("/K1/mpc/error", MpcError(t=t, e_norm=1e-3, e_norm_agent={}), log_time=t * 10**9)
+            log.write("/K1/mpc/parameters", RuntimeValues(t=t, references={"p2": 0.5}), log_time=t * 10**9)
+    ax_x, *_ = make_figures([tmp_path / "r.mcap"])["refs-study2"].axes
+    assert [t.get_text() for t in ax_x.get_legend().get_texts()] == ["car1", "car2", "car3", "p{i}", "v{i}", "w{i}",
+                                                                    "reference r(t)"]
+    lines = {ln.get_label(): ln for ln in ax_x.get_lines()}
+    assert list(lines["reference of p2"].get_ydata()) == [0.5] * 10
+    assert lines["reference of p2"].get_color() == lines["p2"].get_color()
