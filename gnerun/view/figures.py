@@ -8,8 +8,8 @@
   iterate instead. A game with references adds the tracking error |x(t) - r(t)| per K.
 - Study 3 (distributed closed loops): ||e_i(t)|| per agent, one panel per K, on one y range (Fig. 3); ||Phi||
   without z*.
-- Games with positions (closed loops): the paths in the plane and the pairwise distances against the required
-  ones (:mod:`gnerun.view.paths`).
+- Games with positions (closed loops): the paths in the plane and each vehicle's distance to the nearest other
+  against the required one, the closest pair named (:mod:`gnerun.view.paths`).
 
 Everything plotted is read from the MCAP log (:func:`gnerun.log.mcap_log.read_run`), so any run from any
 machine, finished or killed, written by this version or an earlier one, can be drawn without solving again.

@@ -1,12 +1,15 @@
-"""Closed loops of games with positions: the paths in the plane and the pairwise distances (`gnerun figures`).
+"""Closed loops of games with positions: the paths in the plane and the distances between vehicles (`gnerun figures`).
 
 A game has positions when its states come in pairs ``px<i>``, ``py<i>`` (or ``x<i>``, ``y<i>``), one pair per
-vehicle. A shared constraint written as a distance, ``(px1 - px2)**2 + (py1 - py2)**2 >= R`` with R an expression
-of the parameters and the stage tau, gives the pair's required distance sqrt(R), drawn at tau = 0 (the step the
-plant takes). The constraints on one vehicle's position alone (a road's or a lane's edges, an arena) are drawn where
-they hold with equality, in the vehicle's colour (grey where they are the same for every vehicle, their outside
-shaded), and the panel reaches the nearest edge on each side of the paths. Sampling times whose solver step failed
-and those where the safeguard applied a fallback plan are marked on both panels. Everything is read from the log.
+vehicle, labelled by the name of the agent that drives it. Many vehicles stay readable: a colour per vehicle, a line
+style per K, one legend entry per vehicle and per K; the distances are each vehicle's to its nearest other (not one
+curve per pair), and the closest pair of the run is named and marked. A shared constraint written as a distance,
+``(px1 - px2)**2 + (py1 - py2)**2 >= R`` with R an expression of the parameters and the stage tau, gives the pair's
+required distance sqrt(R), drawn at tau = 0 (the step the plant takes). The constraints on one vehicle's position
+alone (a road's or a lane's edges, an arena) are drawn where they hold with equality, in the vehicle's colour (grey
+where they are the same for every vehicle, their outside shaded), and the panel reaches the nearest edge on each
+side of the paths. Sampling times whose solver step failed and those where the safeguard applied a fallback plan are
+marked on both panels. Everything is read from the log.
 """
 
 from __future__ import annotations
