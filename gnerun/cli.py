@@ -420,9 +420,13 @@ def figures(
     out: Annotated[Path, typer.Option("--out", help="Folder for the figures.", metavar="DIR")] = Path("figures"),
     format_: Annotated[str, typer.Option("--format", help="Comma-separated: png, pdf, svg.",
                                          metavar="FORMATS")] = "png,pdf",
+    states: Annotated[str | None, typer.Option(
+        "--states", help="Comma-separated states that panel (a) of a closed loop draws (default: all but clocks).",
+        metavar="NAMES", show_default=False)] = None,
     quiet: QuietOpt = False,
 ) -> None:
-    """Paper-style figures (Studies 1-3) from run logs, and sweep figures from sweep directories."""
+    """Paper-style figures (Studies 1-3) from run logs, the paths of games with positions, and sweep figures from
+    sweep directories."""
     with _reported():
         from .errors import InputError
         from .view.figures import write_figures
@@ -433,8 +437,12 @@ def figures(
             raise InputError(f"--format {format_}: choose from png, pdf, svg")
         from .log.sweep_index import is_sweep_dir
 
+        chosen = None if states is None else [s.strip() for s in states.split(",") if s.strip()]
+        if chosen == []:
+            raise InputError(f"--states {states!r}: no state names (comma-separated, e.g. --states px1,py1)")
         sweeps = [r for r in runs if is_sweep_dir(r)]
-        written = write_figures(_existing_logs([r for r in runs if r not in sweeps]), out, formats, sweeps=sweeps)
+        written = write_figures(_existing_logs([r for r in runs if r not in sweeps]), out, formats, sweeps=sweeps,
+                                states=chosen)
         if not written:
             raise InputError("the runs hold nothing to draw (no /solve/iterate and no /K<k>/mpc topics" +
                              ("; no sweep row on a run.K or disturbance-scale axis)" if sweeps else ")"))
