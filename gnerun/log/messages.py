@@ -206,8 +206,8 @@ class MpcState(Message):
     constraint_violation: float | None = Field(None, description="the largest constraint violation at the "
                                                                  "applied input and the state it produces")
     plan: list[list[float]] | None = Field(None, description="the states the applied plan predicts, x(t) and "
-                                                            "then one row per stage tau = 0..T (left out where the "
-                                                            "plan is not finite)")
+                                                            "then one row per stage tau = 0..T, to 6 significant "
+                                                            "digits (left out where the plan is not finite)")
 
 
 class MpcIterate(Message):

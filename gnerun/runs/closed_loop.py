@@ -294,6 +294,16 @@ class LoopRecord:
             parameters=self.parameters[:per_step], references=self.references[:per_step])
 
 
+PLAN_DIGITS = 6  # significant digits of a logged plan: it is drawn, not computed with (half the bytes it would take)
+
+
+def _significant(values: np.ndarray, digits: int = PLAN_DIGITS) -> np.ndarray:
+    """``values`` rounded to ``digits`` significant digits (non-finite values as they are)."""
+    with np.errstate(all="ignore"):
+        scale = 10.0 ** (digits - 1 - np.floor(np.log10(np.abs(np.where(values == 0, 1.0, values)))))
+        return np.where(np.isfinite(values) & np.isfinite(scale), np.round(values * scale) / scale, values)
+
+
 class LoopLog:
     """A closed loop's messages in the run log: per sampling time its iterates, the state with the inputs applied
     and the tracking error (topics /K<k>/mpc/iterate, /state, /error), on the loop's own time axis."""
@@ -317,7 +327,7 @@ class LoopLog:
         self.run.write(topics.mpc(self.K, "state"), MpcState(
             t=t, x=x.tolist(), u=None if u is None else u.tolist(), status=sample.status,
             fallback=bool(sample.fallback), constraint_violation=float(sample.constraint_violation),
-            plan=None if plan is None else plan.tolist()))
+            plan=None if plan is None else _significant(plan).tolist()))
         self.run.write(topics.mpc(self.K, "error"), MpcError(t=t, e_norm=sample.e_norm,
                                                               e_norm_agent=dict(sample.e_norm_agent)))
         self.run.flush()
