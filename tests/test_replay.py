@@ -332,10 +332,11 @@ def test_the_logged_plan_is_the_states_the_plant_reaches_undisturbed(runs) -> No
     significant digits logged."""
     states = read_run(runs["merge"]).messages["/K3/mpc/state"]
     for m, after in zip(states, states[1:], strict=False):
-        assert len(m["plan"]) == read_run(runs["merge"]).config["game"]["horizon"] + 2
+        nx = len(m["x"])  # a row of len(x) states per stage, one after the other
+        assert len(m["plan"]) == (read_run(runs["merge"]).config["game"]["horizon"] + 2) * nx
         # (logged to 6 significant digits)
-        assert np.allclose(m["plan"][0], m["x"], rtol=1e-5, atol=0)
-        assert np.allclose(m["plan"][1], after["x"], rtol=1e-5, atol=1e-12)
+        assert np.allclose(m["plan"][:nx], m["x"], rtol=1e-5, atol=0)
+        assert np.allclose(m["plan"][nx:2 * nx], after["x"], rtol=1e-5, atol=1e-12)
     assert "plan" not in states[-1]
 
 

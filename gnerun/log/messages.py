@@ -35,7 +35,6 @@ def _present(v: Any) -> Any:
         return out
     if isinstance(v, list):
         # an array with a missing entry (a NaN state or iterate) would shift every later index: left out whole
-        v = [_present(x) if isinstance(x, list) else x for x in v]
         return None if any(_absent(x) for x in v) else v
     return None if _absent(v) else v
 
@@ -205,9 +204,10 @@ class MpcState(Message):
     fallback: bool | None = Field(None, description="the applied plan was a fallback, not the budgeted iterate")
     constraint_violation: float | None = Field(None, description="the largest constraint violation at the "
                                                                  "applied input and the state it produces")
-    plan: list[list[float]] | None = Field(None, description="the states the applied plan predicts, x(t) and "
-                                                            "then one row per stage tau = 0..T, to 6 significant "
-                                                            "digits (left out where the plan is not finite)")
+    plan: list[float] | None = Field(None, description="the states the applied plan predicts, x(t) and then those "
+                                                      "of each stage tau = 0..T, one after the other (len(x) values "
+                                                      "each), to 6 significant digits; left out where the plan is "
+                                                      "not finite")
 
 
 class MpcIterate(Message):

@@ -327,7 +327,7 @@ class LoopLog:
         self.run.write(topics.mpc(self.K, "state"), MpcState(
             t=t, x=x.tolist(), u=None if u is None else u.tolist(), status=sample.status,
             fallback=bool(sample.fallback), constraint_violation=float(sample.constraint_violation),
-            plan=None if plan is None else _significant(plan).tolist()))
+            plan=None if plan is None else _significant(plan).reshape(-1).tolist()))
         self.run.write(topics.mpc(self.K, "error"), MpcError(t=t, e_norm=sample.e_norm,
                                                               e_norm_agent=dict(sample.e_norm_agent)))
         self.run.flush()

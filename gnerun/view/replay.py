@@ -361,6 +361,12 @@ def _finite(point) -> bool:
     return all(v is not None and math.isfinite(v) for v in point)
 
 
+def _plan(m: dict) -> list[list[float]]:
+    """The states a sampling time's plan predicts, a row per stage (none in logs of earlier versions)."""
+    plan, nx = m.get("plan") or [], len(m.get("x") or [])
+    return [plan[k:k + nx] for k in range(0, len(plan) - nx + 1, nx)] if nx else []
+
+
 def draw_paths(rec, run: RunRecord, prefix: str, contents: Contents) -> None:
     """The paths in the plane of a closed loop whose game has positions (:func:`paths.vehicles`, as `gnerun figures`
     finds them), one 2D view per K on the timeline ``t``: under ``<run>/plane/K<k>/<agent>/``, each vehicle's trail up
@@ -381,8 +387,8 @@ def draw_paths(rec, run: RunRecord, prefix: str, contents: Contents) -> None:
     xs, ys = loop_positions(cars, loops)
     for topics in loops.values():  # and where the plans go (the view holds them whole)
         for m in topics.get("state", []):
-            xs += [row[ix] for row in m.get("plan") or [] for _, ix, _ in cars]
-            ys += [row[iy] for row in m.get("plan") or [] for _, _, iy in cars]
+            xs += [row[ix] for row in _plan(m) for _, ix, _ in cars]
+            ys += [row[iy] for row in _plan(m) for _, _, iy in cars]
     xs, ys = [v for v in xs if math.isfinite(v)], [v for v in ys if math.isfinite(v)]
     if not xs or not ys:
         return
@@ -417,7 +423,7 @@ def draw_paths(rec, run: RunRecord, prefix: str, contents: Contents) -> None:
                                                               radii=rr.Radius.ui_points(5.0), draw_order=4.0))
                 else:
                     rec.log(f"{entity}/position", rr.Clear(recursive=False))
-                plan = [p for p in ([row[ix], row[iy]] for row in m.get("plan") or []) if _finite(p)]
+                plan = [p for p in ([row[ix], row[iy]] for row in _plan(m)) if _finite(p)]
                 if len(plan) >= 2:
                     rec.log(f"{entity}/plan", rr.LineStrips2D([plan[k:k + 2] for k in range(0, len(plan) - 1, 2)],
                                                               colors=_lighter(colour), radii=rr.Radius.ui_points(1.0),
