@@ -507,8 +507,9 @@ def replay(
     spawn: Annotated[bool, typer.Option("--spawn", help="Open the native viewer (needs a display).")] = False,
     serve: Annotated[bool, typer.Option("--serve", help="Serve the web viewer on 127.0.0.1, print its URL.")] = False,
     screenshot: Annotated[Path | None, typer.Option(
-        "--screenshot", help="Write one PNG per paper figure to DIR, taken by a headless viewer (needs a Vulkan "
-        "driver, e.g. Debian's mesa-vulkan-drivers).", show_default=False, metavar="DIR")] = None,
+        "--screenshot", help="Write one PNG per paper figure to DIR, and paths.png of the paths in the plane (games "
+        "with positions), taken by a headless viewer (needs a Vulkan driver, e.g. Debian's mesa-vulkan-drivers).",
+        show_default=False, metavar="DIR")] = None,
     size: Annotated[str, typer.Option("--size", help="Screenshot size in points (--screenshot).",
                                       metavar="WIDTHxHEIGHT")] = "1600x900",
     web_port: Annotated[int, typer.Option("--web-port", help="Port of the web viewer (--serve).",
@@ -517,7 +518,8 @@ def replay(
                                            metavar="PORT")] = 9876,
     quiet: QuietOpt = False,
 ) -> None:
-    """Open runs in Rerun: one timeline per kind of run, one view per paper figure (built from the logs only)."""
+    """Open runs in Rerun: one timeline per kind of run, one view per paper figure, the paths in the plane of games
+    with positions (built from the logs only)."""
     with _reported():
         import os
         import tempfile

@@ -84,3 +84,15 @@ class Horizon:
         """u(0): every agent's first input, in agent order (what the plant receives)."""
         parts = [a[sl][: len(v)] for sl, v in zip(self.game.agent_slices, self.game.variable_names, strict=True)]
         return np.concatenate(parts)
+
+    def predicted_states(self, a: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """The states the plan's inputs lead to from x under the plant model: x(0) = x, x(tau + 1) = f(x(tau), u(tau))
+        for tau = 0..T: a (T + 2) x nx array (the states the stage costs see, after x)."""
+        game = self.game
+        stages = [a[sl].reshape(game.horizon + 1, len(v)) for sl, v in zip(game.agent_slices, game.variable_names,
+                                                                             strict=True)]
+        out = [np.asarray(x, dtype=float)]
+        with np.errstate(all="ignore"):  # a plan that diverges is drawn as far as it is finite
+            for tau in range(game.horizon + 1):
+                out.append(game.step_dynamics(out[-1], np.concatenate([s[tau] for s in stages])))
+        return np.array(out)

@@ -16,6 +16,9 @@ from __future__ import annotations
 
 import math
 import re
+from dataclasses import dataclass
+
+import numpy as np
 
 from ..language.expr import CONSTANTS, Constraint, evaluate, numpy_functions, parse_constraint
 from ..log.mcap_log import RunRecord
@@ -198,24 +201,30 @@ def _when(run: RunRecord, t: int) -> str:
 GRID = 600  # points per side of the grid the edges are traced on
 
 
-def _edges(ax, config: dict, cars: list[tuple[str, int, int]], colors: list[str],
-           loops: dict[int, dict[str, list[dict]]]) -> None:
-    """The vehicles' own position constraints where they hold with equality (:func:`position_constraints`), traced on
-    a grid three times the paths' extent; the axes then reach from the paths to the nearest edge on each side."""
-    import contourpy
-    import numpy as np
+@dataclass
+class Edges:
+    """The vehicles' own position constraints where they hold with equality (:func:`position_edges`)."""
 
-    xs, ys = [], []
-    for topics in loops.values():
-        for m in topics.get("state", []):
-            if m.get("x") is not None:
-                xs += [_num(m["x"][ix]) for _, ix, _ in cars]
-                ys += [_num(m["x"][iy]) for _, _, iy in cars]
+    gx: np.ndarray  # the grid the constraints are evaluated on
+    gy: np.ndarray
+    groups: list[tuple[np.ndarray, set[int]]]  # g(X, Y) (<= 0 where it holds) and the vehicles it binds
+    lines: list[tuple[np.ndarray, set[int]]]  # each traced edge (n x 2: x, y) and the vehicles it binds
+    limits: tuple[float, float, float, float]  # the nearest edge on each side of the paths: x0, x1, y0, y1
+    floor: float  # the smallest extent of the paths' band
+
+
+def position_edges(config: dict, cars: list[tuple[str, int, int]], xs: list[float],
+                   ys: list[float]) -> Edges | None:
+    """The constraints of :func:`position_constraints` traced where they hold with equality on a grid three times the
+    extent of the positions ``xs``, ``ys`` (evaluated at tau = 0), with the nearest edge on each side of them; None
+    where there is nothing to trace."""
+    import contourpy
+
     xs = [v for v in xs if math.isfinite(v)]
     ys = [v for v in ys if math.isfinite(v)]
     constraints = position_constraints(config, cars)
     if not xs or not ys or not constraints:
-        return
+        return None
     x0, x1, y0, y1 = min(xs), max(xs), min(ys), max(ys)
     floor = max(x1 - x0, y1 - y0, 1e-3) / 20  # a path along one axis still gets a band across it
     sx, sy = max(x1 - x0, floor), max(y1 - y0, floor)
@@ -240,16 +249,10 @@ def _edges(ax, config: dict, cars: list[tuple[str, int, int]], colors: list[str]
         else:
             same[1].add(c)
     lo_x, hi_x, lo_y, hi_y = x0, x1, y0, y1
-    drawn = False
+    lines = []
     for g, who in groups:
-        common = len(who) == len(cars)
-        color = "0.35" if common else colors[min(who) % len(colors)]
-        if common and np.any(g > 0):  # outside the road (or the arena) of every vehicle
-            ax.contourf(X, Y, np.where(np.isfinite(g), g > 0, False).astype(float), levels=[0.5, 1.5],
-                        colors=["0.88"], zorder=0)
         for line in contourpy.contour_generator(gx, gy, np.where(np.isfinite(g), g, np.nan)).lines(0.0):
-            ax.plot(line[:, 0], line[:, 1], color=color, lw=2.2, alpha=0.35, solid_capstyle="butt", zorder=1)
-            drawn = True
+            lines.append((line, who))
             # the nearest edge on each side, where it crosses the paths' band
             across_y = line[(line[:, 0] >= x0) & (line[:, 0] <= x1), 1]
             across_x = line[(line[:, 1] >= y0) & (line[:, 1] <= y1), 0]
@@ -259,10 +262,42 @@ def _edges(ax, config: dict, cars: list[tuple[str, int, int]], colors: list[str]
             hi_y = max(hi_y, above.min()) if above.size else hi_y
             lo_x = min(lo_x, left.max()) if left.size else lo_x
             hi_x = max(hi_x, right.min()) if right.size else hi_x
-    if not drawn:
+    if not lines:
+        return None
+    return Edges(gx, gy, groups, lines, (lo_x, hi_x, lo_y, hi_y), floor)
+
+
+def loop_positions(cars: list[tuple[str, int, int]],
+                   loops: dict[int, dict[str, list[dict]]]) -> tuple[list[float], list[float]]:
+    """Every x and every y position the closed loops' vehicles took."""
+    xs, ys = [], []
+    for topics in loops.values():
+        for m in topics.get("state", []):
+            if m.get("x") is not None:
+                xs += [_num(m["x"][ix]) for _, ix, _ in cars]
+                ys += [_num(m["x"][iy]) for _, _, iy in cars]
+    return xs, ys
+
+
+def _edges(ax, config: dict, cars: list[tuple[str, int, int]], colors: list[str],
+           loops: dict[int, dict[str, list[dict]]]) -> None:
+    """The vehicles' own position constraints where they hold with equality (:func:`position_edges`), in the
+    vehicle's colour (grey where they bind every vehicle, their outside shaded); the axes then reach from the paths to
+    the nearest edge on each side."""
+    edges = position_edges(config, cars, *loop_positions(cars, loops))
+    if edges is None:
         return
+    X, Y = np.meshgrid(edges.gx, edges.gy)
+    for g, who in edges.groups:
+        if len(who) == len(cars) and np.any(g > 0):  # outside the road (or the arena) of every vehicle
+            ax.contourf(X, Y, np.where(np.isfinite(g), g > 0, False).astype(float), levels=[0.5, 1.5],
+                        colors=["0.88"], zorder=0)
+    for line, who in edges.lines:
+        color = "0.35" if len(who) == len(cars) else colors[min(who) % len(colors)]
+        ax.plot(line[:, 0], line[:, 1], color=color, lw=2.2, alpha=0.35, solid_capstyle="butt", zorder=1)
     ax.plot([], [], color="0.35", lw=2.2, alpha=0.35, label="constraint edge")
-    mx, my = 0.05 * max(hi_x - lo_x, floor), 0.05 * max(hi_y - lo_y, floor)
+    lo_x, hi_x, lo_y, hi_y = edges.limits
+    mx, my = 0.05 * max(hi_x - lo_x, edges.floor), 0.05 * max(hi_y - lo_y, edges.floor)
     ax.set_xlim(lo_x - mx, hi_x + mx)
     ax.set_ylim(lo_y - my, hi_y + my)
 
