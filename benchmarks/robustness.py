@@ -23,7 +23,7 @@ player who improves alone: must be 0), **miss** (the game has an equilibrium and
 failure status, or a name that gives another reason). Its time is the whole ``solve`` (compile and certificate
 included); the independent check's time is not counted.
 
-Prints markdown tables (the README's robustness section) and writes JSON to benchmarks/results/.
+Prints markdown tables (docs/robustness.md) and writes JSON to benchmarks/results/.
 """
 
 from __future__ import annotations

@@ -577,9 +577,13 @@ def figures(
     out: Annotated[Path, typer.Option("--out", help="Folder for the figures.", metavar="DIR")] = Path("figures"),
     format_: Annotated[str, typer.Option("--format", help="Comma-separated: png, pdf, svg.",
                                          metavar="FORMATS")] = "png,pdf",
+    states: Annotated[str | None, typer.Option(
+        "--states", help="Comma-separated states that panel (a) of a closed loop draws (default: all but clocks).",
+        metavar="NAMES", show_default=False)] = None,
     quiet: QuietOpt = False,
 ) -> None:
-    """Paper-style figures (Studies 1-3) from run logs, and sweep figures from sweep directories."""
+    """Paper-style figures (Studies 1-3) from run logs, the paths of games with positions, and sweep figures from
+    sweep directories."""
     with _reported():
         from .errors import InputError
         from .view.figures import write_figures
@@ -590,8 +594,12 @@ def figures(
             raise InputError(f"--format {format_}: choose from png, pdf, svg")
         from .log.sweep_index import is_sweep_dir
 
+        chosen = None if states is None else [s.strip() for s in states.split(",") if s.strip()]
+        if chosen == []:
+            raise InputError(f"--states {states!r}: no state names (comma-separated, e.g. --states px1,py1)")
         sweeps = [r for r in runs if is_sweep_dir(r)]
-        written = write_figures(_existing_logs([r for r in runs if r not in sweeps]), out, formats, sweeps=sweeps)
+        written = write_figures(_existing_logs([r for r in runs if r not in sweeps]), out, formats, sweeps=sweeps,
+                                states=chosen)
         if not written:
             raise InputError("the runs hold nothing to draw (no /solve/iterate and no /K<k>/mpc topics" +
                              ("; no sweep row on a run.K or disturbance-scale axis)" if sweeps else ")"))
@@ -656,8 +664,9 @@ def replay(
     spawn: Annotated[bool, typer.Option("--spawn", help="Open the native viewer (needs a display).")] = False,
     serve: Annotated[bool, typer.Option("--serve", help="Serve the web viewer on 127.0.0.1, print its URL.")] = False,
     screenshot: Annotated[Path | None, typer.Option(
-        "--screenshot", help="Write one PNG per paper figure to DIR, taken by a headless viewer (needs a Vulkan "
-        "driver, e.g. Debian's mesa-vulkan-drivers).", show_default=False, metavar="DIR")] = None,
+        "--screenshot", help="Write one PNG per paper figure to DIR, and paths.png of the paths in the plane (games "
+        "with positions), taken by a headless viewer (needs a Vulkan driver, e.g. Debian's mesa-vulkan-drivers).",
+        show_default=False, metavar="DIR")] = None,
     size: Annotated[str, typer.Option("--size", help="Screenshot size in points (--screenshot).",
                                       metavar="WIDTHxHEIGHT")] = "1600x900",
     web_port: Annotated[int, typer.Option("--web-port", help="Port of the web viewer (--serve).",
@@ -666,7 +675,8 @@ def replay(
                                            metavar="PORT")] = 9876,
     quiet: QuietOpt = False,
 ) -> None:
-    """Open runs in Rerun: one timeline per kind of run, one view per paper figure (built from the logs only)."""
+    """Open runs in Rerun: one timeline per kind of run, one view per paper figure, the paths in the plane of games
+    with positions (built from the logs only)."""
     with _reported():
         import os
         import tempfile

@@ -47,12 +47,14 @@ def test_the_merge_is_drawn_between_its_road_edges(tmp_path: Path) -> None:
 
     x = np.array(json.loads((run / "summary.json").read_text())["by_K"]["2"]["x"])
     ax_p, ax_d = make_figures([run])["algames-merge-mpc-paths"].axes
-    for car, (ix, iy) in enumerate([(0, 1), (4, 5), (8, 9)], start=1):
-        [path] = [ln for ln in ax_p.get_lines() if ln.get_label() == str(car)]
+    for car, (ix, iy) in enumerate([(0, 1), (4, 5), (8, 9)], start=1):  # labelled by the agents' names
+        [path] = [ln for ln in ax_p.get_lines() if ln.get_label() == f"car{car}"]
         np.testing.assert_array_equal(path.get_xdata(), x[:, ix])
         np.testing.assert_array_equal(path.get_ydata(), x[:, iy])
-    [d12] = [ln for ln in ax_d.get_lines() if ln.get_label() == "1-2"]
-    np.testing.assert_allclose(d12.get_ydata(), np.hypot(x[:, 0] - x[:, 4], x[:, 1] - x[:, 5]), rtol=1e-12)
+    # each car's distance to the nearest other: car1's is the nearer of car2 and car3
+    [d1] = [ln for ln in ax_d.get_lines() if ln.get_label() == "car1"]
+    d12, d13 = np.hypot(x[:, 0] - x[:, 4], x[:, 1] - x[:, 5]), np.hypot(x[:, 0] - x[:, 8], x[:, 1] - x[:, 9])
+    np.testing.assert_allclose(d1.get_ydata(), np.minimum(d12, d13), rtol=1e-12)
     required = {round(float(ln.get_ydata()[0]), 12) for ln in ax_d.get_lines()
                 if ln.get_label().startswith("_") and len(set(ln.get_ydata())) == 1 and ln.get_xdata()[0] == 0}
     assert 0.18 in required
@@ -128,3 +130,43 @@ def test_a_logs_config_of_the_wrong_shape_is_left_out_and_odd_constraints_are_no
     ax_p, _ = make_figures([tmp_path / "odd.mcap"])["odd-paths"].axes
     [edge] = _edges(ax_p)
     np.testing.assert_allclose(edge.get_xdata(), 1.5, atol=1e-9)  # px1 <= e, the only one drawn
+
+
+SIX = {"game.parameters.N": 6, "game.x0": [0.3, -0.2, -0.4, 0.5, -0.9, -0.6, 0.6, -1.1, 1.2, 0.1, -1.3, 0.9],
+       "run.steps": 30}
+
+
+def test_six_robots_have_a_legend_per_robot_and_per_K_and_the_closest_pair_named(tmp_path: Path) -> None:
+    """The ring of six robots, K = 1 and 3: the figure's legends hold one entry per robot and per K (not one per pair
+    and K: 30 before), the robots by their agents' names; panel (b) draws each robot's distance to the nearest other,
+    the clearance D = 0.4, and names the closest pair of the run, where it is."""
+    sim = simulate(load_config(CONFIGS / "formation_ring.yaml", SIX), out=tmp_path / "six")
+    fig = make_figures([tmp_path / "six"])["formation-ring-paths"]
+    ax_p, ax_d = fig.axes
+    entries = [t.get_text() for ax in fig.axes for t in ax.get_legend().get_texts()]
+    robots = [f"robot{i}" for i in range(1, 7)]
+    assert entries[:8] == [*robots, "K = 1", "K = 3"] and entries[-2] == "required 0.4"
+    assert len(entries) <= 12
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    for ax in fig.axes:  # below the panels, inside the figure
+        box, data = ax.get_legend().get_window_extent(renderer), ax.get_window_extent(renderer)
+        assert box.y1 <= data.y0 and fig.bbox.y0 <= box.y0 and box.x1 <= fig.bbox.x1
+    # each robot's nearest distance per K, and the closest pair over both K
+    best = (np.inf, None)
+    for K in (1, 3):
+        x = sim[K].x
+        xy = np.stack([x[:, 0::2], x[:, 1::2]], axis=-1)
+        d = np.linalg.norm(xy[:, :, None] - xy[:, None, :], axis=-1)
+        d[:, np.arange(6), np.arange(6)] = np.inf
+        for i, robot in enumerate(robots):
+            [line] = [ln for ln in ax_d.get_lines() if ln.get_label() == f"{robot}, K = {K}"]
+            np.testing.assert_allclose(line.get_ydata(), d[:, i].min(axis=1), rtol=1e-12)
+        t, a, b = np.unravel_index(np.argmin(d), d.shape)
+        best = min(best, (d[t, a, b], (K, t, a, b)), key=lambda v: v[0])
+    r, (K, t, a, b) = best
+    note = entries[-1]
+    assert note == f"closest: robot{a + 1}-robot{b + 1}\n{r:.3g} at t = {t} ({t * 0.1:.3g} s), K = {K}", note
+    [mark] = [ln for ln in ax_d.get_lines() if ln.get_marker() == "o"]
+    assert (mark.get_xdata()[0], mark.get_ydata()[0]) == (t, pytest.approx(r, rel=1e-12))
+    assert 0.4 - 1e-6 <= r  # the clearance holds

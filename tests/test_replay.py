@@ -21,7 +21,7 @@ from gnerun.log.mcap_log import read_run
 from gnerun.runs.closed_loop import simulate
 from gnerun.runs.solving import solve
 from gnerun.view.figures import FLOOR
-from gnerun.view.replay import PALETTE, save, serve_command, vulkan_available
+from gnerun.view.replay import EDGE_COLOUR, PALETTE, TRAIL_BLOCK, _lighter, save, serve_command, vulkan_available
 
 from .conftest import CONFIGS, gnerun_command, run_cli
 
@@ -29,10 +29,11 @@ from .conftest import CONFIGS, gnerun_command, run_cli
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory) -> dict[str, Path]:
     root = tmp_path_factory.mktemp("runs")
-    out = {"solve": root / "s1", "loop": root / "s2", "dist": root / "s3"}
+    out = {"solve": root / "s1", "loop": root / "s2", "dist": root / "s3", "merge": root / "s4"}
     solve(load_config(CONFIGS / "paper_study1_disturbed.yaml"), out=out["solve"])
     simulate(load_config(CONFIGS / "paper_study2.yaml", {"run.steps": 8, "run.K": [1, 3]}), out=out["loop"])
     simulate(load_config(CONFIGS / "paper_study3.yaml", {"run.steps": 6}), out=out["dist"])
+    simulate(load_config(CONFIGS / "algames_merge_mpc.yaml", {"run.steps": 5, "run.K": [1, 3]}), out=out["merge"])
     return out
 
 
@@ -257,6 +258,105 @@ def test_blueprint_has_one_view_per_paper_figure(runs, tmp_path: Path) -> None:
     assert "paper-study2/K3/x/x1" in only_loop and "paper-study2/K1/log10_e_norm" in only_loop
 
 
+def _columns(rrd: Path, prefix: str) -> dict[str, list[tuple[int | None, object]]]:
+    """entity path -> [(t, value)] of every LineStrips2D, Points2D and Clear under ``prefix`` (t None: static);
+    labels and clears under ``<entity>:labels``, ``<entity>:clear``."""
+    out: dict[str, list] = {}
+    for chunk in RrdReader(rrd).stream().to_chunks():
+        if not chunk.entity_path.startswith(prefix):
+            continue
+        batch = chunk.to_record_batch()
+        names = batch.schema.names
+        times = batch.column("t").to_pylist() if "t" in names else [None] * batch.num_rows
+        for column, key in (("LineStrips2D:strips", ""), ("Points2D:positions", ""), ("Points2D:labels", ":labels"),
+                            ("Clear:is_recursive", ":clear")):
+            if column in names:
+                out.setdefault(chunk.entity_path + key, []).extend(zip(times, batch.column(column).to_pylist(),
+                                                                       strict=True))
+    return out
+
+
+def test_paths_in_the_plane(runs, tmp_path: Path) -> None:
+    """A game with positions (px<i>, py<i>): per K, each car's trail up to t, its position labelled with its agent's
+    name, and its plan at t (every other stage: dashed); the road's edges once, static; a 2D view per K."""
+    rrd = tmp_path / "merge.rrd"
+    proc = run_cli("replay", str(runs["merge"]), "--save", str(rrd))
+    assert proc.returncode == 0, proc.stderr
+    got = _columns(rrd, "/algames-merge-mpc/plane")
+    record = read_run(runs["merge"])
+    horizon = record.config["game"]["horizon"]
+    for K in (1, 3):
+        states = record.messages[f"/K{K}/mpc/state"]
+        assert [m["t"] for m in states] == list(range(6))  # x(0..5): 5 sampling times and the state they end in
+        for c, car in enumerate(("car1", "car2", "car3")):
+            base = f"/algames-merge-mpc/plane/K{K}/{car}"
+            xy = [[m["x"][4 * c], m["x"][4 * c + 1]] for m in states]
+            trail = got[f"{base}/trail/0"]  # (one piece: fewer than TRAIL_BLOCK sampling times)
+            assert len(states) < TRAIL_BLOCK and f"{base}/trail/1" not in got
+            assert [t for t, _ in trail] == list(range(6))
+            for t, strips in trail:  # one strip, x(0..t)
+                assert len(strips) == 1 and np.allclose(strips[0], xy[: t + 1])
+            assert [(t, np.allclose(p, [xy[t]])) for t, p in got[f"{base}/position"]] == [(t, True) for t in range(6)]
+            assert {tuple(v) for _, v in got[f"{base}/position:labels"]} == {(car,)}
+            plans = got[f"{base}/plan"]
+            assert [t for t, _ in plans] == list(range(5))
+            for t, strips in plans:  # horizon + 2 predicted states: x(t) and one per stage; a dash every other stage
+                assert len(strips) == (horizon + 2) // 2 and all(len(s) == 2 for s in strips)
+                assert np.allclose(strips[0][0], xy[t])
+            assert [t for t, _ in got[f"{base}/plan:clear"]] == [5]  # no plan at the state that ends the loop
+    (edges,) = got["/algames-merge-mpc/plane/edges"]
+    assert edges[0] is None and len(edges[1]) >= 2  # static: the road's top edge, the ramp's edge into the bottom one
+    text = _blueprint_text(rrd)
+    for K in (1, 3):
+        assert f"Paths: algames-merge-mpc, K = {K}: y against x, trail up to t, plan at t (dashed)" in text
+    assert text.count("ViewBlueprint:class_identifier [['2D']]") == 2 and "TimePanelBlueprint:timeline [['t']]" in text
+
+
+def test_a_long_trail_is_logged_in_pieces(runs, tmp_path: Path, monkeypatch) -> None:
+    """Pieces of TRAIL_BLOCK sampling times, each from the last point of the one before: together, x(0..t) at t."""
+    import gnerun.view.replay as rp
+
+    monkeypatch.setattr(rp, "TRAIL_BLOCK", 2)
+    got = _columns(save([runs["merge"]], tmp_path / "pieces.rrd"), "/algames-merge-mpc/plane/K1/car2/trail")
+    xy = [[m["x"][4], m["x"][5]] for m in read_run(runs["merge"]).messages["/K1/mpc/state"]]
+    assert sorted(got) == [f"/algames-merge-mpc/plane/K1/car2/trail/{n}" for n in range(3)]
+    for n in range(3):
+        pieces = got[f"/algames-merge-mpc/plane/K1/car2/trail/{n}"]
+        assert [t for t, _ in pieces] == [2 * n, 2 * n + 1]
+        for t, (strip,) in pieces:
+            assert np.allclose(strip, xy[max(2 * n - 1, 0): t + 1])
+
+
+def test_the_logged_plan_is_the_states_the_plant_reaches_undisturbed(runs) -> None:
+    """Without plant noise, the applied plan's first predicted state is x(t) and its next is x(t + 1), to the 6
+    significant digits logged."""
+    states = read_run(runs["merge"]).messages["/K3/mpc/state"]
+    for m, after in zip(states, states[1:], strict=False):
+        nx = len(m["x"])  # a row of len(x) states per stage, one after the other
+        assert len(m["plan"]) == (read_run(runs["merge"]).config["game"]["horizon"] + 2) * nx
+        # (logged to 6 significant digits)
+        assert np.allclose(m["plan"][:nx], m["x"], rtol=1e-5, atol=0)
+        assert np.allclose(m["plan"][nx:2 * nx], after["x"], rtol=1e-5, atol=1e-12)
+    assert "plan" not in states[-1]
+
+
+def test_many_states_get_a_view_per_vehicle_and_legends_room(runs) -> None:
+    """Fig. 2a of 12 states: a view per vehicle (px<i>, py<i>, th<i>, v<i>), each time axis reaching beyond the
+    last time by the room its legend takes."""
+    from gnerun.view.replay import _legend_room, figure_views, record
+
+    contents = record([runs["merge"]], _Sink())
+    x_keys = [key for key in contents.views if key.startswith("fig2_x")]
+    assert [contents.views[key].entities for key in x_keys] == [
+        [f"algames-merge-mpc/K3/x/{s}{i}" for s in ("px", "py", "th", "v")] for i in (1, 2, 3)]
+    assert contents.titles[x_keys[0]] == "Fig. 2a: x(t) (y) against sampling time t (x), K = 3: px1, py1, th1, v1"
+    room = _legend_room(contents.views[x_keys[0]], 2)
+    assert room == pytest.approx((7 * len("px1 (K = 3)") + 40) / 750)
+    fig2 = next(f for f in figure_views(contents) if f.slug == "fig2")
+    assert len(fig2.container.contents[0].contents) == 3  # the per-vehicle views, stacked beside Fig. 2b
+    assert [f.slug for f in figure_views(contents)] == ["paths", "fig2"]
+
+
 class _Sink:  # a recording stream that keeps nothing
     def __getattr__(self, name):
         return lambda *a, **k: None
@@ -335,10 +435,10 @@ def test_screenshots_show_the_figures(runs, tmp_path: Path) -> None:
     from PIL import Image
 
     out = tmp_path / "shots"
-    proc = run_cli("replay", str(runs["solve"]), str(runs["loop"]), str(runs["dist"]), "--screenshot", str(out),
-                   "--size", "1200x700", timeout=300)
+    proc = run_cli("replay", str(runs["solve"]), str(runs["loop"]), str(runs["dist"]), str(runs["merge"]),
+                   "--screenshot", str(out), "--size", "1200x700", timeout=300)
     assert proc.returncode == 0, proc.stderr
-    assert sorted(p.name for p in out.iterdir()) == ["fig1.png", "fig2.png", "fig3.png"]
+    assert sorted(p.name for p in out.iterdir()) == ["fig1.png", "fig2.png", "fig3.png", "paths.png"]
     # the curves are there, in their palette colours: Fig. 1 has one solve (the first colour), Fig. 2 three
     # states and two K, Fig. 3 three agents (the first three colours); the top bar is left out (its warnings
     # are orange)
@@ -352,6 +452,13 @@ def test_screenshots_show_the_figures(runs, tmp_path: Path) -> None:
         # views' headers are 13)
         corner = image[40:60, image.shape[1] - 300:image.shape[1] - 20].mean(axis=-1)
         assert np.median(corner) < 25, name
+    # the paths in the plane, a view per K: each car's trail and position in its colour, the road's edges in grey,
+    # the plans lighter
+    image = np.asarray(Image.open(out / "paths.png").convert("RGB")).astype(int)
+    assert image.shape[1] >= 1200 and image.shape[0] >= 700
+    body = image[image.shape[0] // 15:]
+    for colour in [*PALETTE[:3], EDGE_COLOUR, *(_lighter(c) for c in PALETTE[:3])]:
+        assert np.all(np.abs(body - np.array(colour)) <= 12, axis=-1).sum() > 50, colour
 
 
 def test_screenshots_without_vulkan_say_what_to_install(runs, tmp_path: Path, monkeypatch) -> None:

@@ -287,7 +287,8 @@ def test_a_declared_reference_is_logged_with_the_tracking_error_and_drawn(tmp_pa
 
     fig = make_figures([tmp_path / "run"])["tracking-study2"]
     titles = [ax.get_title() for ax in fig.axes if ax.get_visible()]
-    assert titles[1] == "(b) tracking error to the reference (p1)" and titles[2] == "(c) solver error to z*(t)"
+    assert titles[1] == "(b) tracking error to the reference (p1)"
+    assert titles[2] == r"(c) solver error $\|z^K - z^*(t)\|$"
     ax_r = fig.axes[1]
     for K, line in zip(("1", "3"), ax_r.get_lines(), strict=True):  # |x - r| per K, as the summary has it
         np.testing.assert_allclose(line.get_ydata(), np.abs(summary["by_K"][K]["tracking_error"]["p1"]), atol=1e-15)

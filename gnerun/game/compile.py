@@ -383,6 +383,10 @@ class CompiledGame:
         """:meth:`gnerun.game.horizon.Horizon.first_inputs`."""
         return self.plans.first_inputs(a)
 
+    def predicted_states(self, a: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """:meth:`gnerun.game.horizon.Horizon.predicted_states`."""
+        return self.plans.predicted_states(a, x)
+
 
 def _num(v: float) -> float | None:
     v = float(v)

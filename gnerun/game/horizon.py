@@ -8,6 +8,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .evaluator import Evaluator
+
 if TYPE_CHECKING:
     from .compile import CompiledGame
 
@@ -84,3 +86,20 @@ class Horizon:
         """u(0): every agent's first input, in agent order (what the plant receives)."""
         parts = [a[sl][: len(v)] for sl, v in zip(self.game.agent_slices, self.game.variable_names, strict=True)]
         return np.concatenate(parts)
+
+    @functools.cached_property
+    def _rollout(self) -> Evaluator:
+        """x(0) and the stages' inputs -> x(1..T+1): the plant model accumulated over the horizon, one call."""
+        return Evaluator(self.game._dynamics.function.mapaccum("rollout", self.game.horizon + 1))
+
+    def predicted_states(self, a: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """The states the plan's inputs lead to from x under the plant model: x(0) = x, x(tau + 1) = f(x(tau), u(tau))
+        for tau = 0..T: a (T + 2) x nx array (the states the stage costs see, after x; a plan that diverges gives
+        non-finite values from there on)."""
+        game = self.game
+        blocks = zip(game.agent_slices, game.variable_names, strict=True)
+        stages = np.hstack([a[sl].reshape(game.horizon + 1, len(v)) for sl, v in blocks])
+        x = np.asarray(x, dtype=float)
+        with np.errstate(all="ignore"):
+            states = self._rollout(x, stages.reshape(-1))[0]
+        return np.vstack([x, states.T])

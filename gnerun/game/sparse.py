@@ -256,8 +256,8 @@ ORDERINGS = ("MMD_ATA", "COLAMD")
 class Ordering:
     """SuperLU's column ordering for one kind of matrix of one game, chosen at its first factorisation: the one of
     ``ORDERINGS`` with the least fill (nonzeros of L and U; deterministic, unlike a timing). Minimum degree on M^T M
-    keeps the fill linear in T for long horizons with few agents; COLAMD fills less with many agents (README,
-    "Performance"). The choice is a property of the sparsity pattern, kept with the game's sparse system like the
+    keeps the fill linear in T for long horizons with few agents; COLAMD fills less with many agents
+    (docs/performance.md). The choice is a property of the sparsity pattern, kept with the game's sparse system like the
     pattern itself."""
 
     def __init__(self) -> None:

@@ -5,7 +5,7 @@ formulation (dynamic games solved by ssn, states and costates kept as unknowns),
 (static games, jn, distributed, or ``formulation: condensed``: the Jacobian JPhi is a dense matrix). A config
 past the limits below is refused when it is loaded, with its estimate; one past the warning levels runs with a
 warning, and ``gnerun validate`` does not build it, so that validate stays fast on any config. The limits
-follow build times and memory measured on a 2-core machine (README, "Size limits").
+follow build times and memory measured on a 2-core machine (docs/failures.md, "Size limits").
 """
 
 from __future__ import annotations
@@ -34,7 +34,7 @@ SPARSE_WORK = 20_000
 LOOP_STEPS_WARN = 10_000_000  # from this many solver steps of a simulate on (sum over K of run.steps * K)
 # The certificate of a solve builds every agent's own problem, condensed and dense (gnerun.game.compile_agent_problem):
 # its decisions and constraint rows, the others' decisions as parameters; its time and memory grow with the square of
-# the unknowns (the constants below: fitted to measured builds, README "Size limits").
+# the unknowns (the constants below: fitted to measured builds, docs/failures.md "Size limits").
 RESPONSE_WARN = DENSE_WARN  # unknowns of the largest agent problem from which a solve warns
 RESPONSE_S = 5.5e-6  # seconds per squared unknown of an agent problem
 RESPONSE_BYTES = 93  # bytes per squared unknown, kept once built (the agents are built in turn and kept)

@@ -193,7 +193,8 @@ def level_name(entry: dict) -> str:
 class MpcState(Message):
     """The plant at sampling time t and the input applied (/K<k>/mpc/state); u is left out at the last t, whose
     state ends the loop (and whose status is empty). With it: the solver's status at t, whether the applied plan
-    was a fallback (not z^K(t)), and the largest constraint violation at u(t) and the state it produced."""
+    was a fallback (not z^K(t)), the largest constraint violation at u(t) and the state it produced, and the states
+    the applied plan predicts over its horizon (dynamic games)."""
 
     t: int
     x: list[float] | None = None
@@ -203,6 +204,10 @@ class MpcState(Message):
     fallback: bool | None = Field(None, description="the applied plan was a fallback, not the budgeted iterate")
     constraint_violation: float | None = Field(None, description="the largest constraint violation at the "
                                                                  "applied input and the state it produces")
+    plan: list[float] | None = Field(None, description="the states the applied plan predicts, x(t) and then those "
+                                                      "of each stage tau = 0..T, one after the other (len(x) values "
+                                                      "each), to 6 significant digits; left out where the plan is "
+                                                      "not finite")
 
 
 class MpcIterate(Message):

@@ -313,6 +313,16 @@ class LoopRecord:
             parameters=self.parameters[:per_step], references=self.references[:per_step])
 
 
+PLAN_DIGITS = 6  # significant digits of a logged plan: it is drawn, not computed with (half the bytes it would take)
+
+
+def _significant(values: np.ndarray, digits: int = PLAN_DIGITS) -> np.ndarray:
+    """``values`` rounded to ``digits`` significant digits (non-finite values as they are)."""
+    with np.errstate(all="ignore"):
+        scale = 10.0 ** (digits - 1 - np.floor(np.log10(np.abs(np.where(values == 0, 1.0, values)))))
+        return np.where(np.isfinite(values) & np.isfinite(scale), np.round(values * scale) / scale, values)
+
+
 class LoopLog:
     """A closed loop's messages in the run log: per sampling time its iterates, the state with the inputs applied
     and the tracking error (topics /K<k>/mpc/iterate, /state, /error), on the loop's own time axis."""
@@ -327,15 +337,17 @@ class LoopLog:
         self.run.log(level, text)
 
     def sampling_time(self, t: int, trace: list, z_star: np.ndarray | None, x: np.ndarray, u: np.ndarray | None,
-                      sample: Sample) -> None:
-        """Sampling time t (flushed): its iterates, the state with the inputs applied, the error."""
+                      sample: Sample, plan: np.ndarray | None = None) -> None:
+        """Sampling time t (flushed): its iterates, the state with the inputs applied and the states its plan
+        predicts, the error."""
         with self.run.timed():
             for k, r, zk in trace:
                 err = None if z_star is None else float(np.linalg.norm(zk - z_star))
                 self.run.write(topics.mpc(self.K, "iterate"), MpcIterate(t=t, k=k, residual_norm=r, error_norm=err))
             self.run.write(topics.mpc(self.K, "state"), MpcState(
                 t=t, x=x.tolist(), u=None if u is None else u.tolist(), status=sample.status,
-                fallback=bool(sample.fallback), constraint_violation=float(sample.constraint_violation)))
+                fallback=bool(sample.fallback), constraint_violation=float(sample.constraint_violation),
+                plan=None if plan is None else _significant(plan).reshape(-1).tolist()))
             self.run.write(topics.mpc(self.K, "error"), MpcError(t=t, e_norm=sample.e_norm,
                                                                   e_norm_agent=dict(sample.e_norm_agent)))
             self.run.flush()
@@ -574,8 +586,10 @@ class ClosedLoop:
                 self._note_fallback(t, applied, state)
             x_next, sample = self._plant_step(x, applied, solved)
             rec.add(sample, x_next)
-            if log is not None:
-                log.sampling_time(t, trace, z_star, x, sample.u, sample)
+            if log is not None:  # (the plan's predicted states are for the viewers: computed for the log only)
+                with log.run.timed():
+                    log.sampling_time(t, trace, z_star, x, sample.u, sample,
+                                      game.predicted_states(applied.z[: game.n], x))
             if self.progress is not None:
                 self.progress(StepReport(self.K, t, steps, x.copy(), sample.u.copy(), sample.status,
                                          bool(applied.fallback), float(sample.constraint_violation), int(state.k),

@@ -2,12 +2,14 @@
 
 - Study 1 (solve runs): ||z^k - z*|| against k on a log scale, one panel per run, side by side (the clean
   and the disturbed solve of Fig. 1), on one y range; ||Phi(z^k)|| for a solve without z*.
-- Study 2 (closed loops): x(t) of the loop with the largest K, and ||e(t)|| per K on a log scale (Fig. 2); a loop
-  without z* (run.reference none) has no e(t), and shows ||Phi|| of each sampling time's last iterate instead.
+- Study 2 (closed loops): x(t) of the loop with the largest K (the states chosen with ``--states``, else all but
+  the clocks: :mod:`gnerun.view.states`), and the solver's error ||e(t)|| = ||z^K(t) - z*(t)|| per K on a log scale
+  (Fig. 2); a loop without z* (run.reference none) has no e(t), and shows ||Phi|| of each sampling time's last
+  iterate instead. A game with references adds the tracking error |x(t) - r(t)| per K.
 - Study 3 (distributed closed loops): ||e_i(t)|| per agent, one panel per K, on one y range (Fig. 3); ||Phi||
   without z*.
-- Games with positions (closed loops): the paths in the plane and the pairwise distances against the required
-  ones (:mod:`gnerun.view.paths`).
+- Games with positions (closed loops): the paths in the plane and each vehicle's distance to the nearest other
+  against the required one, the closest pair named (:mod:`gnerun.view.paths`).
 
 Everything plotted is read from the MCAP log (:func:`gnerun.log.mcap_log.read_run`), so any run from any
 machine, finished or killed, written by this version or an earlier one, can be drawn without solving again.
@@ -32,8 +34,9 @@ from ..files import open_for_writing, output_directory, read_json_object
 from ..log.mcap_log import RunRecord, read_run
 from ..log.sweep_index import SEED_AXES, SWEEP_JSON, loglog_slope, read_index
 from ..log.topics import LOG, SOLVE_ITERATE, parse_mpc
-from .panels import FAILED_LABEL, FALLBACK_LABEL, failed_steps, fallback_steps, legend, panels
+from .panels import FAILED_LABEL, FALLBACK_LABEL, K_STYLES, failed_steps, fallback_steps, k_line, legend, panels
 from .paths import has_positions, paths_figure
+from .states import KIND_STYLES, selected_states, state_groups
 
 FLOOR = 1e-13  # errors below this are rounding level (about 500 machine epsilons): drawn in the band
 ROW_DECADES = 0.5  # the band's rows are this far apart (in decades)
@@ -346,31 +349,57 @@ def tracking_errors(topics: dict[str, list[dict]], names: list[str]) -> tuple[li
     return ts, [math.sqrt(by_t[t]) for t in ts]
 
 
-def study2_figure(run: RunRecord):
-    """x(t) of the loop with the largest K, and ||e(t)|| per K (a loop without z*, run.reference none, has no
-    e(t): its residual ||Phi(z^K(t))|| per K instead). A game with references (game.references) draws r(t) dashed
-    over its states, and a panel of the tracking error |x(t) - r(t)| per K before the solver's error."""
+def study2_figure(run: RunRecord, states: list[str] | None = None):
+    """x(t) of the loop with the largest K, and ||e(t)|| = ||z^K(t) - z*(t)|| per K, the solver's error (a loop
+    without z*, run.reference none, has no e(t): its residual ||Phi(z^K(t))|| per K instead). ``states``: the states
+    panel (a) draws (default: every state but the clocks, :mod:`gnerun.view.states`). A game with references
+    (game.references) draws r(t) dashed over its states, and a panel of the tracking error |x(t) - r(t)| per K
+    before the solver's error."""
+    from matplotlib.lines import Line2D
+
     loops = closed_loops(run)
     K_max = max(loops)
-    names = (run.config.get("game") or {}).get("states") or []
+    names = list((run.config.get("game") or {}).get("states") or [])
+    drawn, clocks = selected_states(run.config, states, run_name(run))
+    groups = state_groups(run.config, drawn)
     tracked = references(loops[K_max])
     if tracked:
         fig, (ax_x, ax_r, ax_e), width = panels(3)
     else:
         fig, (ax_x, ax_e), width = panels(2)
-    states = loops[K_max].get("state", [])
-    nx = max((len(m.get("x") or []) for m in states), default=0)
-    t = [m["t"] for m in states]
-    for j in range(nx):
-        line, = ax_x.plot(t, [number((m.get("x") or [math.nan] * nx)[j]) for m in states],
-                          label=names[j] if j < len(names) else f"x{j + 1}", ls=("-", "--", ":")[j // 10 % 3])
-        if j < len(names) and names[j] in tracked:
-            ax_x.plot(*tracked[names[j]], color=line.get_color(), ls=(0, (4, 2)), lw=1.0,
-                      label=f"reference of {names[j]}")
-    _mark_steps(ax_x, failed_steps(states), fallback_steps(states))
+    logged = loops[K_max].get("state", [])
+    nx = max((len(m.get("x") or []) for m in logged), default=0)
+    t = [m["t"] for m in logged]
+    columns = [(names.index(s), s) for s in drawn] if names else [(j, f"x{j + 1}") for j in range(nx)]
+    if groups:
+        agent_of, kind_of = groups
+        agents, kinds = list(dict.fromkeys(agent_of.values())), list(dict.fromkeys(kind_of.values()))
+    handles = []
+    for n, (j, name) in enumerate(columns):
+        if j >= nx:
+            continue
+        style = ({"color": f"C{agents.index(agent_of[name]) % 10}", "ls": KIND_STYLES[kinds.index(kind_of[name])]}
+                 if groups else {"ls": ("-", "--", ":")[n // 10 % 3]})
+        line, = ax_x.plot(t, [number((m.get("x") or [math.nan] * nx)[j]) for m in logged], label=name,
+                          gid=f"state-{name}", **style)  # (the id of its group in an SVG)
+        if name in tracked:
+            ax_x.plot(*tracked[name], color=line.get_color(), ls=(0, (4, 2)), lw=1.0, label=f"reference of {name}")
+    if groups:  # a colour per agent, a line style per kind of state
+        handles = ([Line2D([], [], color=f"C{i % 10}", label=a) for i, a in enumerate(agents)]
+                   + [Line2D([], [], color="0.3", ls=KIND_STYLES[i], label=k) for i, k in enumerate(kinds)])
+        if any(name in tracked for _, name in columns):
+            handles.append(Line2D([], [], color="0.3", ls=(0, (4, 2)), lw=1.0, label="reference r(t)"))
+    _mark_steps(ax_x, failed_steps(logged), fallback_steps(logged))
+    if groups:
+        found = dict(zip(*reversed(ax_x.get_legend_handles_labels()), strict=True))
+        handles += [found[k] for k in (FAILED_LABEL, FALLBACK_LABEL) if k in found]
+    if clocks:  # said where the states are named
+        handles.append(Line2D([], [], ls="none", label=f"not drawn: {', '.join(clocks)} (clock)"))
     if tracked:
         for i, (K, topics) in enumerate(loops.items()):
-            ax_r.plot(*tracking_errors(topics, names), label=f"K = {K}", color=f"C{i % 10}")
+            lw, alpha = k_line(i, len(loops))  # equal errors of several K (they often are) all show
+            ax_r.plot(*tracking_errors(topics, names), label=f"K = {K}", color=f"C{i % 10}", lw=lw, alpha=alpha,
+                      ls=K_STYLES[i % len(K_STYLES)])
         ax_r.set_xlabel("t")
         ax_r.set_ylabel(r"$|x(t) - r(t)|$")
         ax_r.set_title(f"(b) tracking error to the reference ({', '.join(tracked)})")
@@ -395,12 +424,14 @@ def study2_figure(run: RunRecord):
     ax_e.set_xlabel("t")
     ax_e.set_ylabel(r"$\|e(t)\|$" if errors_logged else r"$\|\Phi(z^K(t))\|$")
     letter = "c" if tracked else "b"
-    ax_e.set_title((f"({letter}) solver error to z*(t)" if tracked else "(b) tracking error") if errors_logged
-                   else f"({letter}) residual (no z*)")
+    ax_e.set_title(f"({letter}) " + (SOLVER_ERROR if errors_logged else "residual (no z*)"))
     _integer_ticks(ax_e)
-    legend(ax_x, width)
+    legend(ax_x, width, handles, own=not groups)
     legend(ax_e, width, floor.notes())
     return fig
+
+
+SOLVER_ERROR = r"solver error $\|z^K - z^*(t)\|$"  # e(t): the iterate's distance to the equilibrium, not to a reference
 
 
 def study3_figure(run: RunRecord):
@@ -434,11 +465,14 @@ def study3_figure(run: RunRecord):
     return fig
 
 
-def make_figures(paths: list[str | Path]) -> dict[str, object]:
+def make_figures(paths: list[str | Path], states: list[str] | None = None) -> dict[str, object]:
     """The figures the given runs contain, by file stem: study1 (all solve runs together),
-    <name>-study2 for closed loops, <name>-study3 for distributed closed loops."""
+    <name>-study2 for closed loops, <name>-study3 for distributed closed loops, <name>-paths for closed loops
+    with positions. ``states``: the states the x(t) panel of a closed loop draws (``gnerun figures --states``)."""
     _style()
     runs = [read_run(p) for p in paths]
+    if states is not None and not any(closed_loops(r) and solver_kind(r) != "distributed" for r in runs):
+        raise InputError("--states: no closed loop among the runs (the states are drawn for `gnerun simulate` runs)")
     figures: dict[str, object] = {}
     solves = [r for r in runs if SOLVE_ITERATE in r.messages]
     if solves:
@@ -447,7 +481,7 @@ def make_figures(paths: list[str | Path]) -> dict[str, object]:
         loops = closed_loops(run)
         if loops:
             kind = "study3" if solver_kind(run) == "distributed" else "study2"
-            figures[f"{run_name(run)}-{kind}"] = (study3_figure if kind == "study3" else study2_figure)(run)
+            figures[f"{run_name(run)}-{kind}"] = study3_figure(run) if kind == "study3" else study2_figure(run, states)
             if has_positions(run):
                 figures[f"{run_name(run)}-paths"] = paths_figure(run, loops)
     return figures
@@ -566,13 +600,13 @@ def file_stem(name: str) -> str:
 
 
 def write_figures(paths: list[str | Path], out: str | Path, formats: list[str],
-                  sweeps: list[str | Path] = ()) -> list[Path]:
-    """Draw and save; returns the files written."""
+                  sweeps: list[str | Path] = (), states: list[str] | None = None) -> list[Path]:
+    """Draw and save; returns the files written. ``states``: as :func:`make_figures`."""
     import matplotlib.pyplot as plt
 
     output_directory(out, "figures folder", create=False)  # checked before any work, made once there is a figure
     written = []
-    drawn = make_figures(paths) if paths else {}
+    drawn = make_figures(paths, states) if paths or states is not None else {}
     for s in sweeps:
         drawn.update(sweep_figures(s))
     if drawn:

@@ -32,12 +32,13 @@ def panels(n: int):
     return fig, axes, width / cols
 
 
-def legend(ax, width: float, notes: list = ()) -> None:
+def legend(ax, width: float, notes: list = (), own: bool = True) -> None:
     """The legend of ``ax`` below it (under its x label: outside the data), in as many columns as fit its
-    panel's ``width`` (inches); ``notes`` (the floor band's entry) last."""
+    panel's ``width`` (inches); ``notes`` (the floor band's entry) last. ``own=False``: the notes alone, not the
+    labels of the panel's lines (a figure whose lines are labelled per series and whose legend is per group)."""
     from matplotlib.transforms import offset_copy
 
-    handles, labels = ax.get_legend_handles_labels()
+    handles, labels = ax.get_legend_handles_labels() if own else ([], [])
     found = dict(zip(labels, handles, strict=True))
     # the series first, then the marks of failed and fallback steps, then the notes
     entries = {k: v for k, v in found.items() if k not in MARK_LABELS}
@@ -62,6 +63,16 @@ def legend(ax, width: float, notes: list = ()) -> None:
     if excess > grown:
         fig.set_figheight(fig.get_figheight() + excess - grown)
         fig._legend_growth = excess
+
+
+K_STYLES = ["-", "--", ":", "-."]  # a line style per K, where a colour means something else (an agent)
+
+
+def k_line(n: int, count: int) -> tuple[float, float | None]:
+    """Line width and opacity of the n-th of ``count`` K: the first widest and lightest, each later one narrower and
+    drawn over it, the last opaque (no opacity set), so that equal curves of several K all show."""
+    share = (count - 1 - n) / max(count - 1, 1)
+    return 1.0 + 0.8 * share, (1.0 - 0.5 * share) if share else None
 
 
 def failed_steps(states: list[dict]) -> list[int]:

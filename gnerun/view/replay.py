@@ -7,11 +7,14 @@ timeline of its run (``t`` or ``iteration``; ``log_time`` for logs of earlier ve
 clock), and the resolved config as a text document. Rerun's time-series view has no log axis, so every
 error and residual also has a ``log10_`` series; as in `gnerun figures`, values below
 :data:`figures.FLOOR` are drawn in a band under a floor line, one row per series. Failed and fallback
-sampling times are marked (``<run>/K<k>/failed_steps``, ``fallback_steps``). The blueprint has one tab per
-figure of the paper that the runs contain: Fig. 1 (||z^k - z*|| against k, one view per solve, side by
-side), Fig. 2 (x(t); ||e(t)|| per K, or ||Phi|| without z*), Fig. 3 (||e_i(t)|| per agent, one view per K, or ||Phi||),
-and tabs for the log and the configs. Rerun's views have no axis titles: each view's name says what its axes
-show, and views that the paper compares share their y range.
+sampling times are marked (``<run>/K<k>/failed_steps``, ``fallback_steps``). A closed loop of a game with positions
+also draws its paths in the plane (``<run>/plane``, :func:`draw_paths`). The blueprint has a tab of the paths (a 2D
+view per K, on the timeline ``t``) and one tab per figure of the paper that the runs contain: Fig. 1 (||z^k - z*||
+against k, one view per solve, side by side), Fig. 2 (x(t), a view per vehicle beyond :data:`LEGEND_ROWS` states;
+||e(t)|| per K, or ||Phi|| without z*), Fig. 3 (||e_i(t)|| per agent, one view per K, or ||Phi||), and tabs for the
+log and the configs. Rerun's views have no axis titles: each view's name says what its axes show, and views that the
+paper compares share their y range; each legend sits in the upper right corner, over room the time axis leaves for it
+beyond the data.
 
 rerun-sdk is imported here only, so that ``gnerun --help`` stays fast.
 """
@@ -46,6 +49,7 @@ from .figures import (
     solver_kind,
 )
 from .panels import failed_steps, fallback_steps
+from .paths import loop_positions, position_edges, vehicle_names, vehicles
 
 APPLICATION_ID = "gnerun"
 
@@ -55,6 +59,8 @@ PALETTE = [(31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40), (148, 1
 MARK_COLOUR = (235, 235, 235)  # failed steps: light on the viewer's dark background
 FALLBACK_COLOUR = (255, 221, 87)  # fallback steps (a colour no series has)
 FLOOR_COLOUR = (150, 150, 150)
+EDGE_COLOUR = (120, 120, 120)  # a constraint edge that binds every vehicle (a road's, an arena's)
+TRAIL_BLOCK = 100  # sampling times per logged piece of a trail (a trail logged whole at every t would grow as t^2)
 
 
 def _log10(v: float | None) -> float | None:
@@ -86,6 +92,7 @@ class Series:
     """The entities of one figure view, with the range of the data they show (for fixed axes)."""
 
     entities: list[str] = field(default_factory=list)
+    labels: list[str] = field(default_factory=list)  # their legend entries
     t: list[int] = field(default_factory=list)  # [first, last] time
     y: list[float] = field(default_factory=list)  # [lowest, highest] value as drawn
     traces: list[Trace] = field(default_factory=list)  # log views: the series to draw
@@ -101,11 +108,23 @@ class Series:
 
 
 @dataclass
+class Plane:
+    """A 2D view of the paths in the plane of one closed loop."""
+
+    title: str
+    origin: str
+    contents: list[str]
+    bounds: tuple[float, float, float, float]  # x0, x1, y0, y1 as logged (y up)
+    end: int  # the loop's last sampling time
+
+
+@dataclass
 class Contents:
     """What the blueprint's figure views show: ``fig1:<run>``, ``fig2_x``, ``fig2_e``, ``fig3:<run>: K = <k>``."""
 
     views: dict[str, Series] = field(default_factory=dict)
     titles: dict[str, str] = field(default_factory=dict)  # view key -> its name in the viewer
+    planes: list[Plane] = field(default_factory=list)
     logs: list[str] = field(default_factory=list)
     configs: list[str] = field(default_factory=list)
     ends: dict[str, int] = field(default_factory=dict)  # timeline -> last time logged on it
@@ -115,6 +134,21 @@ class Contents:
 
     def reach(self, timeline: str, value: int) -> None:
         self.ends[timeline] = max(self.ends.get(timeline, value), value)
+
+
+LEGEND_ROWS = 8  # Fig. 2a: more states than this are drawn in a view per group (by the number their names end in)
+
+
+def state_groups(states: list[str]) -> list[list[int]]:
+    """The indices of the states each view of Fig. 2a draws: all in one, or, for more than :data:`LEGEND_ROWS`, one
+    view per number the names end in (px1, py1, th1, v1: vehicle 1), so that every legend fits its view."""
+    if len(states) <= LEGEND_ROWS:
+        return [list(range(len(states)))]
+    groups: dict[str, list[int]] = {}
+    for j, name in enumerate(states):
+        m = re.search(r"\d+$", name)
+        groups.setdefault(m.group(0) if m else "", []).append(j)
+    return list(groups.values()) if len(groups) > 1 else [list(range(len(states)))]
 
 
 def _names(run: RunRecord) -> tuple[str, list[str], list[str], str]:
@@ -142,6 +176,7 @@ def log_run(rec, run: RunRecord, prefix: str, contents: Contents, several: bool 
     logger.text()
     logger.solve()
     logger.closed_loops()
+    logger.paths()
 
 
 class _RunLogger:
@@ -171,6 +206,7 @@ class _RunLogger:
             return
         color = PALETTE[len(series.entities) % len(PALETTE)]
         series.entities.append(entity)
+        series.labels.append(label)
         self.rec.log(entity, self.rr.SeriesLines(names=label, colors=color, widths=2.0), static=True)
 
     def trace(self, view: str, group: str, entity: str, label: str, timeline: str) -> Trace:
@@ -237,11 +273,15 @@ class _RunLogger:
             # without z*: the residual of each sampling time's last iterate, drawn in Fig. 2b or 3 instead
             residuals = [] if with_errors else [(t, number(v)) for t, v in
                                                 zip(*final_residuals(topics.get("iterate", [])), strict=True)]
-            self._states(K, base, states_K, x_view)
-            if x_view:
-                self.contents.titles[x_view] = f"Fig. 2a: x(t) (y) against sampling time t (x), K = {K}"
+            groups = state_groups(self.states) if x_view else []
+            keys = {j: x_view if len(groups) == 1 else f"{x_view}:{g}" for g, group in enumerate(groups) for j in group}
+            self._states(K, base, states_K, keys, x_view if len(groups) == 1 else None)
+            for key in dict.fromkeys([x_view] if len(groups) == 1 else keys.values()):
+                shown = [self.states[j] for j, k in keys.items() if k == key]
+                self.contents.titles[key] = (f"Fig. 2a: x(t) (y) against sampling time t (x), K = {K}"
+                                             + ("" if len(groups) == 1 else f": {', '.join(shown)}"))
                 for t in failed + fallback:
-                    self.contents.view(x_view).span(t)
+                    self.contents.view(key).span(t)
             errors = topics.get("error", [])
             for m in errors:
                 self.scalar(f"{base}/e_norm", "t", m["t"], m.get("e_norm"))
@@ -254,18 +294,25 @@ class _RunLogger:
                 self._fig3(K, errors, residuals, with_errors, marks)
         self.rec.reset_time()
 
-    def _states(self, K: int, base: str, states_K: list, x_view: str | None) -> None:
+    def _states(self, K: int, base: str, states_K: list, x_views: dict[int, str], x_view: str | None) -> None:
+        """The states and inputs of one K; state j also in Fig. 2a's view ``x_views[j]`` (else ``x_view``; None: not
+        drawn there)."""
         states, inputs = self.states, self.inputs
         for m in states_K:
             for j, v in enumerate(m.get("x") or []):
                 entity = f"{base}/x/{states[j] if j < len(states) else f'x{j + 1}'}"
-                if x_view:
-                    self.show(x_view, entity, f"{entity.rsplit('/', 1)[1]} (K = {K})")
-                self.scalar(entity, "t", m["t"], v, x_view)
+                view = x_views.get(j, x_view)
+                if view:
+                    self.show(view, entity, f"{entity.rsplit('/', 1)[1]} (K = {K})")
+                self.scalar(entity, "t", m["t"], v, view)
             for j, v in enumerate(m.get("u") or []):
                 self.scalar(f"{base}/u/{inputs[j] if j < len(inputs) else f'u{j + 1}'}", "t", m["t"], v)
             if m.get("constraint_violation") is not None:
                 self.scalar(f"{base}/constraint_violation", "t", m["t"], m["constraint_violation"])
+
+    def paths(self) -> None:
+        """The paths in the plane (:func:`draw_paths`)."""
+        draw_paths(self.rec, self.run, self.prefix, self.contents)
 
     def _fig2_e(self, K: int, errors: list, residuals: list, with_errors: bool, marks: tuple) -> None:
         """Fig. 2b: the error (or, without z*, the residual) of one K."""
@@ -300,6 +347,94 @@ class _RunLogger:
             tr = self.trace(view, "fig3", f"{base}/log10_residual_norm", "||Phi||", "t")
             tr.points = residuals
             tr.failed, tr.fallback, tr.marks = failed, fallback, base
+
+
+def _lighter(colour: tuple[int, int, int], share: float = 0.5) -> tuple[int, int, int]:
+    return tuple(round(c + share * (255 - c)) for c in colour)
+
+
+def _dimmer(colour: tuple[int, int, int], share: float = 0.45) -> tuple[int, int, int]:
+    return tuple(round(c * (1 - share)) for c in colour)
+
+
+def _finite(point) -> bool:
+    return all(v is not None and math.isfinite(v) for v in point)
+
+
+def _plan(m: dict) -> list[list[float]]:
+    """The states a sampling time's plan predicts, a row per stage (none in logs of earlier versions)."""
+    plan, nx = m.get("plan") or [], len(m.get("x") or [])
+    return [plan[k:k + nx] for k in range(0, len(plan) - nx + 1, nx)] if nx else []
+
+
+def draw_paths(rec, run: RunRecord, prefix: str, contents: Contents) -> None:
+    """The paths in the plane of a closed loop whose game has positions (:func:`paths.vehicles`, as `gnerun figures`
+    finds them), one 2D view per K on the timeline ``t``: under ``<run>/plane/K<k>/<agent>/``, each vehicle's trail up
+    to t (``trail/<n>``, LineStrips2D in pieces of :data:`TRAIL_BLOCK` sampling times), its position at t with the
+    agent's name (``position``, Points2D) and the states its applied plan predicts at t (``plan``, LineStrips2D of
+    every other stage: dashed, lighter); the constraints on one vehicle's position alone where they hold with equality
+    at tau = 0 (``<run>/plane/edges``, grey where they bind every vehicle, else in the vehicle's colour, dimmer). A
+    vehicle has the colour of its place in the game (as in `gnerun figures`). Rerun's 2D views draw y downwards: the
+    plane is logged under a transform that flips y (``<run>/plane``), so that y points up and values read as logged."""
+    import rerun as rr
+
+    names = list((run.config.get("game") or {}).get("states") or [])
+    cars = vehicles(names)
+    loops = closed_loops(run)
+    if not cars or not loops:
+        return
+    labels = vehicle_names(run.config, cars)
+    xs, ys = loop_positions(cars, loops)
+    for topics in loops.values():  # and where the plans go (the view holds them whole)
+        for m in topics.get("state", []):
+            xs += [row[ix] for row in _plan(m) for _, ix, _ in cars]
+            ys += [row[iy] for row in _plan(m) for _, _, iy in cars]
+    xs, ys = [v for v in xs if math.isfinite(v)], [v for v in ys if math.isfinite(v)]
+    if not xs or not ys:
+        return
+    plane = f"{prefix}/plane"
+    rec.log(plane, rr.Transform3D(scale=[1.0, -1.0, 1.0]), static=True)
+    edges = position_edges(run.config, cars, xs, ys)
+    bounds = (min(xs), max(xs), min(ys), max(ys))
+    if edges is not None:
+        colours = [EDGE_COLOUR if len(who) == len(cars) else _dimmer(PALETTE[min(who) % len(PALETTE)])
+                   for _, who in edges.lines]
+        rec.log(f"{plane}/edges", rr.LineStrips2D([line for line, _ in edges.lines], colors=colours,
+                                                  radii=rr.Radius.ui_points(1.5), draw_order=0.0), static=True)
+        bounds = edges.limits
+    for K, topics in loops.items():
+        states = [m for m in topics.get("state", []) if m.get("x") is not None]
+        base = f"{plane}/K{K}"
+        for c, ((_, ix, iy), label) in enumerate(zip(cars, labels, strict=True)):
+            entity = f"{base}/{_entity_name(label)}"
+            colour = PALETTE[c % len(PALETTE)]
+            trail: list[list[float]] = []
+            for m in states:
+                rec.set_time("t", sequence=m["t"])
+                contents.reach("t", m["t"])
+                point = [m["x"][ix], m["x"][iy]]
+                if _finite(point):
+                    trail.append(point)
+                    piece = (len(trail) - 1) // TRAIL_BLOCK
+                    rec.log(f"{entity}/trail/{piece}", rr.LineStrips2D([trail[max(piece * TRAIL_BLOCK - 1, 0):]],
+                                                                       colors=colour, radii=rr.Radius.ui_points(1.5),
+                                                                       draw_order=2.0))
+                    rec.log(f"{entity}/position", rr.Points2D([point], colors=colour, labels=label, show_labels=True,
+                                                              radii=rr.Radius.ui_points(5.0), draw_order=4.0))
+                else:
+                    rec.log(f"{entity}/position", rr.Clear(recursive=False))
+                plan = [p for p in ([row[ix], row[iy]] for row in _plan(m)) if _finite(p)]
+                if len(plan) >= 2:
+                    rec.log(f"{entity}/plan", rr.LineStrips2D([plan[k:k + 2] for k in range(0, len(plan) - 1, 2)],
+                                                              colors=_lighter(colour), radii=rr.Radius.ui_points(1.0),
+                                                              draw_order=3.0))
+                else:  # (the state that ends the loop has no plan)
+                    rec.log(f"{entity}/plan", rr.Clear(recursive=False))
+        name = run_name(run)
+        contents.planes.append(Plane(f"Paths: {name}, K = {K}: y against x, trail up to t, plan at t (dashed)",
+                                     prefix, [f"{plane}/edges", f"{base}/**"], bounds,
+                                     max((m["t"] for m in states), default=0)))
+    rec.reset_time()
 
 
 def draw_log_views(rec, contents: Contents) -> None:
@@ -343,6 +478,7 @@ def draw_log_views(rec, contents: Contents) -> None:
                     entity = f"{tr.marks}/{what}"
                     label = f"{tr.marks.rsplit('/', 1)[-1].replace('K', 'K = ')}: {what.replace('_', ' ')}"
                     series.entities.append(entity)
+                    series.labels.append(label)
                     rec.log(entity, rr.SeriesPoints(names=label, colors=colour, markers=marker,
                                                     marker_sizes=8.0), static=True)
                     for time in times:
@@ -355,8 +491,9 @@ def draw_log_views(rec, contents: Contents) -> None:
             if band is not None and series.t:
                 series.floor = f"floor/{_entity_name(key)}"
                 series.entities.append(series.floor)
-                rec.log(series.floor, rr.SeriesLines(names=f"floor {FLOOR:.0e}: below it, a row per series",
-                                                     colors=FLOOR_COLOUR, widths=1.0), static=True)
+                series.labels.append(f"floor {FLOOR:.0e}")  # (below it: a row per series)
+                rec.log(series.floor, rr.SeriesLines(names=series.labels[-1], colors=FLOOR_COLOUR, widths=1.0),
+                        static=True)
                 for time in series.t:
                     rec.set_time(series.traces[0].timeline, sequence=time)
                     rec.log(series.floor, rr.Scalars(math.log10(FLOOR)))
@@ -373,9 +510,21 @@ class FigureView:
     container: object  # a rerun.blueprint container
 
 
-def _series_view(name: str, series: Series, margin: bool = True):
+WINDOW_POINTS = 1500  # the width a window's views share, in points, that the room for their legends is reckoned on
+
+
+def _legend_room(series: Series, across: int) -> float:
+    """The share of the width of a view, one of ``across`` side by side, that its legend takes (about 7 points a
+    character and 40 for the marker and the padding)."""
+    if not series.labels:
+        return 0.0
+    return min(0.5, (7 * max(len(label) for label in series.labels) + 40) / (WINDOW_POINTS / across))
+
+
+def _series_view(name: str, series: Series, margin: bool = True, across: int = 1):
     """A time-series view whose axes are fixed to its data (with a margin), so that every viewer and every
-    screenshot shows all of it."""
+    screenshot shows all of it; its time axis reaches beyond the last time by the room its legend takes (in the
+    upper right corner), so that the legend covers no data."""
     import rerun as rr
     import rerun.blueprint as rrb
 
@@ -385,37 +534,61 @@ def _series_view(name: str, series: Series, margin: bool = True):
         pad = (0.05 * (hi - lo) if hi > lo else 0.5) if margin else 0.0
         kwargs["axis_y"] = rrb.ScalarAxis(range=(lo - pad, hi + pad))
         t0, t1 = series.t
+        t1 = max(t1, t0 + 1)
+        room = _legend_room(series, across)
         kwargs["axis_x"] = rrb.archetypes.TimeAxis(view_range=rr.TimeRange(
-            start=rr.TimeRangeBoundary.absolute(seq=t0), end=rr.TimeRangeBoundary.absolute(seq=max(t1, t0 + 1))))
-    # errors fall and states settle: the upper right corner is where the curves are not
+            start=rr.TimeRangeBoundary.absolute(seq=t0),
+            end=rr.TimeRangeBoundary.absolute(seq=t1 + math.ceil((t1 - t0) * room / (1 - room)))))
     return rrb.TimeSeriesView(name=name, contents=series.entities, plot_legend=rrb.components.Corner2D.RightTop,
                               **kwargs)
 
 
+def _plane_view(plane: Plane):
+    """A 2D view of the paths of one closed loop (:func:`draw_paths`), its bounds the paths and the nearest constraint
+    edges, with a margin (the plane is drawn with y flipped: the bounds too)."""
+    import rerun.blueprint as rrb
+
+    x0, x1, y0, y1 = plane.bounds
+    floor = max(x1 - x0, y1 - y0, 1e-3) / 20
+    mx, my = 0.05 * max(x1 - x0, floor), 0.05 * max(y1 - y0, floor)
+    return rrb.Spatial2DView(name=plane.title, origin=plane.origin, contents=plane.contents,
+                             visual_bounds=rrb.VisualBounds2D(x_range=(x0 - mx, x1 + mx), y_range=(-y1 - my, -y0 + my)))
+
+
 def figure_views(contents: Contents) -> list[FigureView]:
-    """The paper figures that the runs contain, in the paper's order."""
+    """The paths in the plane (games with positions), then the paper figures that the runs contain, in the paper's
+    order."""
     import rerun.blueprint as rrb
 
     views, titles = contents.views, contents.titles
     out = []
+    if contents.planes:
+        planes = [_plane_view(plane) for plane in contents.planes]
+        out.append(FigureView("paths", "Paths", "t", (rrb.Horizontal if len(planes) <= 3 else rrb.Grid)(
+            *planes, name="Paths")))
     fig1 = [key for key, s in views.items() if key.startswith("fig1:") and s.entities]
     if fig1:
         out.append(FigureView("fig1", "Fig. 1: solves", "iteration", rrb.Horizontal(
-            *[_series_view(titles[key], views[key], margin=False) for key in fig1], name="Fig. 1: solves")))
+            *[_series_view(titles[key], views[key], margin=False, across=len(fig1)) for key in fig1],
+            name="Fig. 1: solves")))
     if views.get("fig2_e") and views["fig2_e"].entities:
+        x_keys = [key for key in views if key.startswith("fig2_x") and views[key].entities] or ["fig2_x"]
+        x_views = [_series_view(titles.get(key, "Fig. 2a: x(t) (y) against sampling time t (x)"),
+                                views.get(key, Series()), across=2) for key in x_keys]
         out.append(FigureView("fig2", "Fig. 2: closed loop", "t", rrb.Horizontal(
-            _series_view(titles.get("fig2_x", "Fig. 2a: x(t) (y) against sampling time t (x)"),
-                         views.get("fig2_x", Series())),
-            _series_view(titles["fig2_e"], views["fig2_e"], margin=False), name="Fig. 2: closed loop")))
+            x_views[0] if len(x_views) == 1 else rrb.Vertical(*x_views),
+            _series_view(titles["fig2_e"], views["fig2_e"], margin=False, across=2), name="Fig. 2: closed loop")))
     fig3 = [key for key, s in views.items() if key.startswith("fig3:") and s.entities]
     if fig3:
         out.append(FigureView("fig3", "Fig. 3: per agent", "t", (rrb.Horizontal if len(fig3) <= 3 else rrb.Grid)(
-            *[_series_view(titles[key], views[key], margin=False) for key in fig3], name="Fig. 3: per agent")))
+            *[_series_view(titles[key], views[key], margin=False, across=min(len(fig3), 3)) for key in fig3],
+            name="Fig. 3: per agent")))
     return out
 
 
 def blueprint(contents: Contents):
-    """One tab per paper figure the runs contain, then the log and the configs."""
+    """The paths in the plane (games with positions), one tab per paper figure the runs contain, then the log and the
+    configs."""
     import rerun.blueprint as rrb
 
     figures = figure_views(contents)
@@ -774,9 +947,13 @@ def check_size(size: str) -> None:
         raise InputError(f"--size must look like 1600x900, not {size!r}")
 
 
+PATHS_AT = 0.5  # the screenshot of the paths shows this share of the closed loop behind the time cursor
+
+
 def screenshots(paths: list[str | Path], out_dir: str | Path, size: str = "1600x900",
                 timeout: float = 60.0) -> list[Path]:
-    """One PNG per paper figure the runs contain, taken by a headless viewer (needs a Vulkan driver)."""
+    """One PNG per paper figure the runs contain, and one of the paths in the plane (``paths.png``, at the middle
+    sampling time), taken by a headless viewer (needs a Vulkan driver)."""
     import rerun.blueprint as rrb
 
     check_size(size)
@@ -795,6 +972,11 @@ def screenshots(paths: list[str | Path], out_dir: str | Path, size: str = "1600x
                                              collapse_panels=True), make_active=True)
             rec.flush()
             _wait_for(viewer.client, _view_names(fig.container), fig.timeline, contents.ends, timeout)
+            # the paths midway (trails behind, plans ahead); the other figures at the end
+            at = (max(plane.end for plane in contents.planes) * PATHS_AT if fig.slug == "paths"
+                  else contents.ends.get(fig.timeline))
+            if at is not None:
+                viewer.client.set_time(fig.timeline, sequence=round(at), play_state="paused")
             viewer.outlive_notifications()
             png = _settled_screenshot(viewer.client)
             target = out_dir / f"{fig.slug}.png"
