@@ -19,8 +19,8 @@ from .conftest import ROOT, run_cli
 TUTORIAL = ROOT / "docs" / "tutorial.md"
 FENCE = re.compile(r"^```(\w*)\n(.*?)^```\n", re.S | re.M)
 FILE_NAME = re.compile(r"`([\w.-]+\.yaml)`:$")
-# lines of a shown output that differ from machine to machine: numbers in e-notation, times
-VOLATILE = re.compile(r"\d\.\d+e[+-]\d\d|\d ms\b")
+# lines of a shown output that differ from machine to machine: numbers in e-notation, times, the timing line
+VOLATILE = re.compile(r"\d\.\d+e[+-]\d\d|\d ms\b|^wall \d+\.\d+ s: ")
 
 
 @dataclass
