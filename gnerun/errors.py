@@ -2,6 +2,41 @@
 
 from __future__ import annotations
 
+import difflib
+from collections.abc import Iterable
+
+
+def did_you_mean(word: str, choices: Iterable[str]) -> str:
+    """``"; did you mean 'x'?"`` for the choice closest to a misspelt ``word`` (difflib's ratio of at least 0.6, the
+    case ignored; else one that begins the other), or ``""`` when none is close."""
+    by_lower: dict[str, str] = {}
+    for c in choices:
+        by_lower.setdefault(c.lower(), c)
+    close = difflib.get_close_matches(word.lower(), list(by_lower), n=1)
+    if not close:  # an abbreviation or a longer form (tol for tolerance, horizon for horizon_length)
+        close = [c for c in by_lower if min(len(c), len(word)) >= 3 and (c.startswith(word.lower())
+                                                                          or word.lower().startswith(c))][:1]
+    return f"; did you mean {by_lower[close[0]]!r}?" if close else ""
+
+
+EXCERPT_WIDTH = 100  # characters of a source line shown under a message
+
+
+def excerpt(line: str, number: int, column: int, length: int = 1) -> str:
+    """The source ``line`` (its ``number``) and a caret line under ``length`` characters from ``column`` (1-based), as
+    two lines to print under a message: ``  35 | text`` and ``     |      ^^^``. A line longer than
+    :data:`EXCERPT_WIDTH` is cut to a window around the column."""
+    line = one_line(line.rstrip("\n"))
+    start = 0
+    if len(line) > EXCERPT_WIDTH:
+        start = max(0, min(column - 1 - EXCERPT_WIDTH // 2, len(line) - EXCERPT_WIDTH))
+        line = ("..." if start else "") + line[start:start + EXCERPT_WIDTH] + (
+            "..." if start + EXCERPT_WIDTH < len(line) else "")
+        column -= start - (3 if start else 0)
+    gutter = f"{number:>4} | "
+    pad = "".join("\t" if c == "\t" else " " for c in line[:column - 1])
+    return f"{gutter}{line}\n{' ' * (len(gutter) - 2)}| {pad}{'^' * max(1, length)}"
+
 
 def one_line(text: str) -> str:
     """``text`` with every non-printable character (newlines, carriage returns, NUL, ...) escaped, so
@@ -49,18 +84,28 @@ class InputError(Exception):
 class ConfigError(InputError):
     """A config that cannot be loaded: YAML syntax, schema or semantic error.
 
-    ``problems`` holds every message found (each ``file:line:column: field.path: message``);
+    ``problems`` holds every message found (each ``file:line:column: field.path: message``, one line, which may be
+    followed by an :func:`excerpt` of the source: the line and a caret under the character);
     ``str(err)`` is the first one, followed by a count of the others (``cli``: the same, pointing to
     ``gnerun validate``).
     """
 
     def __init__(self, problems: list[str]):
-        self.problems = [_bounded(p) for p in problems]
-        first = self.problems[0] if self.problems else "invalid config"
+        self.problems = [_problem(p) for p in problems]
+        first, _, shown = (self.problems[0] if self.problems else "invalid config").partition("\n")
         more = len(self.problems) - 1
         count = f" (and {more} more problem{'s' if more > 1 else ''}" if more else ""
         super().__init__(first + (f"{count}: all of them in the error's .problems)" if more else ""),
                          cli=first + (f"{count}: run `gnerun validate` for all)" if more else ""))
+        if shown:  # the excerpt's lines are already one line each
+            self.args = (f"{self.args[0]}\n{shown}",)
+            self.cli = f"{self.cli}\n{shown}"
+
+
+def _problem(text: str) -> str:
+    """A problem's message bounded to one line; an excerpt after it (lines made by :func:`excerpt`) kept."""
+    head, newline, shown = text.partition("\n")
+    return _bounded(head) + newline + "\n".join(one_line(x) for x in shown.split("\n")) if newline else _bounded(head)
 
 
 class Unavailable(Exception):

@@ -35,6 +35,8 @@ from contextvars import ContextVar
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
+from ..errors import did_you_mean
+
 MAX_LENGTH = 20_000
 MAX_DEPTH = 100
 
@@ -350,7 +352,7 @@ class _Parser:
         fn = name.text
         if fn not in FUNCTIONS:
             raise self.error(
-                f"unknown function {fn!r} (functions: {', '.join(FUNCTIONS)})",
+                f"unknown function {fn!r}{did_you_mean(fn, FUNCTIONS)} (functions: {', '.join(FUNCTIONS)})",
                 name,
             )
         self.expect("(")
@@ -657,8 +659,9 @@ def check_names(parsed: Expression | Constraint, allowed: Iterable[str], what: s
                 unknown.append((first_column_of(root, name) or 1, name))
     if unknown:
         column, name = min(unknown)
-        known = ", ".join(sorted(set(allowed) | set(CONSTANTS))) or "none"
-        raise ExpressionError(f"unknown {what} {name!r} (known here: {known})", parsed.text, column)
+        known = sorted(set(allowed) | set(CONSTANTS))
+        raise ExpressionError(f"unknown {what} {name!r}{did_you_mean(name, known)} (known here: "
+                              f"{', '.join(known) or 'none'})", parsed.text, column)
 
 
 # ---------------------------------------------------------------------------------------------
