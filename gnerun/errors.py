@@ -3,20 +3,56 @@
 from __future__ import annotations
 
 import difflib
+import re
 from collections.abc import Iterable
 
 
+class Names:
+    """Names to suggest from when a word is not one of them (:meth:`closest`). Names numbered by a family's index
+    (``ux1 .. ux200``) are compared by their pattern (``ux#``) first, and the suggestion keeps the word's numbers: a
+    misspelt ``uxx7`` is ``ux7``, in a game of 5 or of 5,000 agents, at the cost of comparing a few patterns."""
+
+    WHOLE = 300  # whole names compared with difflib in a set of at most this many
+
+    def __init__(self, names: Iterable[str]):
+        self.by_lower: dict[str, str] = {}
+        self.patterns: dict[str, dict[tuple[str, ...], str]] = {}  # 'ux#' -> {('7',): 'ux7', ...}
+        for name in names:
+            self.by_lower.setdefault(name.lower(), name)
+            self.patterns.setdefault(_DIGITS.sub("#", name.lower()), {}).setdefault(
+                tuple(_DIGITS.findall(name)), name)
+
+    def closest(self, word: str) -> str | None:
+        """The name closest to ``word`` (difflib's ratio of at least 0.6, the case ignored; else one that begins the
+        other), or None."""
+        low = word.lower()
+        numbers = tuple(_DIGITS.findall(word))
+        if numbers:  # the pattern, and the name of that pattern with the word's numbers
+            for pattern in difflib.get_close_matches(_DIGITS.sub("#", low), list(self.patterns), n=3):
+                if numbers in self.patterns[pattern]:
+                    return self.patterns[pattern][numbers]
+        if len(self.by_lower) <= self.WHOLE:
+            close = difflib.get_close_matches(low, list(self.by_lower), n=1)
+            if close:
+                return self.by_lower[close[0]]
+            for c in self.by_lower:  # an abbreviation or a longer form (tol for tolerance)
+                if min(len(c), len(low)) >= 3 and (c.startswith(low) or low.startswith(c)):
+                    return self.by_lower[c]
+        return None
+
+    def suggestion(self, word: str) -> str:
+        """``"; did you mean 'x'?"`` (:meth:`closest`), or ``""``."""
+        close = self.closest(word)
+        return f"; did you mean {close!r}?" if close is not None else ""
+
+
+_DIGITS = re.compile(r"\d+")
+
+
 def did_you_mean(word: str, choices: Iterable[str]) -> str:
-    """``"; did you mean 'x'?"`` for the choice closest to a misspelt ``word`` (difflib's ratio of at least 0.6, the
-    case ignored; else one that begins the other), or ``""`` when none is close."""
-    by_lower: dict[str, str] = {}
-    for c in choices:
-        by_lower.setdefault(c.lower(), c)
-    close = difflib.get_close_matches(word.lower(), list(by_lower), n=1)
-    if not close:  # an abbreviation or a longer form (tol for tolerance, horizon for horizon_length)
-        close = [c for c in by_lower if min(len(c), len(word)) >= 3 and (c.startswith(word.lower())
-                                                                          or word.lower().startswith(c))][:1]
-    return f"; did you mean {by_lower[close[0]]!r}?" if close else ""
+    """``"; did you mean 'x'?"`` for the choice closest to a misspelt ``word`` (:meth:`Names.closest`), or ``""`` when
+    none is close."""
+    return Names(choices).suggestion(word)
 
 
 EXCERPT_WIDTH = 100  # characters of a source line shown under a message

@@ -24,6 +24,7 @@ that produced the failing copy.
 
 from __future__ import annotations
 
+import math
 import re
 from collections.abc import Callable
 from typing import Any
@@ -117,15 +118,18 @@ class Expander:
         try:
             out = self._document(data)
         except Problem as p:
-            if p.column is not None:
-                text = p.path[-1] if p.key else _value_at(data, p.path)
-                where = self.src.locate_in_text(p.path, p.column, key=p.key,
-                                                text=text if isinstance(text, str) else None)
+            text = p.path[-1] if p.key else _value_at(data, p.path)
+            shown = ""
+            if p.column is not None and isinstance(text, str):  # a string written over several lines: an excerpt
+                where, _, shown = self.src.point(p.path, p.column, text, key=p.key, quote=p.quote)
+            elif p.column is not None:
+                where = self.src.locate_in_text(p.path, p.column, key=p.key)
             else:
                 where = self.src.locate(p.path, key=p.key)
             if p.bindings:
                 where += " (for " + ", ".join(f"{k} = {v}" for k, v in p.bindings.items()) + ")"
-            raise ConfigError([f"{where}: {p.message}"]) from None
+            message, _, excerpt = f"{p.message}{shown}".partition("\n")
+            raise ConfigError([f"{where}: {message}" + (f"\n{excerpt}" if excerpt else "")]) from None
         self.out.origins, self.out.source = self.origin, self.src
         return out, self.out
 
@@ -137,13 +141,14 @@ class Expander:
         if found is None or not isinstance(template, str):
             return None
         src, scope = found
-        items = self.families.items
+        items, deadline = self.families.items, self.families.deadline
+        self.families.deadline = math.inf  # (the expansion's budgets were checked when it ran)
         try:  # the same expansion again, to pair its nodes with the text's
             lhs, relation, rhs, changed = self._expanded(template, src, scope)
         except Problem:
             return None
         finally:
-            self.families.items = items
+            self.families.items, self.families.deadline = items, deadline
         if not changed:
             return Origin(src, template, column) if text == template else None
         at = written_at(text, column, [lhs] if relation is None else [lhs, rhs], self.definitions)

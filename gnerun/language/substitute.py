@@ -93,7 +93,7 @@ class Substitution:
             try:
                 template = parse_template(text)
             except ExpressionError as e:
-                raise Problem(path, e.describe(), scope.indices, column=e.column) from None
+                raise Problem(path, e.message, scope.indices, column=e.column, quote=True) from None
             self.templates[text] = template
         return template
 
