@@ -9,35 +9,31 @@ from collections.abc import Iterable
 
 class Names:
     """Names to suggest from when a word is not one of them (:meth:`closest`). Names numbered by a family's index
-    (``ux1 .. ux200``) are compared by their pattern (``ux#``) first, and the suggestion keeps the word's numbers: a
-    misspelt ``uxx7`` is ``ux7``, in a game of 5 or of 5,000 agents, at the cost of comparing a few patterns."""
-
-    WHOLE = 300  # whole names compared with difflib in a set of at most this many
+    (``ux1 .. ux200``) are compared by their pattern (``ux#``), and the suggestion keeps the word's numbers: a misspelt
+    ``uxx7`` is ``ux7``, in a game of 5 or of 5,000 agents, at the cost of comparing a few patterns."""
 
     def __init__(self, names: Iterable[str]):
-        self.by_lower: dict[str, str] = {}
         self.patterns: dict[str, dict[tuple[str, ...], str]] = {}  # 'ux#' -> {('7',): 'ux7', ...}
         for name in names:
-            self.by_lower.setdefault(name.lower(), name)
             self.patterns.setdefault(_DIGITS.sub("#", name.lower()), {}).setdefault(
                 tuple(_DIGITS.findall(name)), name)
 
     def closest(self, word: str) -> str | None:
-        """The name closest to ``word`` (difflib's ratio of at least 0.6, the case ignored; else one that begins the
-        other), or None."""
+        """The name closest to ``word``: of the pattern closest to the word's (difflib's ratio of at least 0.6, the case
+        ignored), the name with the word's numbers; else (a word without numbers) a name that begins the word or that
+        the word begins; or None."""
         low = word.lower()
         numbers = tuple(_DIGITS.findall(word))
-        if numbers:  # the pattern, and the name of that pattern with the word's numbers
-            for pattern in difflib.get_close_matches(_DIGITS.sub("#", low), list(self.patterns), n=3):
-                if numbers in self.patterns[pattern]:
-                    return self.patterns[pattern][numbers]
-        if len(self.by_lower) <= self.WHOLE:
-            close = difflib.get_close_matches(low, list(self.by_lower), n=1)
-            if close:
-                return self.by_lower[close[0]]
-            for c in self.by_lower:  # an abbreviation or a longer form (tol for tolerance)
-                if min(len(c), len(low)) >= 3 and (c.startswith(low) or low.startswith(c)):
-                    return self.by_lower[c]
+        pattern = _DIGITS.sub("#", low)
+        if numbers and pattern in self.patterns:  # a number out of the family's range is not a misspelling (x5: x1..x4)
+            return None
+        for close in difflib.get_close_matches(pattern, list(self.patterns), n=3):
+            if numbers in self.patterns[close]:  # (the same answer for every copy: y2 and y10 are not x2 and x10)
+                return self.patterns[close][numbers]
+        if not numbers:  # an abbreviation or a longer form (tol for tolerance)
+            for c, names in self.patterns.items():
+                if min(len(c), len(low)) >= 3 and "#" not in c and (c.startswith(low) or low.startswith(c)):
+                    return names[()]
         return None
 
     def suggestion(self, word: str) -> str:
