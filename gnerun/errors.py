@@ -124,7 +124,7 @@ class ConfigError(InputError):
 
     def __init__(self, problems: list[str]):
         self.problems = [_problem(p) for p in problems]
-        first, _, shown = (self.problems[0] if self.problems else "invalid config").partition("\n")
+        first, shown = split_excerpt(self.problems[0] if self.problems else "invalid config")
         more = len(self.problems) - 1
         count = f" (and {more} more problem{'s' if more > 1 else ''}" if more else ""
         super().__init__(first + (f"{count}: all of them in the error's .problems)" if more else ""),
@@ -136,8 +136,18 @@ class ConfigError(InputError):
 
 def _problem(text: str) -> str:
     """A problem's message bounded to one line; an excerpt after it (lines made by :func:`excerpt`) kept."""
-    head, newline, shown = text.partition("\n")
-    return _bounded(head) + newline + "\n".join(one_line(x) for x in shown.split("\n")) if newline else _bounded(head)
+    head, shown = split_excerpt(text)
+    return _bounded(head) + (f"\n{shown}" if shown else "")
+
+
+_EXCERPT = re.compile(r"\n( {0,3}\d+ \| [^\n]*\n     \| [ \t]*\^+)$")
+
+
+def split_excerpt(text: str) -> tuple[str, str]:
+    """A message and the :func:`excerpt` of the source that ends it (``""`` if none): a newline elsewhere is the
+    user's, quoted (and escaped when shown)."""
+    m = _EXCERPT.search(text)
+    return (text[:m.start()], m[1]) if m else (text, "")
 
 
 class Unavailable(Exception):

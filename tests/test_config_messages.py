@@ -276,3 +276,14 @@ def test_an_excerpt_of_a_long_line_is_a_window_around_the_column() -> None:
     shown, caret = excerpt(line, 7, 151).split("\n")
     assert shown.startswith("   7 | ...") and shown.endswith("...")
     assert shown[caret.index("^")] == "y"
+
+
+def test_a_config_given_as_data_has_one_message_per_template_too() -> None:
+    import yaml
+
+    data = yaml.safe_load(RING.replace("+ 0.05*(ux{i}**2", "+ 0.05*(uxx{i}**2"))
+    with pytest.raises(ConfigError) as err:
+        load_config(data)
+    [problem] = err.value.problems
+    assert problem.startswith("config dict, at game.agents.0.stage_cost (in 4 copies, for i = 1..4): "
+                              "game.agents.0.stage_cost: unknown name 'uxx1'; did you mean 'ux1'?"), problem

@@ -637,7 +637,7 @@ RENAMED = {
 }
 
 
-_COPY = re.compile(r"^(?P<where>.*?:\d+:\d+) \(for (?P<note>[^)]*)\): (?P<rest>[^\n]*)(?P<tail>\n.*)?$", re.DOTALL)
+_COPY = re.compile(r"^(?P<where>.*?) \(for (?P<note>[^()]*)\): (?P<rest>[^\n]*)(?P<tail>\n.*)?$", re.DOTALL)
 
 
 _SUGGESTION = re.compile(r"; did you mean '[^']*'\?")

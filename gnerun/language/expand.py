@@ -128,8 +128,7 @@ class Expander:
                 where = self.src.locate(p.path, key=p.key)
             if p.bindings:
                 where += " (for " + ", ".join(f"{k} = {v}" for k, v in p.bindings.items()) + ")"
-            message, _, excerpt = f"{p.message}{shown}".partition("\n")
-            raise ConfigError([f"{where}: {message}" + (f"\n{excerpt}" if excerpt else "")]) from None
+            raise ConfigError([f"{where}: {p.message}{shown}"]) from None
         self.out.origins, self.out.source = self.origin, self.src
         return out, self.out
 
