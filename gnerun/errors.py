@@ -58,7 +58,7 @@ def excerpt(line: str, number: int, column: int, length: int = 1) -> str:
     """The source ``line`` (its ``number``) and a caret line under ``length`` characters from ``column`` (1-based), as
     two lines to print under a message: ``  35 | text`` and ``     |      ^^^``. A line longer than
     :data:`EXCERPT_WIDTH` is cut to a window around the column."""
-    line = one_line(line.rstrip("\n"))
+    line = one_line(line.rstrip("\r\n"))
     start = 0
     if len(line) > EXCERPT_WIDTH:
         start = max(0, min(column - 1 - EXCERPT_WIDTH // 2, len(line) - EXCERPT_WIDTH))

@@ -7,6 +7,7 @@ column where it was written. Duplicate keys, which PyYAML silently accepts, are 
 
 from __future__ import annotations
 
+import functools
 import re
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -139,11 +140,16 @@ class SourceMap:
         pos = (smap.keys if key else smap.values).get(at)
         found = smap.character(at, column, key=key, text=text)
         if found is not None and pos is not None and not pos.single_line and smap.text:
-            line = smap.text.splitlines()[found[0] - 1]
+            line = smap.lines[found[0] - 1]
             token = _TOKEN_AT.match(text, column - 1)
             return where, at, "\n" + excerpt(line, found[0], found[1], len(token.group()) if token else 1)
         shown = text if len(text) <= 120 else text[:117] + "..."
         return where, at, f" at column {column} of expression {shown!r}" if quote else ""
+
+    @functools.cached_property
+    def lines(self) -> list[str]:
+        """The document's lines (split once)."""
+        return self.text.split("\n")  # (as positions count lines: by their newlines)
 
     def _in_lines(self, pos: Position, column: int, text: str | None) -> tuple[int, int] | None:
         """Line and column of character ``column`` of ``text``, a scalar written over several lines at ``pos``: the
