@@ -551,10 +551,10 @@ def test_a_shared_constraints_agents_are_reported_in_the_configs_words(agents: s
 @pytest.mark.parametrize(("item", "expected"), [
     ('    - for: {i: 1..5}\n', r"<string>:6:7: this item has nothing but for:"),
     ('    - for: {i: 1..5}\n      name: p\n      variables: {"x{i}": {}}\n      cost: "x{i}**2"\n',
-     r"<string>:7:13 \(for i = 1\): game\.agents\.2\.name: agent 'p' is declared twice "
-     r"\(and in 4 more copies of the family\)"),
+     r"^<string>:7:13 \(in 5 copies, for i = 1\.\.5\): game\.agents\.2\.name: agent 'p' is declared twice$"),
     ('    - for: {i: 1..5}\n      name: "q{i}"\n      variables: {"x{i}": {}}\n      cost: "y**2"\n',
-     r"<string>:9:\d+ \(for i = 1\): .*unknown name 'y'.* \(and in 4 more copies of the family\)"),
+     r"^<string>:9:14 \(in 5 copies, for i = 1\.\.5\): game\.agents\.2\.cost: unknown name 'y' \(known here: pi, "
+     r"x0, x1, x2, x3, x4, x5, z\) at column 1 of expression 'y\*\*2'$"),
 ])
 def test_a_mistake_in_a_template_is_one_message_not_one_per_copy(item: str, expected: str) -> None:
     import re

@@ -97,16 +97,22 @@ def _totals() -> Iterator[None]:
 # Outcomes
 # -------------------------------------------------------------------------------------------------
 
-LOCATED = re.compile(r"^(<string>|\S+\.yaml|--set .*)(:\d+:\d+)?( \(for [^)]*\))?: \S")  # (for i = 2): a family copy
+# (for i = 2): a family copy; (in 6 copies, for i = 1..6): several
+LOCATED = re.compile(r"^(<string>|\S+\.yaml|--set .*)(:\d+:\d+)?( \((in \d+ copies, )?for .*?\))?: \S")
+EXCERPT = re.compile(r" {0,3}\d+ \| [^\n]*\n     \| [ \t]*\^+")  # a line of the file and a caret under a character
 
 
 def assert_one_line(err: BaseException) -> None:
+    """One line; or, where the mistake is in a string written over several lines, one line and under it the line of
+    the file and a caret."""
     text = str(err)
-    assert text.strip() and "\n" not in text, repr(text)
+    head, _, shown = text.partition("\n")
+    assert head.strip() and (not shown or EXCERPT.fullmatch(shown)), repr(text)
     assert "Traceback" not in text
     if isinstance(err, ConfigError):
         for p in err.problems:
-            assert "\n" not in p and LOCATED.match(p), repr(p)
+            head, _, shown = p.partition("\n")
+            assert LOCATED.match(head) and (not shown or EXCERPT.fullmatch(shown)), repr(p)
 
 
 def load_outcome(text: str):

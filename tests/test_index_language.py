@@ -212,11 +212,15 @@ def test_each_refusal_is_one_located_line_with_exit_2(name: str, text: str, at: 
     config.write_text(text)
     proc = run_cli("validate", str(config), cwd=tmp_path)
     assert proc.returncode == 2, (name, proc.stdout, proc.stderr)
-    lines = proc.stderr.strip().splitlines()
-    assert len(lines) == 1 and phrase in lines[0], lines
+    lines = proc.stderr.rstrip("\n").split("\n")
+    assert phrase in lines[0], lines
     m = re.match(rf"error: {re.escape(str(config))}:(\d+):(\d+)", lines[0])
     assert m is not None, lines
     if at is not None:
         assert (int(m[1]), int(m[2])) == at, lines
         assert text.splitlines()[at[0] - 1][at[1] - 1:].strip(), "the column is on the line's text"
+    if len(lines) > 1:  # a string written over several lines: its line, and a caret under the character
+        source = text.splitlines()[int(m[1]) - 1]
+        assert len(lines) == 3 and lines[1] == f"{m[1]:>4} | {source}", lines
+        assert lines[2].startswith(f"     | {' ' * (int(m[2]) - 1)}^"), lines
     assert "Traceback" not in proc.stderr

@@ -68,7 +68,8 @@ def test_zip_and_bad_specs_are_located(tmp_path: Path) -> None:
         (SMALL.replace("[0, 1]", "[0, -1.5]"), "sweep.yaml:10:21: disturbance.seed: Input should be a valid integer"),
         (SMALL.replace("{logspace: [-6, -2, 3]}", "[-1.0]"), "sweep.yaml:9:22: disturbance.scale: Input should be "
                                                              "greater than or equal to 0 (point 0: disturbance.scale"),
-        (SMALL.replace("set:", "sets:"), "sweep.yaml:3:1: sets: Extra inputs are not permitted"),
+        (SMALL.replace("set:", "sets:"), "sweep.yaml:3:1: sets: unknown key; did you mean 'set'? (allowed here: "
+                                         "version, name, base, command, set, mode, grid)"),
         (SMALL.replace("paper_study2.yaml", "missing.yaml"), "sweep.yaml:2:7: base: no config file"),
         (SMALL + "  run.K: [1]\n", "sweep.yaml:4:3: set.run.K: also an axis"),
         (SMALL.replace("solver.complementarity", "solver.complementary"), "sweep.yaml:6:25: solver.complementary: "

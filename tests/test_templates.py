@@ -420,7 +420,7 @@ LANGUAGE_CASES = [
     ("an item with nothing but for", HARKER.replace("  shared_constraints:", "    - for: {i: 1..3}\n"
                                                     "  shared_constraints:"), "this item has nothing but for:"),
     ("a name a template repeats", FAMILY.replace('name: "p{i + 3}"', "name: p"),
-     "agent 'p' is declared twice (and in 3 more copies of the family)"),
+     "6:13 (in 4 copies, for i = -1..2): game.agents.1.name: agent 'p' is declared twice"),
     ("max() nested 1,200 deep", HARKER.replace('"x1**2 +', '"' + "max(" * 1200 + "x1" + ", 1)" * 1200 + " +"),
      "nested deeper than 100 levels"),
 ]

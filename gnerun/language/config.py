@@ -12,7 +12,8 @@ import hashlib
 import math
 import re
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from types import UnionType
+from typing import Annotated, Any, Literal, Union, get_args, get_origin
 
 import yaml
 from pydantic import (
@@ -30,7 +31,7 @@ from pydantic import (
 )
 from pydantic_core import PydanticCustomError
 
-from ..errors import ConfigError, InputError, shorten
+from ..errors import ConfigError, InputError, did_you_mean, shorten
 from .expand import Expander, expands
 from .expr import (
     CONSTANTS,
@@ -198,9 +199,14 @@ class ContinuousDynamics(Strict):
 
 
 def _dynamics_tag(v: Any) -> str:
+    # the form whose keys were written; without ode, two keys of the ode's form (or misspellings of them) are still an
+    # ode with a misspelt key, not discrete dynamics of states named so, and are reported in the ode's words
     if isinstance(v, LinearDynamics) or (isinstance(v, dict) and ("A" in v or "B" in v)):
         return "linear"
     if isinstance(v, ContinuousDynamics) or (isinstance(v, dict) and "ode" in v):
+        return "continuous"
+    keys = [k for k in v if isinstance(k, str)] if isinstance(v, dict) else []
+    if sum(k in ("integrator", "dt") or bool(did_you_mean(k, ("ode", "integrator"))) for k in keys) >= 2:
         return "continuous"
     return "expressions"
 
@@ -631,42 +637,93 @@ RENAMED = {
 }
 
 
-_COPY = re.compile(r"^(?P<where>.*?:\d+:\d+) \(for [^)]*\): (?P<path>[^ ]*): (?P<message>.*)$")
+_COPY = re.compile(r"^(?P<where>.*?) \(for (?P<note>[^()]*)\): (?P<rest>[^\n]*)(?P<tail>\n.*)?$", re.DOTALL)
+
+
+_SUGGESTION = re.compile(r"; did you mean '[^']*'\?")
 
 
 def one_per_template(problems: list[str]) -> list[str]:
     """One message per template: the same problem in several copies of a family (at the template's file:line:column,
-    the same field and message) is reported once, for its first copy, with the number of the others."""
-    first: dict[tuple[str, str, str], int] = {}
-    more: dict[int, int] = {}
-    kept: list[str] = []
+    the same field and message but for the numbers the copies' indices write in, and the names suggested) is reported
+    once, for the first copy, with the index values of all (``file:line:column (in 6 copies, for i = 1..6): ...``);
+    a problem found twice (a definition's, wherever it is used) once."""
+    groups: dict[tuple[str, str], list[tuple[str, dict[str, int]]]] = {}
+    order: list[tuple[str, str] | str] = []
+    seen: set[str] = set()
     for p in problems:
         m = _COPY.match(p)
         if m is None:
-            kept.append(p)
+            if p not in seen:  # (a definition's problem is found wherever it is used)
+                seen.add(p)
+                order.append(p)
             continue
-        key = (m["where"], re.sub(r"\.\d+(?=\.|$)", ".*", m["path"]), m["message"])
-        if key in first:
-            more[first[key]] += 1
+        key = (m["where"], re.sub(r"\d+", "#", _SUGGESTION.sub("", m["rest"])))
+        if key not in groups:
+            groups[key] = []
+            order.append(key)
+        bindings = dict((k, int(v)) for k, v in re.findall(r"(\w+) = (-?\d+)", m["note"]))
+        groups[key].append((p, bindings))
+    out = []
+    for item in order:
+        if isinstance(item, str):
+            out.append(item)
             continue
-        first[key] = len(kept)
-        more[len(kept)] = 0
-        kept.append(p)
-    return [p + (f" (and in {more[i]} more cop{'ies' if more[i] > 1 else 'y'} of the family)" if more.get(i) else "")
-            for i, p in enumerate(kept)]
+        copies = groups[item]
+        first = _COPY.match(copies[0][0])
+        if len(copies) == 1 or first is None:
+            out.append(copies[0][0])
+            continue
+        out.append(f"{first['where']} (in {len(copies)} copies, for {copies_text([b for _, b in copies])}): "
+                   f"{first['rest']}{first['tail'] or ''}")
+    return out
+
+
+def copies_text(bindings: list[dict[str, int]]) -> str:
+    """The index values of several copies of a family: ``i = 1..6``; ``i = 1..3, j = 1..2`` (all pairs);
+    ``(i, j) = (1, 2), (1, 3), ..., (5, 6)`` (some)."""
+    names = list(bindings[0])
+    values = [sorted({b.get(n, 0) for b in bindings}) for n in names]
+    tuples = sorted({tuple(b.get(n, 0) for n in names) for b in bindings})
+    if math.prod(len(v) for v in values) == len(tuples):  # every combination: each index's values
+        return ", ".join(f"{n} = {_ranges(v)}" for n, v in zip(names, values, strict=True))
+    shown = [f"({', '.join(map(str, t))})" for t in tuples]
+    if len(shown) > 4:
+        shown = shown[:3] + ["...", shown[-1]]
+    return f"({', '.join(names)}) = {', '.join(shown)}"
+
+
+def _ranges(values: list[int]) -> str:
+    """``1..4, 6, 8..9`` for [1, 2, 3, 4, 6, 8, 9]."""
+    runs: list[list[int]] = []
+    for v in values:
+        if runs and v == runs[-1][1] + 1:
+            runs[-1][1] = v
+        else:
+            runs.append([v, v])
+    return ", ".join(str(a) if a == b else f"{a}..{b}" if b > a + 1 else f"{a}, {b}" for a, b in runs)
 
 
 def _validation_problems(err: ValidationError, data: Any, smap: SourceMap) -> list[str]:
-    problems = []
+    """The schema's problems, the cause first: an unknown key says which key it may be a misspelling of (and the
+    required field it names is then not reported missing), and a field reported missing where an unknown key was
+    written comes after that key's problem."""
+    problems: list[tuple[PathKey, str, str]] = []  # the place, the kind of problem, the message
+    suggested: set[PathKey] = set()  # required fields an unknown key is a misspelling of
     for e in err.errors(include_url=False):
         path = document_path(e["loc"], data)
         dotted = show_path(path, "<config>")
         kind = e["type"]
         if kind == "extra_forbidden":
             where = smap.locate(path, key=True)
-            allowed = _allowed_keys(path[:-1], data)
-            msg = RENAMED.get(path[-2:]) or "unknown key" + (f" (allowed here: {', '.join(allowed)})"
-                                                             if allowed else "")
+            allowed = allowed_keys(e["loc"], path, data)
+            given = _value_at_path(data, path[:-1])
+            unused = [k for k in allowed if not (isinstance(given, dict) and k in given)]
+            hint = did_you_mean(str(path[-1]), unused) if isinstance(path[-1], str) else ""
+            if hint:
+                suggested.add(path[:-1] + (hint.split("'")[1],))
+            msg = RENAMED.get(path[-2:]) or "unknown key" + hint + (f" (allowed here: {', '.join(allowed)})"
+                                                                    if allowed else "")
         elif kind == "missing":
             where = smap.locate(path[:-1])
             msg = "required field is missing"
@@ -680,8 +737,15 @@ def _validation_problems(err: ValidationError, data: Any, smap: SourceMap) -> li
             elif kind == "too_short":
                 n = (e.get("ctx") or {}).get("min_length", 1)
                 msg = f"needs at least {n} entr{'y' if n == 1 else 'ies'} (it has {len(e['input'])})"
-        problems.append(f"{where}: {dotted}: {msg}")
-    return problems
+        problems.append((path, kind, f"{where}: {dotted}: {msg}"))
+    unknown_at = {path[:-1] for path, kind, _ in problems if kind == "extra_forbidden"}
+    first = [(path, kind, text) for path, kind, text in problems
+             if not (kind == "missing" and (path in suggested or path[:-1] in unknown_at))]
+    for path, kind, text in problems:  # a field missing where an unknown key was written: after that key
+        if kind == "missing" and path not in suggested and path[:-1] in unknown_at:
+            at = max(i for i, (p, k, _) in enumerate(first) if k == "extra_forbidden" and p[:-1] == path[:-1])
+            first.insert(at + 1, (path, kind, text))
+    return [text for _, _, text in first]
 
 
 def document_path(loc: tuple, data: Any) -> PathKey:
@@ -705,46 +769,73 @@ def document_path(loc: tuple, data: Any) -> PathKey:
     return tuple(out)
 
 
-def _allowed_keys(path: PathKey, data: Any) -> list[str]:
-    model: Any = Config
-    node = data
+def _value_at_path(data: Any, path: PathKey) -> Any:
     for part in path:
-        if isinstance(node, dict):
-            node = node.get(part)
-        elif isinstance(node, list) and isinstance(part, int):
-            node = node[part]
-        model = _field_model(model, part, node)
-        if model is None:
-            return []
-    if model is None or not (isinstance(model, type) and issubclass(model, BaseModel)):
+        if isinstance(data, dict) and part in data or isinstance(data, list) and isinstance(part, int):
+            data = data[part]
+        else:
+            return None
+    return data
+
+
+def allowed_keys(loc: tuple, path: PathKey, data: Any, root: type[BaseModel] | None = None) -> list[str]:
+    """The keys allowed at the mapping that holds the unknown key of a pydantic error at ``loc`` (``path`` in the
+    document): the fields of the model that validated that mapping (the branch of a union its tag names), and the
+    template language's keys of that place."""
+    model = schema_at(loc[:-1], root or Config)
+    if not (isinstance(model, type) and issubclass(model, BaseModel)):
         return []
-    return list(model.model_fields)
+    keys = list(model.model_fields)  # and the keys the template language reads before (gnerun.language.expand):
+    if model in (StaticGame, DynamicGame):
+        keys.append("definitions")  # the game's definitions, and for: in an item of a list of the game section
+    elif len(path) >= 3 and path[0] == "game" and isinstance(path[-2], int):
+        keys.append("for")
+    return keys
 
 
-class _VariableMap:
-    """Marker: a mapping from variable names to :class:`Variable`."""
+def _unwrapped(tp: Any) -> Any:
+    while get_origin(tp) is Annotated:
+        tp = get_args(tp)[0]
+    return tp
 
 
-def _field_model(model: Any, part: Any, node: Any) -> Any:
-    if isinstance(part, int):
-        return model  # a list element: same model as the list's items
-    if model is Config and part == "game":
-        kind = node.get("kind") if isinstance(node, dict) else None
-        return {"static": StaticGame, "dynamic": DynamicGame}.get(kind)
-    table = {
-        (StaticGame, "agents"): StaticAgent,
-        (DynamicGame, "agents"): DynamicAgent,
-        (Config, "solver"): SolverConfig,
-        (Config, "disturbance"): DisturbanceConfig,
-        (Config, "run"): RunConfig,
-        (DisturbanceConfig, "plant"): PlantDisturbance,
-        (DynamicGame, "dynamics"): LinearDynamics,
-        (StaticAgent, "variables"): _VariableMap,
-        (DynamicAgent, "inputs"): _VariableMap,
-    }
-    if model is _VariableMap:
-        return Variable
-    return table.get((model, part))
+def _branch(union: Any, tag: Any) -> Any:
+    """The member of a union that a pydantic error location's ``tag`` names: a ``Tag``, or the value of a
+    discriminating ``Literal`` field (``kind: dynamic``); None if it names none."""
+    for member in get_args(union):
+        if get_origin(member) is Annotated and any(getattr(m, "tag", None) == tag for m in get_args(member)[1:]):
+            return member
+        model = _unwrapped(member)
+        if isinstance(model, type) and issubclass(model, BaseModel):
+            for f in model.model_fields.values():
+                if get_origin(f.annotation) is Literal and tag in get_args(f.annotation):
+                    return member
+    return None
+
+
+def schema_at(loc: tuple, root: Any = None) -> Any:
+    """The type that validated the place ``loc`` of a pydantic error location (whose union tags name the branch that
+    was taken), from the model ``root`` (:class:`Config`); None where the location leaves the models."""
+    tp: Any = Config if root is None else root
+    for part in loc:
+        tp = _unwrapped(tp)
+        origin = get_origin(tp)
+        if isinstance(tp, type) and issubclass(tp, BaseModel):
+            field = tp.model_fields.get(part) if isinstance(part, str) else None
+            if field is None:
+                return None
+            tp = field.annotation
+        elif origin in (Union, UnionType):
+            tp = _branch(tp, part)
+        elif origin is list and isinstance(part, int):
+            tp = get_args(tp)[0]
+        elif origin is dict:
+            tp = get_args(tp)[1]
+        else:
+            return None
+        if tp is None:
+            return None
+    return _unwrapped(tp)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -791,8 +882,15 @@ class _SemanticChecks:
 
     def report(self, path: PathKey, message: str, *, key: bool = False, column: int | None = None,
                text: str | None = None) -> None:
-        where = (self.smap.locate_in_text(path, column, text=text) if column is not None
-                 else self.smap.locate(path, key=key))
+        """A problem at ``path`` (its ``key``); at character ``column`` of the expression ``text`` there, where it was
+        written (a template's character, :meth:`~gnerun.language.yaml_source.SourceMap.point`), which is shown."""
+        if column is not None and text is not None:
+            where, path, shown = self.smap.point(path, column, text)
+            message += shown
+        elif column is not None:
+            where = self.smap.locate_in_text(path, column)
+        else:
+            where = self.smap.locate(path, key=key)
         self.problems.append(f"{where}: {show_path(path)}: {message}")
 
     def declare(self, name: str, path: PathKey, what: str, *, key: bool = False) -> None:
@@ -927,7 +1025,8 @@ class _SemanticChecks:
                 found.append(n)
             elif isinstance(n, Name) and self.kinds.get(n.id) in ("vector", "matrix"):  # scalars, stages: by name
                 self.report(path, f"{n.id!r} is a runtime {self.kinds[n.id]}: use its entries ({n.id}[1]"
-                                  f"{'[1]' if self.kinds[n.id] == 'matrix' else ''})", column=n.column)
+                                  f"{'[1]' if self.kinds[n.id] == 'matrix' else ''})", column=n.column,
+                            text=parsed.text)
                 return
             stack.extend(children(n))
         if not found:
@@ -939,7 +1038,7 @@ class _SemanticChecks:
             if self.kinds.get(node.name, "scalar") == "scalar":
                 what = "a runtime number" if node.name in self.g.runtime else "not a runtime parameter"
                 self.report(path, f"{node.name!r} is indexed but is {what} (indexed here: runtime vectors, matrices "
-                                  "and per-stage parameters)", column=node.column)
+                                  "and per-stage parameters)", column=node.column, text=parsed.text)
                 return
             entry = layout.entries[node.name]
             table = SymbolTable(entry, list(range(entry.size)))
@@ -951,10 +1050,11 @@ class _SemanticChecks:
                     evaluate(node, env, fns)
                 except KeyError as e:
                     self.report(path, f"{e.args[0]!r} in an index of {node.name!r} is not an integer parameter or "
-                                      "tau", column=node.column)
+                                      "tau", column=node.column, text=parsed.text)
                     return
                 except ValueError as e:
-                    self.report(path, f"{e}" + (f" (at tau = {tau})" if tau is not None else ""), column=node.column)
+                    self.report(path, f"{e}" + (f" (at tau = {tau})" if tau is not None else ""), column=node.column,
+                                text=parsed.text)
                     return
 
     # expressions ------------------------------------------------------------------------------------
@@ -990,7 +1090,7 @@ class _SemanticChecks:
                 raise ExpressionError(f"'{integer.op}' is integer arithmetic (indices, integer parameters, T): "
                                       f"{unparse(integer)!r} is not", text, integer.column)
         except ExpressionError as e:
-            self.report(path, e.describe(), column=e.column, text=text)
+            self.report(path, e.message, column=e.column, text=text)
             return
         if g.runtime and self.runtime_ok:
             self.indices(parsed, path, taus)

@@ -24,6 +24,7 @@ that produced the failing copy.
 
 from __future__ import annotations
 
+import math
 import re
 from collections.abc import Callable
 from typing import Any
@@ -33,10 +34,11 @@ from .expr import CONSTANTS, FUNCTIONS, Node
 from .extent import MAX_ITEMS, Extent, game_section
 from .families import EXPANSION_SECONDS, NAME, Families, Scope
 from .located import Problem, is_expression, is_number
+from .origins import written_at
 from .positions import Positions
 from .substitute import Substitution, dag_names
 from .templates import AGGREGATES, Template
-from .yaml_source import PathKey, SourceMap
+from .yaml_source import Origin, PathKey, SourceMap
 
 __all__ = ["EXPANSION_SECONDS", "MAX_ITEMS", "Expander", "expands"]
 
@@ -96,6 +98,7 @@ class Expander:
         self.positions = Positions(smap)
         self.families = Families({})
         self.subst = Substitution(self.families)
+        self.written_from: dict[PathKey, tuple[PathKey, Scope]] = {}  # an expression: its template and copy's scope
 
     @property
     def out(self) -> SourceMap:
@@ -115,16 +118,45 @@ class Expander:
         try:
             out = self._document(data)
         except Problem as p:
-            if p.column is not None:
-                text = p.path[-1] if p.key else _value_at(data, p.path)
-                where = self.src.locate_in_text(p.path, p.column, key=p.key,
-                                                text=text if isinstance(text, str) else None)
+            text = p.path[-1] if p.key else _value_at(data, p.path)
+            shown = ""
+            if p.column is not None and isinstance(text, str):  # a string written over several lines: an excerpt
+                where, _, shown = self.src.point(p.path, p.column, text, key=p.key, quote=p.quote)
+            elif p.column is not None:
+                where = self.src.locate_in_text(p.path, p.column, key=p.key)
             else:
                 where = self.src.locate(p.path, key=p.key)
             if p.bindings:
                 where += " (for " + ", ".join(f"{k} = {v}" for k, v in p.bindings.items()) + ")"
-            raise ConfigError([f"{where}: {p.message}"]) from None
+            raise ConfigError([f"{where}: {p.message}{shown}"]) from None
+        self.out.origins, self.out.source = self.origin, self.src
         return out, self.out
+
+    def origin(self, path: PathKey, column: int, text: str) -> Origin | None:
+        """Where character ``column`` of ``text``, the expression at ``path`` of the expansion, was written: the
+        template's (or a definition's) text and column (:mod:`gnerun.language.origins`); None where not known."""
+        found = self.written_from.get(tuple(path))
+        template = _value_at(self.document, found[0]) if found is not None else None
+        if found is None or not isinstance(template, str):
+            return None
+        src, scope = found
+        items, deadline = self.families.items, self.families.deadline
+        self.families.deadline = math.inf  # (the expansion's budgets were checked when it ran)
+        try:  # the same expansion again, to pair its nodes with the text's
+            lhs, relation, rhs, changed = self._expanded(template, src, scope)
+        except Problem:
+            return None
+        finally:
+            self.families.items, self.families.deadline = items, deadline
+        if not changed:
+            return Origin(src, template, column) if text == template else None
+        at = written_at(text, column, [lhs] if relation is None else [lhs, rhs], self.definitions)
+        if at is None:
+            return None
+        if at[1] is not None:
+            definition = _value_at(self.document, ("game", "definitions", at[1]))
+            return Origin(("game", "definitions", at[1]), str(definition), at[0], definition=True)
+        return Origin(src, template, at[0])
 
     def _document(self, data: dict) -> dict:
         self.document = data
@@ -255,6 +287,7 @@ class Expander:
             if is_number(logical):
                 return self.subst.number(value, src, scope)
             if is_expression(logical):
+                self.written_from[dst] = (src, scope)
                 return self.subst.expression(value, src, scope)
             return self.subst.template(value, src, scope)
         return value

@@ -35,6 +35,8 @@ from contextvars import ContextVar
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
+from ..errors import Names, did_you_mean
+
 MAX_LENGTH = 20_000
 MAX_DEPTH = 100
 
@@ -350,7 +352,7 @@ class _Parser:
         fn = name.text
         if fn not in FUNCTIONS:
             raise self.error(
-                f"unknown function {fn!r} (functions: {', '.join(FUNCTIONS)})",
+                f"unknown function {fn!r}{did_you_mean(fn, FUNCTIONS)} (functions: {', '.join(FUNCTIONS)})",
                 name,
             )
         self.expect("(")
@@ -657,8 +659,25 @@ def check_names(parsed: Expression | Constraint, allowed: Iterable[str], what: s
                 unknown.append((first_column_of(root, name) or 1, name))
     if unknown:
         column, name = min(unknown)
-        known = ", ".join(sorted(set(allowed) | set(CONSTANTS))) or "none"
-        raise ExpressionError(f"unknown {what} {name!r} (known here: {known})", parsed.text, column)
+        suggest, known = _known(allowed)
+        raise ExpressionError(f"unknown {what} {name!r}{suggest.suggestion(name)} (known here: {known})", parsed.text,
+                              column)
+
+
+_KNOWN: dict[int, tuple[Iterable[str], Names, str]] = {}  # the last sets of names checked against (by their id)
+
+
+def _known(allowed: Iterable[str]) -> tuple[Names, str]:
+    """The names of ``allowed`` and the constants, to suggest from and as the text of a message; the same set is
+    checked for every copy of a family, and its names are indexed once (a few sets are kept, with their ids)."""
+    hit = _KNOWN.get(id(allowed))
+    if hit is None or hit[0] is not allowed:
+        known = sorted(set(allowed) | set(CONSTANTS))
+        hit = (allowed, Names(known), ", ".join(known) or "none")
+        if len(_KNOWN) >= 8:
+            _KNOWN.clear()
+        _KNOWN[id(allowed)] = hit
+    return hit[1], hit[2]
 
 
 # ---------------------------------------------------------------------------------------------

@@ -10,6 +10,7 @@ import time
 from dataclasses import dataclass, field
 from typing import Any
 
+from ..errors import did_you_mean
 from .expr import ExpressionError, Node, first_column_of, names_in, parse_expression
 from .extent import MAX_ITEMS
 from .integers import IntegerError, integer_value
@@ -157,8 +158,8 @@ class Families:
                                      "parameters)", scope.indices, column=column(first_column_of(tree, name)))
             if name not in env:
                 known = ", ".join(sorted(env)) or "none"
-                raise Problem(path, f"{name!r} in {text.strip()!r} is not an index, an integer parameter or T "
-                                     f"(known here: {known})", scope.indices,
+                raise Problem(path, f"{name!r} in {text.strip()!r} is not an index, an integer parameter or T"
+                                     f"{did_you_mean(name, env)} (known here: {known})", scope.indices,
                               column=column(first_column_of(tree, name)))
         try:
             value = float(integer_value(tree, env))

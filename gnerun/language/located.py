@@ -26,13 +26,14 @@ class Problem(Exception):
     """A located problem: the document path, the message, the family indices it holds for."""
 
     def __init__(self, path: PathKey, message: str, bindings: dict[str, int] | None = None, *, key: bool = False,
-                 column: int | None = None):
+                 column: int | None = None, quote: bool = False):
         super().__init__(message)
         self.path = path
         self.message = message
         self.bindings = dict(bindings or {})
         self.key = key  # located at the mapping key of ``path``
         self.column = column  # located at this character of the string at ``path``
+        self.quote = quote  # the message says at which column of the string (a string written on one line)
 
 
 def _matches(logical: tuple, places: tuple) -> bool:

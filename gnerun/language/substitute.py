@@ -7,6 +7,7 @@ import math
 import re
 from typing import Any
 
+from ..errors import did_you_mean
 from .expr import (
     CONSTANTS,
     INTEGER_OPERATORS,
@@ -92,7 +93,7 @@ class Substitution:
             try:
                 template = parse_template(text)
             except ExpressionError as e:
-                raise Problem(path, e.describe(), scope.indices, column=e.column) from None
+                raise Problem(path, e.message, scope.indices, column=e.column, quote=True) from None
             self.templates[text] = template
         return template
 
@@ -252,8 +253,9 @@ class Substitution:
         """``name[i]``, ``name[i][j]`` of a vector or matrix parameter: the entry (1-based)."""
         if entry.name not in self.vectors:
             known = ", ".join(sorted(self.vectors)) or "none"
-            raise Problem(path, f"{entry.name!r} is indexed but is not a vector or matrix parameter (those here: "
-                                 f"{known})", scope.indices, column=entry.column)
+            raise Problem(path, f"{entry.name!r} is indexed but is not a vector or matrix parameter"
+                                 f"{did_you_mean(entry.name, self.vectors)} (those here: {known})", scope.indices,
+                          column=entry.column)
         value: Any = self.vectors[entry.name]
         for index in entry.indices:
             k = self.families.value(index, unparse(index), path, scope, 1)

@@ -28,6 +28,7 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 
+from ..errors import did_you_mean
 from .expr import (
     BINARY_FUNCTIONS,
     FUNCTIONS,
@@ -318,7 +319,8 @@ class _Parser:
     def call(self, name: _Token):
         fn = name.text
         if fn not in FUNCTIONS and fn not in AGGREGATES:
-            raise self.error(f"unknown function {fn!r} (functions: {', '.join(FUNCTIONS)})", name)
+            raise self.error(f"unknown function {fn!r}{did_you_mean(fn, FUNCTIONS + AGGREGATES)} (functions: "
+                             f"{', '.join(FUNCTIONS)})", name)
         self.expect("(")
         first = self.expr()
         if self.peek().kind == "word" and self.peek().text == "for":

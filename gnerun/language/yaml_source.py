@@ -7,14 +7,16 @@ column where it was written. Duplicate keys, which PyYAML silently accepts, are 
 
 from __future__ import annotations
 
+import functools
 import re
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import yaml
 
-from ..errors import ConfigError, InputError, shorten
+from ..errors import ConfigError, InputError, excerpt, shorten
 from ..files import read_regular
 
 MAX_CONFIG_BYTES = 1_000_000
@@ -37,6 +39,22 @@ class Position:
     span: tuple[int, int] | None = None  # a scalar written over several lines: where its source is in the text
 
 
+@dataclass(frozen=True)
+class Origin:
+    """Where a character of an expanded expression was written: ``column`` of the string ``text`` at ``path`` of the
+    document (a template, or a ``definition`` used in it)."""
+
+    path: PathKey
+    text: str
+    column: int
+    definition: bool = False
+
+
+# the token that starts at a character of an expression: a (templated) name, a number, an operator
+_TOKEN_AT = re.compile(r"(?:[A-Za-z_]|\{[^{}]*\})(?:[A-Za-z0-9_]|\{[^{}]*\})*|\d+(?:\.\d*)?(?:[eE][+-]?\d+)?"
+                       r"|\*\*|<=|>=|==|//")
+
+
 @dataclass
 class SourceMap:
     """Where each value (and each mapping key) of a document was written."""
@@ -47,6 +65,10 @@ class SourceMap:
     overridden: dict[PathKey, str] = field(default_factory=dict)  # path -> its override (`--set a.b=1`)
     notes: dict[PathKey, str] = field(default_factory=dict)  # path -> e.g. "for i = 2" (a family's copy)
     text: str = field(default="", repr=False)  # the document's text (for the lines of multi-line scalars)
+    # an expanded document's: the template a character of an expression came from (gnerun.language.expand), and the
+    # source map of the document as written
+    origins: Callable[[PathKey, int, str], Origin | None] | None = field(default=None, repr=False)
+    source: SourceMap | None = field(default=None, repr=False)
 
     def locate(self, path: PathKey, *, key: bool = False) -> str:
         """``file:line:column`` of the value (or key) at ``path``, or of its nearest written ancestor."""
@@ -84,10 +106,50 @@ class SourceMap:
         pos = (self.keys if key else self.values).get(p)
         if pos is None or any(p[:n] in self.overridden for n in range(len(p), 0, -1)):
             return self.locate(p, key=key)
+        line, col = self.character(p, column, key=key, text=text) or (pos.line, pos.column)
+        return f"{self.file}:{line}:{col}{self._note(p) if not pos.single_line else ''}"
+
+    def character(self, path: PathKey, column: int, *, key: bool = False,
+                  text: str | None = None) -> tuple[int, int] | None:
+        """Line and column in the file of character ``column`` of the string at ``path`` (see :meth:`locate_in_text`);
+        None where it is not known."""
+        p = tuple(path)
+        pos = (self.keys if key else self.values).get(p)
+        if pos is None or any(p[:n] in self.overridden for n in range(len(p), 0, -1)):
+            return None
         if not pos.single_line:
-            line, col = self._in_lines(pos, column, text) or (pos.line, pos.column)
-            return f"{self.file}:{line}:{col}{self._note(p)}"
-        return f"{self.file}:{pos.line}:{pos.column + column - 1 + (1 if pos.quoted else 0)}"
+            return self._in_lines(pos, column, text)
+        return pos.line, pos.column + column - 1 + (1 if pos.quoted else 0)
+
+    def point(self, path: PathKey, column: int, text: str, *, key: bool = False,
+              quote: bool = True) -> tuple[str, PathKey, str]:
+        """Where character ``column`` of the expression ``text`` at ``path`` was written, the path to name there, and
+        how to show it: an excerpt of the file (the line and a caret under the character, on the lines after the
+        message) where the text was written over several lines, else (``quote``) `` at column c of expression
+        'text'``. An expanded expression is followed back to the template (or definition) it came from
+        (``origins``): the position, the column and the text shown are the template's."""
+        origin = self.origins(path, column, text) if self.origins is not None and not key else None
+        if origin is None or self.source is None:
+            smap, at = self, tuple(path)
+            where = self.locate_in_text(at, column, key=key, text=text)
+        else:
+            smap, at, column, text = self.source, origin.path, origin.column, origin.text
+            found = smap.character(at, column, text=text)
+            where = (f"{smap.file}:{found[0]}:{found[1]}" if found else smap.locate(at)) + (
+                "" if origin.definition else self._note(tuple(path)))
+        pos = (smap.keys if key else smap.values).get(at)
+        found = smap.character(at, column, key=key, text=text)
+        if found is not None and pos is not None and not pos.single_line and smap.text:
+            line = smap.lines[found[0] - 1]
+            token = _TOKEN_AT.match(text, column - 1)
+            return where, at, "\n" + excerpt(line, found[0], found[1], len(token.group()) if token else 1)
+        shown = text if len(text) <= 120 else text[:117] + "..."
+        return where, at, f" at column {column} of expression {shown!r}" if quote else ""
+
+    @functools.cached_property
+    def lines(self) -> list[str]:
+        """The document's lines (split once)."""
+        return self.text.split("\n")  # (as positions count lines: by their newlines)
 
     def _in_lines(self, pos: Position, column: int, text: str | None) -> tuple[int, int] | None:
         """Line and column of character ``column`` of ``text``, a scalar written over several lines at ``pos``: the

@@ -33,12 +33,13 @@ from typing import Annotated, Any, Literal
 import numpy as np
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-from ..errors import ConfigError, InputError, Unavailable, shorten
+from ..errors import ConfigError, InputError, Unavailable, did_you_mean, shorten
 from ..files import not_a_link, read_json_object, replace_text, replacing, write_text
 from ..language.config import (
     CONFIG_VERSION,
     MAX_NAME_BYTES,
     Config,
+    allowed_keys,
     document_path,
     load_config,
     override_label,
@@ -185,7 +186,11 @@ def load_sweep(path: str | Path) -> Sweep:
         for err in e.errors():
             path = document_path(err["loc"], data)
             where = smap.locate(path, key=err["type"] == "extra_forbidden")
-            problems.append(f"{where}: {dotted(path, '<sweep>')}: {err['msg'].removeprefix('Value error, ')}")
+            message = err["msg"].removeprefix("Value error, ")
+            if err["type"] == "extra_forbidden":  # as in a config: the closest key, and the keys of the place
+                allowed = allowed_keys(err["loc"], path, data, SweepSpec)
+                message = f"unknown key{did_you_mean(str(path[-1]), allowed)} (allowed here: {', '.join(allowed)})"
+            problems.append(f"{where}: {dotted(path, '<sweep>')}: {message}")
         raise ConfigError(problems) from None
     base = (Path(file).parent / spec.base).resolve()
     if not base.is_file():
