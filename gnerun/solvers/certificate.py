@@ -50,7 +50,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import minimize
-from scipy.stats import qmc
 
 from ..game.compile import CompiledGame
 from ..game.tape import Tape, UnsupportedTape
@@ -153,6 +152,8 @@ def response_starts(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray
     # a scrambled Sobol design over the search box
     blo, bhi = search_box(game, agent, a)
     count = SOBOL_SMALL if ni <= global_response.MAX_DIM else SOBOL_LARGE
+    from scipy.stats import qmc  # (loaded when a player is checked over starts: 0.3 s of import no other run needs)
+
     # blo + (bhi - blo) * u, not qmc.scale: a fixed decision (lower = upper) has an empty box there
     design = blo + (bhi - blo) * qmc.Sobol(ni, scramble=True, seed=rng).random(count) if ni else np.zeros((0, 0))
     compare = local + corners + others + list(design)
