@@ -31,6 +31,7 @@ from ..game.building import no_check, polled
 from ..game.compile import CompiledGame, StageConstraints, compile_game, compile_stage_constraints
 from ..language.config import Config, PlantDisturbance
 from ..language.runtime import References
+from ..language.vehicles import vehicles
 from ..log import topics
 from ..log.mcap_log import json_ready
 from ..log.messages import MpcError, MpcIterate, MpcState, RuntimeValues
@@ -408,6 +409,8 @@ class ClosedLoop:
                           else PaperRule())
         self.plant = PlantNoise(cfg.disturbance.plant, game.nx)
         self.log = LoopLog(run, K, cfg.run.sampling_time) if run is not None else None
+        # the plans' predicted states are logged for Rerun's paths view: games with positions in the plane only
+        self.plans = bool(vehicles(game.state_names))
         self.progress, self.interrupt = progress, interrupt
         self.record = record if record is not None else LoopRecord(K, cfg.run.steps, game)
         self.agent_idx = [game.agent_indices(i) for i in range(len(game.agent_names))]
@@ -586,10 +589,10 @@ class ClosedLoop:
                 self._note_fallback(t, applied, state)
             x_next, sample = self._plant_step(x, applied, solved)
             rec.add(sample, x_next)
-            if log is not None:  # (the plan's predicted states are for the viewers: computed for the log only)
+            if log is not None:  # (the plan's predicted states are for the paths view: computed for the log only)
                 with log.run.timed():
                     log.sampling_time(t, trace, z_star, x, sample.u, sample,
-                                      game.predicted_states(applied.z[: game.n], x))
+                                      game.predicted_states(applied.z[: game.n], x) if self.plans else None)
             if self.progress is not None:
                 self.progress(StepReport(self.K, t, steps, x.copy(), sample.u.copy(), sample.status,
                                          bool(applied.fallback), float(sample.constraint_violation), int(state.k),

@@ -21,25 +21,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..language.expr import CONSTANTS, Constraint, evaluate, numpy_functions, parse_constraint
+from ..language.vehicles import vehicles
 from ..log.mcap_log import RunRecord
 from .panels import K_STYLES, failed_steps, fallback_steps, k_line, legend, panels
 from .states import agent_numbers, parameters
 
-_X = re.compile(r"^p?x(\d+)$")
 _DISTANCE = re.compile(r"^\(\s*(\w+)\s*-\s*(\w+)\s*\)\s*\*\*\s*2\s*\+\s*\(\s*(\w+)\s*-\s*(\w+)\s*\)\s*\*\*\s*2\s*>=")
-
-
-def vehicles(state_names: list[str]) -> list[tuple[str, int, int]]:
-    """(label, index of its x position, index of its y position) per vehicle, from the state names."""
-    index = {name: k for k, name in enumerate(state_names)}
-    out = []
-    for name, k in index.items():
-        m = _X.match(name)
-        if m:
-            y = name.replace("x", "y", 1)
-            if y in index:
-                out.append((m.group(1), k, index[y]))
-    return out
 
 
 def required_distances(config: dict) -> dict[tuple[str, str], float]:
