@@ -34,9 +34,11 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse import linalg as spla
 
+from ..errors import one_line
 from ..language.config import Config, DynamicGame
 from .building import stoppable
 from .compile import CompiledGame, Evaluator, _expressions, _layout, shared_rows_carried
+from .kernels import KernelReport, Stages, build_library, compiler, pattern_positions, scatter
 
 
 class SparseParts(NamedTuple):
@@ -76,6 +78,7 @@ class SparseKKT:
         self._not_multipliers = np.arange(self._lam0)
         # SuperLU orderings per kind of matrix: the reduced Newton system, the regularised one, the interior one
         self.orderings = {"newton": Ordering(), "regularized": Ordering(), "interior": Ordering()}
+        self.kernels = KernelReport("interpreted")  # how the function is evaluated (set by compile_sparse)
 
     def residual(self, z: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The condensed L(z) and c(a) alone (states rolled out, costates solved; no Jacobian)."""
@@ -123,9 +126,11 @@ def sparse_system(cfg: Config, game: CompiledGame) -> SparseKKT:
 
 
 @stoppable
-def compile_sparse(cfg: Config, game: CompiledGame) -> SparseKKT:
+def compile_sparse(cfg: Config, game: CompiledGame, *, build_c: bool = True) -> SparseKKT:
     """The full-space system of the dynamic game of ``cfg`` (``game`` is its condensed compilation, whose
-    constraint order and multiplier blocks it shares)."""
+    constraint order and multiplier blocks it shares), evaluated by compiled stage kernels where
+    ``cfg.solver.compile`` asks for them (gnerun.game.kernels). ``build_c=False``: the stage kernels' graph
+    evaluated by CasADi's interpreter instead of compiled (to check it without a compiler)."""
     g = cfg.game
     if not isinstance(g, DynamicGame):
         raise ValueError("the sparse formulation is for dynamic games")
@@ -198,8 +203,174 @@ def compile_sparse(cfg: Config, game: CompiledGame) -> SparseKKT:
     residual = ca.Function("sparse_residual", [a, lam, x], [ca.densify(F_proj[:n]), ca.densify(F_proj[F.numel() - m:])],
                            ["a", "lam", "x"], ["L", "c"])
     affine = not ca.depends_on(J, ca.vertcat(a, X, P, lam, x)) and not game.lq.piecewise
-    return SparseKKT(game, function, residual, function.sparsity_out(1), affine, S,
-                     [slice(int(offsets[i]), int(offsets[i + 1])) for i in range(N)], own)
+    pattern = function.sparsity_out(1)
+    report = KernelReport("interpreted", horizon=T + 1)
+    why_not = _why_interpreted(cfg.solver.compile, affine, function.n_instructions(), build_c)
+    if why_not:
+        report = KernelReport("interpreted", reason=why_not, horizon=T + 1)
+    else:
+        try:
+            timed = lay.runtime is not None and lay.runtime.time
+            if timed:  # every stage built as the first, taking its own time t + tau dt: one Function for many
+                ex = _expressions(g, lay, a, x, list(range(N)), states=X, local_time=True)
+                rows = [r for i in range(N) for r in ex.own_rows[i]] + ex.shared_common
+            staged = _staged(ex, rows, lay, game, reach, offsets, inputs, a, X, x, lam, pattern, F.numel(),
+                             lay.runtime.dt if timed else None)
+            if build_c:
+                lib, hit, seconds = build_library(staged[:2], f"sparse_kkt_{T + 1}")
+                function, residual = ca.external("sparse_kkt", str(lib)), ca.external("sparse_residual", str(lib))
+                report = KernelReport("compiled", path=str(lib), cache_hit=hit, compile_s=seconds,
+                                      stages=staged[2], horizon=T + 1)
+            else:
+                function, residual = staged[:2]
+                report = KernelReport("interpreted", reason="stage kernels not compiled", stages=staged[2],
+                                      horizon=T + 1)
+        except (RuntimeError, ValueError) as why:  # a compiler's or CasADi's failure: the interpreted path stays
+            report = KernelReport("interpreted", reason=one_line(str(why)), horizon=T + 1)
+    system = SparseKKT(game, function, residual, pattern, affine, S,
+                       [slice(int(offsets[i]), int(offsets[i + 1])) for i in range(N)], own)
+    system.kernels = report
+    return system
+
+
+# solver.compile: auto compiles the stage kernels from this many operations of the interpreted function: where one
+# evaluation takes ~70-100 us interpreted (measured: the 20-knot merge 42,000 operations 142 us, the intersection
+# 119,000 490 us; the 6-robot ring 11,000 48 us), against 0.5-2 s of the compiler once per game (then cached)
+AUTO_FROM = 20_000
+
+
+def _why_interpreted(mode: str, affine: bool, operations: int, build_c: bool = True) -> str:
+    """Why the sparse system stays interpreted ('': its stage kernels are built)."""
+    if affine:
+        return "constant derivatives, evaluated once"
+    if mode == "interpreted":
+        return "solver.compile: interpreted"
+    if mode == "auto" and operations < AUTO_FROM:
+        return f"auto: {operations:,} operations, below {AUTO_FROM:,}"
+    if build_c and compiler() is None:
+        return "no C compiler found (gcc, cc or $CC)"
+    return ""
+
+
+# long: the stage walk needs the layout, the rows and the costate sets together; split, each part would take them all
+def _staged(ex, rows: list, lay, game: CompiledGame, reach: list[np.ndarray], offsets: np.ndarray, inputs: list,
+            a: ca.SX, X: ca.SX, x: ca.SX, lam: ca.SX, pattern: ca.Sparsity, size: int, dt: float | None
+            ) -> tuple[ca.Function, ca.Function, int]:
+    """The sparse system's function (a, lam, x) -> (F, nonzeros of dF/dw in ``pattern``, F0) and its residual
+    function (a, lam, x) -> (L, c) built from per-stage Functions (gnerun.game.kernels), as MX graphs of their calls.
+    Returns them and the number of distinct stage Functions. ``dt``: the expressions' stages take their own time
+    in the first runtime value (built with ``local_time``), which is t + tau dt at stage tau."""
+    N, n, nx, T = len(lay.variable_names), lay.n, lay.nx, lay.horizon
+    S, Ptot, m = nx * (T + 1), int(offsets[-1]), len(rows)
+    stage_rows: list[list[int]] = [[] for _ in range(T + 1)]
+    for r, row in enumerate(rows):
+        if row.info.stage is None or not 0 <= row.info.stage <= T:
+            raise ValueError(f"constraint '{row.info.label}' belongs to no stage")
+        stage_rows[row.info.stage].append(r)
+    shared = game.shared_slice
+    carried = [set(shared_rows_carried(rows[shared], shared.start, i).tolist()) for i in range(N)]
+    R = [np.flatnonzero(r) for r in reach]
+    k = [r.size for r in R]
+    mine = [[q for q, (i, _) in enumerate(inputs) if i == agent] for agent in range(N)]
+    nu = [len(names) for names in lay.variable_names]
+
+    def u_index(tau: int) -> list[int]:
+        return [lay.agent_slices[i].start + tau * nu[i] + j for i, j in inputs]
+
+    stages = Stages()
+    prm = x[nx:]
+    for tau in range(T + 1):
+        xp = x[:nx] if tau == 0 else X[(tau - 1) * nx:tau * nx]
+        xn = X[tau * nx:(tau + 1) * nx]
+        u = ca.vertcat(*[a[q] for q in u_index(tau)])
+        sr = stage_rows[tau]
+        lam_t = ca.vertcat(*[lam[r] for r in sr]) if sr else ca.SX(0, 1)
+        c_t = ca.vertcat(*[rows[r].expr for r in sr]) if sr else ca.SX(0, 1)
+        p_t = ca.SX.sym("p", sum(k))
+        d_t = ex.defects[tau]
+        ga, gxn, gxp = [], [], []
+        for i in range(N):
+            cost = ex.stage_costs[i][tau] + (ex.stage_costs[i][T + 1] if tau == T else 0)
+            ms = game.multiplier_slices[i]
+            q_i = [q for q, r in enumerate(sr) if ms.start <= r < ms.stop or r in carried[i]]
+            pi = p_t[sum(k[:i]):sum(k[:i + 1])]
+            ell = cost + ca.dot(lam_t[q_i], c_t[q_i]) + ca.dot(pi, d_t[R[i].tolist()])
+            ga.append(ca.gradient(ell, u[mine[i]]))
+            gxn.append(ca.gradient(ell, xn[R[i].tolist()]))
+            gxp.append(ca.gradient(ell, xp[R[i].tolist()]))
+        local = ca.vertcat(*ga, *gxn, *gxp, d_t, c_t)
+        row_map = np.concatenate([
+            *[np.array([lay.agent_slices[i].start + tau * nu[i] + j for j in range(nu[i])], dtype=int)
+              for i in range(N)],
+            *[n + offsets[i] + tau * k[i] + np.arange(k[i]) for i in range(N)],
+            *[n + offsets[i] + (tau - 1) * k[i] + np.arange(k[i]) if tau else np.full(k[i], -1) for i in range(N)],
+            n + Ptot + tau * nx + np.arange(nx), n + Ptot + S + np.asarray(sr, dtype=int)]).astype(int)
+        col_map = np.concatenate([
+            n + (tau - 1) * nx + np.arange(nx) if tau else np.full(nx, -1), np.asarray(u_index(tau), dtype=int),
+            n + tau * nx + np.arange(nx), n + S + Ptot + np.asarray(sr, dtype=int),
+            *[n + S + offsets[i] + tau * k[i] + np.arange(k[i]) for i in range(N)]]).astype(int)
+        first = sum(nu)
+        gxn_slices = [slice(first + sum(k[:i]), first + sum(k[:i + 1])) for i in range(N)]
+        stages.add([xp, u, xn, lam_t, p_t, prm], local, ca.vertcat(xp, u, xn, lam_t, p_t), row_map, col_map,
+                   gxn_slices)
+
+    aM, lamM, xM = ca.MX.sym("a", n), ca.MX.sym("lam", m), ca.MX.sym("x", x.numel())
+    U = ca.reshape(aM[[q for tau in range(T + 1) for q in u_index(tau)]], len(inputs), T + 1)
+    XR = ex.dynamics.mapaccum("roll", T + 1)(xM[:nx], U)  # xi(1..T+1)
+    XP = ca.horzcat(xM[:nx], XR[:, :T])  # xi(0..T)
+    pM, K = xM[nx:], sum(k)
+    # runs of consecutive stages with one Function: each is one mapped call
+    runs: list[tuple[int, int]] = []
+    for tau in range(T + 1):
+        if runs and stages.calls[tau] is stages.calls[runs[-1][0]]:
+            runs[-1] = (runs[-1][0], tau + 1)
+        else:
+            runs.append((tau, tau + 1))
+
+    def mapped(which: int, lo: int, hi: int, lam_on: bool, P) -> list:
+        f = stages.calls[lo][which].map(hi - lo)
+        nl = len(stage_rows[lo])
+        lam_run = (ca.reshape(lamM[[r for tau in range(lo, hi) for r in stage_rows[tau]]], nl, hi - lo)
+                   if lam_on and nl else ca.MX.zeros(nl, hi - lo))
+        prm = pM
+        if dt is not None:
+            prm = ca.vertcat(pM[0] + dt * ca.DM(list(range(lo, hi))).T, ca.repmat(pM[1:], 1, hi - lo))
+        out = f(XP[:, lo:hi], U[:, lo:hi], XR[:, lo:hi], lam_run, P[:, lo:hi], prm)
+        return out if isinstance(out, (list, tuple)) else [out]
+
+    first = sum(nu)
+    zeros_P = ca.MX.zeros(K, T + 1)
+    GX = ca.horzcat(*[mapped(0, lo, hi, True, zeros_P)[0][first:first + K, :] for lo, hi in runs])
+    # costates backwards: p(T) = g(T), p(tau) = g(tau) + blockdiag_i f_xi[R_i, R_i](xi(tau+1), u(tau+1))^T p(tau+1)
+    pn, xs, us, gs = ca.SX.sym("pn", K), ca.SX.sym("xs", nx), ca.SX.sym("us", len(inputs)), ca.SX.sym("g", K)
+    A = ca.jacobian(ex.dynamics(xs, us), xs)
+    back = [gs[sum(k[:i]):sum(k[:i + 1])] + ca.mtimes(A[R[i].tolist(), R[i].tolist()].T, pn[sum(k[:i]):sum(k[:i + 1])])
+            for i in range(N)]
+    step = ca.Function("costate_step", [pn, xs, us, gs], [ca.vertcat(*back)])
+    if T:
+        rev = list(range(T - 1, -1, -1))
+        Pback = step.mapaccum("costates", T)(GX[:, T], XR[:, rev], U[:, [t + 1 for t in rev]], GX[:, rev])
+        P = ca.horzcat(Pback[:, list(range(T - 1, -1, -1))], GX[:, T])
+    else:
+        P = GX
+    fj = [mapped(1, lo, hi, True, P) for lo, hi in runs]
+    f0 = [mapped(0, lo, hi, False, zeros_P)[0] for lo, hi in runs]
+    f_only = [mapped(0, lo, hi, True, P)[0] for lo, hi in runs]
+    M_F = scatter(size, stages.row_maps)
+    targets = [pattern_positions(pattern, rm[r], cm[c])
+               for rm, cm, (r, c) in zip(stages.row_maps, stages.col_maps, stages.jac_entries, strict=True)]
+    M_J = scatter(pattern.nnz(), targets)
+
+    def summed(M: ca.DM, parts: list) -> ca.MX:
+        return ca.densify(ca.mtimes(M, ca.vertcat(*[ca.vec(v) for v in parts])))
+
+    F, F0 = summed(M_F, [out[0] for out in fj]), summed(M_F, f0)
+    Jnz = summed(M_J, [out[1] for out in fj])
+    kkt = ca.Function("sparse_kkt", [aM, lamM, xM], [F, Jnz, F0], ["a", "lam", "x"], ["F", "J", "F0"])
+    F_res = summed(M_F, f_only)
+    residual = ca.Function("sparse_residual", [aM, lamM, xM], [F_res[:n], F_res[size - m:]], ["a", "lam", "x"],
+                           ["L", "c"])
+    return kkt, residual, len(stages.groups)
 
 
 def _costates(f: ca.Function, n_inputs: int, gx_only: list[ca.SX], reach: list[np.ndarray], X: ca.SX,
