@@ -397,6 +397,65 @@ def trajectory_loop_rows(row, quick: bool) -> None:
              f"worst violation {worst:.1e}")
 
 
+def kernel_rows(row, quick: bool) -> None:
+    """Compiled stage kernels (solver.compile): one evaluation of the sparse system and one iteration of solves from
+    random states, compiled C against CasADi's interpreter in the same process (the same iterates); the compiler's
+    time on an empty cache and the second build's (a cache hit: nothing compiled)."""
+    from gnerun.game.sparse import compile_sparse
+
+    from .problems import trajectory
+
+    cases = [("ALGAMES merge, 21 knots", trajectory.merge_problems(3 if quick else 10)),
+             ("ALGAMES intersection", trajectory.intersection_problems(2 if quick else 5)),
+             ("MPC merge, 41 knots", [load_config(ROOT / "configs" / "algames_merge_mpc.yaml")])]
+    with tempfile.TemporaryDirectory() as cache:
+        saved = os.environ.get("GNERUN_CACHE_DIR")
+        os.environ["GNERUN_CACHE_DIR"] = cache
+        try:
+            for label, problems in cases:
+                cfgs = [p if not hasattr(p, "config_yaml") else load_config(text=p.config_yaml) for p in problems]
+                per_mode = {}
+                for mode in ("compiled", "interpreted"):
+                    cfg = cfgs[0].model_copy(update={"solver": cfgs[0].solver.model_copy(
+                        update={"compile": mode, "formulation": "sparse"})})
+                    game = compile_game(cfg)
+                    t0 = time.perf_counter()
+                    system = compile_sparse(cfg, game)
+                    built = time.perf_counter() - t0
+                    z = game.z_start()
+                    t_eval = _median_time(lambda system=system, z=z: system.evaluate(z, None), 7, 20)
+                    game.derived["sparse"] = system
+                    solver = make_solver(cfg, game)
+                    solver.init()
+                    per, its = [], []
+                    for c in cfgs:
+                        t0 = time.perf_counter()
+                        state = iterate(solver, solver.init(None, np.asarray(c.game.x0)))
+                        per.append((time.perf_counter() - t0) / max(state.k, 1))
+                        its.append(state.k)
+                    per_mode[mode] = (t_eval, statistics.median(per), its, built, system.kernels)
+                (ec, ic, its_c, built_c, rep), (ei, ii, its_i, _, _) = per_mode["compiled"], per_mode["interpreted"]
+                row(f"{label}: sparse system evaluation, compiled stage kernels vs interpreted", ec, "interpreted", ei,
+                    target="ratio >= 1", met=ei >= ec, note=f"{rep.stages} stage functions for {rep.horizon} stages")
+                row(f"{label}: one iteration (sparse), compiled vs interpreted", ic, "interpreted", ii,
+                    target="ratio >= 1", met=ii >= ic,
+                    note=f"median over {len(cfgs)} solves; iterations {its_c} and {its_i}")
+                game = compile_game(cfgs[0])
+                cfg = cfgs[0].model_copy(update={"solver": cfgs[0].solver.model_copy(
+                    update={"compile": "compiled", "formulation": "sparse"})})
+                t0 = time.perf_counter()
+                again = compile_sparse(cfg, game).kernels
+                t_again = time.perf_counter() - t0
+                row(f"{label}: sparse system build, a second time (cache hit)", t_again, "first build", built_c,
+                    target="cache hit", met=again.cache_hit,
+                    note=f"first: gcc {rep.compile_s:.2f} s; the second compiles nothing")
+        finally:
+            if saved is None:
+                del os.environ["GNERUN_CACHE_DIR"]
+            else:
+                os.environ["GNERUN_CACHE_DIR"] = saved
+
+
 def us(v: float) -> str:
     return f"{v * 1e6:,.1f} µs" if v < 1e-3 else f"{v * 1e3:,.2f} ms" if v < 1 else f"{v:,.2f} s"
 
@@ -518,6 +577,7 @@ def main(argv: list[str] | None = None) -> int:
 
     # 6. closed loops on the trajectory games
     trajectory_loop_rows(row, args.quick)
+    kernel_rows(row, args.quick)
 
     # 3. peers: nashopt (optional extra `bench`) on a game both can state, last (importing it loads JAX)
     if peers.available():
