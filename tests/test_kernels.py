@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import gnerun.game.sparse as sparse_module
 from benchmarks.problems import trajectory
 from gnerun.game.compile import compile_game
 from gnerun.game.kernels import build_library, cache_dir
@@ -114,7 +115,34 @@ def test_a_second_build_is_a_cache_hit(tmp_path, monkeypatch):
     assert (first.mode, first.cache_hit) == ("compiled", False) and first.compile_s > 0
     assert (second.mode, second.cache_hit, second.compile_s) == ("compiled", True, 0.0)
     assert second.path == first.path and Path(first.path).parent == cache_dir() == tmp_path / "kernels"
-    assert [f.name for f in (tmp_path / "kernels").iterdir()] == [Path(first.path).name]  # no leftovers
+    files = sorted(f.name for f in (tmp_path / "kernels").iterdir())  # the library and its system's layout only
+    assert len(files) == 2 and files[0] == Path(first.path).name
+    assert files[1].startswith("system-") and files[1].endswith(".npz")
+
+
+def test_a_cache_hit_builds_nothing(tmp_path, monkeypatch):
+    """The same game again, with another x0: the system comes from the cache without its expressions being built,
+    and evaluates as the freshly built one."""
+    monkeypatch.setenv("GNERUN_CACHE_DIR", str(tmp_path))
+    cfg = _with(load_config(ROOT / "configs" / "vehicles.yaml"), compile="compiled")
+    game = compile_game(cfg)
+    fresh = compile_sparse(cfg, game)
+    moved = cfg.model_copy(update={"game": cfg.game.model_copy(update={"x0": [v + 0.1 for v in cfg.game.x0]})})
+    game2 = compile_game(moved)
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("the expressions were built")
+
+    monkeypatch.setattr(sparse_module, "_expressions", refuse)
+    hit = compile_sparse(moved, game2)
+    assert hit.kernels.cache_hit and hit.kernels.stages == fresh.kernels.stages
+    assert (hit.pattern != fresh.pattern).nnz == 0 and hit.S == fresh.S
+    assert all(np.array_equal(u, v) for u, v in zip(hit.states, fresh.states, strict=True))
+    z = np.concatenate([game.z_start()[:game.n] + 0.3, np.ones(game.m)])
+    x = np.asarray(moved.game.x0)
+    for u, v in zip(hit.evaluate(z, x), fresh.evaluate(z, x), strict=True):
+        if u is not None:
+            assert np.array_equal(u, v)
 
 
 def test_a_failing_compiler_is_reported(tmp_path, monkeypatch):

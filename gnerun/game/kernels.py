@@ -19,7 +19,9 @@ gnerun.game.sparse; both give the same values up to rounding (the sums are taken
 
 The cache: ``$GNERUN_CACHE_DIR`` or ``$XDG_CACHE_HOME/gnerun`` (``~/.cache/gnerun``), folder ``kernels``, one shared
 library per generated source, named by a hash of the source, the CasADi version, the compiler and its flags.
-Deleting the folder clears it.
+Beside each library, the system's pattern and layout under a hash of the game, the code that builds it and the same
+versions: a second run of the same game (any x0 or runtime values) loads both and builds nothing. Deleting the
+folder clears it.
 """
 
 from __future__ import annotations
@@ -84,6 +86,50 @@ def compiler() -> str | None:
     if cc:
         return shutil.which(cc)
     return shutil.which("gcc") or shutil.which("cc")
+
+
+def sources_digest() -> str:
+    """A hash of the code that turns a config into a compiled system (gnerun.game, gnerun.language): a cached system
+    built by other code is not used."""
+    global _SOURCES
+    if _SOURCES is None:
+        h = hashlib.sha256()
+        root = Path(__file__).resolve().parents[1]
+        for path in sorted([*root.glob("game/*.py"), *root.glob("language/*.py")]):
+            h.update(path.name.encode())
+            h.update(path.read_bytes())
+        _SOURCES = h.hexdigest()
+    return _SOURCES
+
+
+_SOURCES: str | None = None
+
+
+def entry_key(game_key: str) -> str:
+    """The cache's name for a game's compiled system: the game (gnerun.game.compile.compile_key), the code that
+    builds it, CasADi's version, the compiler and its flags."""
+    cc = compiler() or ""
+    return hashlib.sha256("\n".join([game_key, sources_digest(), ca.__version__, cc, *FLAGS]).encode()).hexdigest()[:24]
+
+
+def save_entry(key: str, library: Path, arrays: dict[str, np.ndarray]) -> None:
+    """What a cache hit needs besides the library (the system's pattern and layout), next to it."""
+    folder = cache_dir()
+    with tempfile.NamedTemporaryFile(dir=folder, suffix=".npz", delete=False) as f:
+        np.savez(f, library=np.array(library.name), **arrays)
+    os.replace(f.name, folder / f"system-{key}.npz")
+
+
+def load_entry(key: str) -> tuple[Path, dict[str, np.ndarray]] | None:
+    """The library and arrays saved for ``key``, if both are in the cache and readable."""
+    path = cache_dir() / f"system-{key}.npz"
+    try:
+        with np.load(path) as data:
+            arrays = {k: data[k] for k in data.files}
+    except (OSError, ValueError, EOFError):
+        return None
+    library = cache_dir() / str(arrays.pop("library"))
+    return (library, arrays) if library.exists() else None
 
 
 def build_library(functions: list[ca.Function], name: str) -> tuple[Path, bool, float]:

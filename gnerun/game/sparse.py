@@ -37,8 +37,18 @@ from scipy.sparse import linalg as spla
 from ..errors import one_line
 from ..language.config import Config, DynamicGame
 from .building import stoppable
-from .compile import CompiledGame, Evaluator, _expressions, _layout, shared_rows_carried
-from .kernels import KernelReport, Stages, build_library, compiler, pattern_positions, scatter
+from .compile import CompiledGame, Evaluator, _expressions, _layout, compile_key, shared_rows_carried
+from .kernels import (
+    KernelReport,
+    Stages,
+    build_library,
+    compiler,
+    entry_key,
+    load_entry,
+    pattern_positions,
+    save_entry,
+    scatter,
+)
 
 
 class SparseParts(NamedTuple):
@@ -136,6 +146,12 @@ def compile_sparse(cfg: Config, game: CompiledGame, *, build_c: bool = True) -> 
         raise ValueError("the sparse formulation is for dynamic games")
     lay = _layout(g, game.runtime)
     N, n, nx, T = len(g.agents), lay.n, lay.nx, lay.horizon
+    key = None
+    if build_c and cfg.solver.compile != "interpreted" and compiler() is not None:
+        key = entry_key(compile_key(cfg))
+        cached = _from_cache(game, key, T + 1, cfg.solver.compile)
+        if cached is not None:
+            return cached
     S = nx * (T + 1)
     a = ca.SX.sym("a", n)
     x = ca.SX.sym("x", nx + lay.np)  # the plant state, then the runtime values
@@ -205,7 +221,8 @@ def compile_sparse(cfg: Config, game: CompiledGame, *, build_c: bool = True) -> 
     affine = not ca.depends_on(J, ca.vertcat(a, X, P, lam, x)) and not game.lq.piecewise
     pattern = function.sparsity_out(1)
     report = KernelReport("interpreted", horizon=T + 1)
-    why_not = _why_interpreted(cfg.solver.compile, affine, function.n_instructions(), build_c)
+    function_ops = function.n_instructions()
+    why_not = _why_interpreted(cfg.solver.compile, affine, function_ops, build_c)
     if why_not:
         report = KernelReport("interpreted", reason=why_not, horizon=T + 1)
     else:
@@ -221,6 +238,12 @@ def compile_sparse(cfg: Config, game: CompiledGame, *, build_c: bool = True) -> 
                 function, residual = ca.external("sparse_kkt", str(lib)), ca.external("sparse_residual", str(lib))
                 report = KernelReport("compiled", path=str(lib), cache_hit=hit, compile_s=seconds,
                                       stages=staged[2], horizon=T + 1)
+                if key is not None:
+                    save_entry(key, lib, {"size": np.array(F.numel()), "colind": np.asarray(pattern.colind()),
+                                          "row": np.asarray(pattern.row()), "S": np.array(S), "offsets": offsets,
+                                          "own": np.concatenate(own), "own_len": np.array([o.size for o in own]),
+                                          "stages": np.array(staged[2]),
+                                          "operations": np.array(function_ops)})
             else:
                 function, residual = staged[:2]
                 report = KernelReport("interpreted", reason="stage kernels not compiled", stages=staged[2],
@@ -230,6 +253,30 @@ def compile_sparse(cfg: Config, game: CompiledGame, *, build_c: bool = True) -> 
     system = SparseKKT(game, function, residual, pattern, affine, S,
                        [slice(int(offsets[i]), int(offsets[i + 1])) for i in range(N)], own)
     system.kernels = report
+    return system
+
+
+def _from_cache(game: CompiledGame, key: str, horizon: int, mode: str) -> SparseKKT | None:
+    """The game's compiled sparse system from the cache (gnerun.game.kernels), if it is there (and for ``auto``, the
+    game is one it compiles): nothing is built."""
+    entry = load_entry(key)
+    if entry is None:
+        return None
+    library, arr = entry
+    if mode == "auto" and int(arr["operations"]) < AUTO_FROM:
+        return None
+    try:
+        function, residual = ca.external("sparse_kkt", str(library)), ca.external("sparse_residual", str(library))
+    except RuntimeError:  # a library that does not load: built again
+        return None
+    size = int(arr["size"])
+    pattern = ca.Sparsity(size, size, arr["colind"].tolist(), arr["row"].tolist())
+    own = np.split(arr["own"].astype(int), np.cumsum(arr["own_len"])[:-1])
+    offsets = arr["offsets"]
+    system = SparseKKT(game, function, residual, pattern, False, int(arr["S"]),
+                       [slice(int(offsets[i]), int(offsets[i + 1])) for i in range(len(own))], own)
+    system.kernels = KernelReport("compiled", path=str(library), cache_hit=True, stages=int(arr["stages"]),
+                                  horizon=horizon)
     return system
 
 
