@@ -126,6 +126,61 @@ class SparseKKT:
         return z_new
 
 
+class AgentSparseKKT(SparseKKT):
+    """One agent's best response to the others' decisions (their inputs fixed) as a principal part of the game's
+    sparse system: its rows G_a(i), G_xi(i), the defects d and its constraint rows c_i, in its unknowns a_i, xi, p_i
+    and its multipliers. At a point whose other multipliers are zero these rows are the agent's own problem's KKT
+    system (its costates solve grad_xi L_i = 0, the states roll out from all inputs), so it is evaluated by the
+    game's own (compiled) system and nothing is built per agent.
+
+    ``problem`` is the agent's problem as compiled by :func:`gnerun.game.compile.compile_agent_problem` (proximal
+    weight 0), whose parameter vector is (x with the runtime values, the others' decisions, a centre unused);
+    ``rows[k]`` the game's row of c of its constraint k.
+    """
+
+    def __init__(self, full: SparseKKT, problem: CompiledGame, agent: int, rows: np.ndarray):
+        game = full.game
+        sl = game.agent_slices[agent]
+        n, S, m, P = game.n, full.S, game.m, full.costates[-1].stop
+        own_p = full.costates[agent]
+        self._rows, self._slice, self._full = np.asarray(rows, dtype=int), sl, full
+        self._nx = game._x(None).size  # the plant state and the runtime values at the front of the parameters
+        self._lam = np.zeros(m)
+        F_rows = np.concatenate([np.arange(sl.start, sl.stop), n + np.arange(own_p.start, own_p.stop),
+                                 n + P + np.arange(S), n + P + S + self._rows])
+        w_cols = np.concatenate([np.arange(sl.start, sl.stop), n + np.arange(S),
+                                 n + S + np.arange(own_p.start, own_p.stop), n + S + P + self._rows])
+        index = full.pattern.copy()
+        index.data = np.arange(index.nnz, dtype=float)
+        sub = index[F_rows][:, w_cols].tocsc()
+        sub.sort_indices()
+        self._F_rows, self._nonzeros = F_rows, sub.data.astype(int)
+        pattern = ca.Sparsity(sub.shape[0], sub.shape[1], sub.indptr.tolist(), sub.indices.tolist())
+        super().__init__(problem, full._eval.function, full._residual.function, pattern, False, S,
+                         [slice(0, own_p.stop - own_p.start)], [full.states[agent]])
+        self.kernels = full.kernels
+
+    def _point(self, z: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The game's (a, lambda, x) of the agent problem's (z, parameters)."""
+        sl, ni = self._slice, self._slice.stop - self._slice.start
+        p = self.game._x(x)
+        xv, others = p[:self._nx], p[self._nx:self._nx + self._full.n - ni]
+        a = np.concatenate([others[:sl.start], z[:ni], others[sl.start:]])
+        lam = self._lam.copy()
+        lam[self._rows] = z[ni:]
+        return a, lam, xv
+
+    def residual(self, z: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        a, lam, xv = self._point(z, x)
+        L, c = self._full._residual(a, lam, xv)
+        return L.reshape(-1)[self._slice], c.reshape(-1)[self._rows]
+
+    def evaluate(self, z: np.ndarray, x: np.ndarray) -> SparseParts:
+        F, J, F0 = self._full._eval(*self._point(z, x))
+        F, F0 = F[self._F_rows], F0[self._F_rows]
+        return SparseParts(F[:self.n], F[self._lam0:], None, None, F, J[self._nonzeros], F0)
+
+
 def sparse_system(cfg: Config, game: CompiledGame) -> SparseKKT:
     """The game's sparse system, compiled once per game (kept in ``game.derived``): ``gnerun solve`` and ``gnerun
     simulate`` build it with the game, before a run begins, wherever the solver takes the sparse formulation."""
