@@ -40,8 +40,8 @@ benchmarks/results/solver-design.md):
 The linear algebra has the two forms of the semismooth Newton step: condensed (the inequality multipliers
 eliminated, one dense factorisation of n unknowns and the equality multipliers; constraint rows with a single
 nonzero, such as bounds, add to the diagonal) and sparse (the full-space system of a dynamic game with -D on its
-multiplier block, factorised by SuperLU; the players' blocks of its Schur complement made positive definite in the
-same way, so that both forms take the same direction).
+multiplier block, factorised once per step by banded LU on the stage order; the players' blocks of its Schur
+complement made positive definite in the same way, so that both forms take the same direction).
 
 Rows that no decision variable reaches (a condition on the plant state alone) take no part: their multipliers stay zero.
 """
