@@ -399,16 +399,13 @@ class _AgentBlocks:
         Dx = numbered[d_rows][:, x_cols].tocoo()
         below = Dx.row - Dx.col
         self.width = int(below.max(initial=0))
-        positions = Dx.data.astype(np.int64) - 1
         diagonal = np.zeros(self.states, dtype=bool)
         diagonal[Dx.row[below == 0]] = True
-        # D_x is lower triangular with its diagonal in the pattern (each stage's states follow from the previous
-        # stage's): its band for LAPACK's triangular solves; otherwise a general sparse LU
-        self.triangular = bool(np.all(below >= 0) and diagonal.all())
-        if self.triangular:
-            self._band = (Dx.col * (self.width + 1) + below, positions)
-        else:
-            self._Dx = _Gather(numbered, d_rows, x_cols)
+        # the defects f(xi(tau), u) - xi(tau + 1), stage-major: -I on the diagonal, the dynamics' Jacobian below it
+        if not (np.all(below >= 0) and diagonal.all()):
+            raise AssertionError("the dynamics' block of the sparse system is not lower triangular")
+        # its band for LAPACK's triangular solves (the transpose of the Fortran-ordered band, as for banded LU)
+        self._band = (Dx.col * (self.width + 1) + below, Dx.data.astype(np.int64) - 1)
         self._Da = _Gather(numbered, d_rows, a_cols)
         stacked = np.concatenate([lam_I, g_rows, a_cols])
         self._Ka = _Gather(numbered, stacked, a_cols)
@@ -419,34 +416,21 @@ class _AgentBlocks:
     def complement(self, data: np.ndarray, D: np.ndarray) -> np.ndarray | None:
         """The agent's block of the Schur complement, or None if D_x is singular."""
         nI, ng = self.counts
+        band = np.zeros((self.states, self.width + 1))
         if self.states:
-            Da = self._Da.dense(data)
-            if self.triangular:
-                flat, positions = self._band
-                band = np.zeros((self.states, self.width + 1))
-                band.reshape(-1)[flat] = data[positions]
-                Yx, info = lapack.dtbtrs(band.T, -Da, uplo="L")
-                if info != 0:
-                    return None
-                solve_T = lambda b: lapack.dtbtrs(band.T, b, uplo="L", trans="T")[0]  # noqa: E731
-            else:
-                from scipy.sparse import linalg as spla  # loaded by the sparse formulation only
-
-                try:
-                    lu = spla.splu(self._Dx.sparse(data), permc_spec="NATURAL", diag_pivot_thresh=0.0)
-                except RuntimeError:
-                    return None
-                Yx = -lu.solve(Da)
-                solve_T = lambda b: lu.solve(b, trans="T")  # noqa: E731
+            flat, positions = self._band
+            band.reshape(-1)[flat] = data[positions]
+            Yx, info = lapack.dtbtrs(band.T, -self._Da.dense(data), uplo="L")
+            if info != 0:  # a zero on the diagonal
+                return None
         else:
             Yx = np.zeros((0, self.decisions))
-            solve_T = None
         Ka = self._Ka.dense(data)
         KY = self._Kx(data) @ Yx
         Ylam = (KY[:nI] + Ka[:nI]) / D[:, None]
         LY = self._Kl(data) @ Ylam
         rhs = -(Ka[nI:nI + ng] + KY[nI:nI + ng] + LY[:ng])
-        Yp = solve_T(rhs) if solve_T is not None else rhs
+        Yp = lapack.dtbtrs(band.T, rhs, uplo="L", trans="T")[0] if self.states else rhs
         return Ka[nI + ng:] + KY[nI + ng:] + self._Ap(data) @ Yp + LY[ng:]
 
 
@@ -476,11 +460,6 @@ class _Gather:
         self.indices, self.indptr = sub.indices, sub.indptr
         self.positions = sub.data.astype(np.int64) - 1
         self.col_of = np.repeat(np.arange(sub.shape[1]), np.diff(sub.indptr))
-
-    def sparse(self, data: np.ndarray):
-        import scipy.sparse as sp  # loaded by the sparse formulation only
-
-        return sp.csc_matrix((data[self.positions], self.indices, self.indptr), shape=self.shape)
 
     def dense(self, data: np.ndarray) -> np.ndarray:
         out = np.zeros(self.shape)
