@@ -389,12 +389,18 @@ class SparseBarrier:
 
 class _AgentBlocks:
     """One agent's sub-blocks of K, by its dynamics rows (d), states (x), decisions (a), costate rows (g), costates
-    (p) and the inequality multipliers (l): D_x (banded lower triangular), D_a, then [C; G; A] x (x, a) and
-    [G; A] x l stacked, and A x p, each gathered from K's nonzeros (``numbered``: the pattern with its nonzeros
-    numbered 1, 2, ...)."""
+    (p) and the inequality multipliers (l) of the rows it touches: D_x (banded lower triangular), D_a, then
+    [C; G; A] x (x, a) and [G; A] x l stacked, and A x p, each gathered from K's nonzeros (``numbered``: the pattern
+    with its nonzeros numbered 1, 2, ...)."""
 
     def __init__(self, numbered, d_rows, x_cols, a_cols, g_rows, p_cols, lam_I) -> None:
         self.states, self.decisions = x_cols.size, a_cols.size
+        # the inequality rows that involve the agent's states or decisions, or whose multipliers enter its rows: the
+        # others' multipliers do not respond to its decisions
+        touched = numbered[lam_I][:, np.concatenate([x_cols, a_cols])].getnnz(axis=1) > 0
+        touched |= numbered[np.concatenate([g_rows, a_cols])][:, lam_I].getnnz(axis=0) > 0
+        self.touched = np.flatnonzero(touched)
+        lam_I = lam_I[self.touched]
         self.counts = (lam_I.size, g_rows.size)  # the rows of C and G in the stacks
         Dx = numbered[d_rows][:, x_cols].tocoo()
         below = Dx.row - Dx.col
@@ -427,7 +433,7 @@ class _AgentBlocks:
             Yx = np.zeros((0, self.decisions))
         Ka = self._Ka.dense(data)
         KY = self._Kx(data) @ Yx
-        Ylam = (KY[:nI] + Ka[:nI]) / D[:, None]
+        Ylam = (KY[:nI] + Ka[:nI]) / D[self.touched, None]
         LY = self._Kl(data) @ Ylam
         rhs = -(Ka[nI:nI + ng] + KY[nI:nI + ng] + LY[:ng])
         Yp = lapack.dtbtrs(band.T, rhs, uplo="L", trans="T")[0] if self.states else rhs
