@@ -4,7 +4,8 @@
 certificate` what the certificate costs next to the solve: benchmarks/certificate.py; `python -m benchmarks identical
 record|compare OUT.npz` whether a change left every iterate and status as it was: benchmarks/identical.py; `python -m
 benchmarks runtime` what runtime parameters cost per iteration against constants: benchmarks/runtime.py; `python -m
-benchmarks montecarlo` random merges solved with one compiled game: benchmarks/montecarlo.py.)
+benchmarks montecarlo` random merges solved with one compiled game: benchmarks/montecarlo.py; `python -m benchmarks
+stages` the sparse formulation's banded factorisation against SuperLU: benchmarks/stages.py.)
 
 Prints a markdown table and writes JSON to benchmarks/results/. Every number is a median over repeats;
 every ratio is baseline time / gnerun time, both measured here, in this run.
@@ -18,6 +19,10 @@ Measured:
   logging off and with MCAP logging on (the messages `gnerun simulate` writes, flushed every step);
 - the scalable family of benchmarks/family.py over N agents and horizons T: time per iteration with one
   solver (what is kept per active set reused) and with a fresh solver (every factorisation new);
+- the sparse formulation's factorisation (benchmarks/stages.py): banded LU on the stage order against SuperLU on
+  the matrices a solve factorises (merge at 21 and 41 knots, intersection, 6-robot formation ring, bounded LQ at
+  T = 40, 80), the structure's limit (one banded LU's flops at a dense 39 x 39 LU's GFLOP/s), and the time per
+  iteration on the merge and the intersection with each, as a multiple of the limit;
 - `gnerun --help` (a fresh process) and the config load + compile time of the paper game;
 - if nashopt is installed (`pip install -e ".[bench]"`), nashopt's solvers on configs/variational_gne.yaml,
   a game both can state (benchmarks/peers.py).
@@ -317,6 +322,55 @@ def robust_rows(row, reps: int, quick: bool) -> None:
             note=f"median over {len(problems)} random initial states; iterations {min(its)}-{max(its)}")
 
 
+def factorization_rows(row, quick: bool) -> None:
+    """The sparse formulation's factorisation: banded LU on the stage order against SuperLU on the same matrices (the
+    ones a solve factorises; assembly, LU and condition estimate), the structure's limit (the flops of one banded LU
+    at the GFLOP/s of a dense 39 x 39 LU, measured here) and the time per iteration on the merge (the sparse
+    formulation forced) and the intersection, with the banded factorisation and with SuperLU, as a multiple of the
+    limit (benchmarks/stages.py)."""
+    from . import stages
+    from .problems import trajectory
+
+    gflops = stages.dense_gflops()
+    row("dense 39 x 39 LU (dgetrf): this machine's GFLOP/s at a stage's size", None, note=f"{gflops:.2f} GFLOP/s")
+    limits = {}
+    for case in stages.cases(quick):
+        c = stages.compare(case, repeats=3 if quick else 7)
+        limit = c.flops / (gflops * 1e9)
+        limits[case.name] = limit
+        row(f"{c.name}: one factorisation, banded LU vs SuperLU", c.banded_s, "SuperLU", c.superlu_s,
+            target="ratio >= 1", met=c.banded_s <= c.superlu_s,
+            note=f"n = {c.size}, kl = {c.lower}, ku = {c.upper}; LU alone {us(c.lu_banded_s)} vs "
+                 f"{us(c.lu_superlu_s)}; limit {us(limit)} ({c.flops / 1e6:.2f} MFLOP); solutions agree to "
+                 f"{c.difference:.0e} (relative), condition estimates to a factor {c.rcond_ratio:.2f}")
+    for label, problems, limit in (
+            ("ALGAMES merge", trajectory.merge_problems(3 if quick else 10), limits["ALGAMES merge, 21 knots"]),
+            ("ALGAMES intersection", trajectory.intersection_problems(2 if quick else 5),
+             limits["ALGAMES intersection, 41 knots"])):
+        cfg = load_config(text=problems[0].config_yaml)
+        cfg = cfg.model_copy(update={"solver": cfg.solver.model_copy(update={"formulation": "sparse"})})
+        game = compile_game(cfg)
+        times = {}
+        for banded in (True, False):
+            solver = make_solver(cfg, game)
+            solver.newton.system.stage_order.banded = banded
+            per, its = [], []
+            for rep in range(2):  # the first round warms up (the orderings and layouts of the game)
+                for p in problems:
+                    x0 = np.asarray(load_config(text=p.config_yaml).game.x0)
+                    t0 = time.perf_counter()
+                    state = iterate(solver, solver.init(None, x0))
+                    if rep:
+                        per.append((time.perf_counter() - t0) / max(state.k, 1))
+                        its.append(state.k)
+            times[banded] = (statistics.median(per), its)
+        solver.newton.system.stage_order.banded = None
+        (t_band, its_band), (t_lu, its_lu) = times[True], times[False]
+        row(f"{label} ({game.size} unknowns, sparse): one iteration, banded LU vs SuperLU", t_band, "SuperLU", t_lu,
+            note=f"median over {len(problems)} random initial states, iterations {its_band} (SuperLU {its_lu}); "
+                 f"{t_band / limit:.0f}x the structure's limit ({us(limit)} per banded LU)")
+
+
 def merge_compile_rows(row, cars: tuple[int, ...]) -> None:
     """configs/algames_merge_n.yaml (one file for any N): load and expand, compile, and the first step (which builds
     the derivatives the solver needs), then the rest of a cold solve from zero inputs; the target is the 8-car
@@ -574,6 +628,7 @@ def main(argv: list[str] | None = None) -> int:
     # 5. robust solving: the globalized default against the local method, the LQ family against its peers, the
     # trajectory games' cost per iteration
     robust_rows(row, reps, args.quick)
+    factorization_rows(row, args.quick)
 
     # 6. closed loops on the trajectory games
     trajectory_loop_rows(row, args.quick)
@@ -627,6 +682,10 @@ if __name__ == "__main__":
         from .montecarlo import main as montecarlo
 
         sys.exit(montecarlo(sys.argv[2:]))
+    if sys.argv[1:2] == ["stages"]:
+        from .stages import main as stages_main
+
+        sys.exit(stages_main(sys.argv[2:]))
     if sys.argv[1:2] == ["identical"]:
         from .identical import main as identical
 
