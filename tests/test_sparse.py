@@ -93,14 +93,18 @@ def test_sparse_and_condensed_give_the_same_closed_loop(name: str) -> None:
 
 
 def test_nonlinear_dynamics_choose_by_unknowns_times_stages() -> None:
-    """The 41-knot MPC merge (600 unknowns, 40 stages) is sparse, the 21-knot 5-car merge (600 unknowns, 20 stages)
-    condensed; the demo's linear dynamics keep the count of unknowns (403 at T = 30: condensed)."""
+    """The 41-knot MPC merge (600 unknowns, 40 stages) and the 21-knot 5-car merge (600 unknowns, 20 stages) are
+    sparse, two vehicles over 3 stages (U (T + 1) below SPARSE_WORK) condensed; the demo's linear dynamics keep the
+    count of unknowns (403 at T = 30: condensed)."""
     mpc = load_config(CONFIGS / "algames_merge_mpc.yaml")
     game = compile_game(mpc)
     assert game.size * 40 >= SPARSE_WORK and formulation(mpc, game) == "sparse"
     five = load_config(CONFIGS / "algames_merge_n.yaml", {"game.parameters.N": 5})
     game = compile_game(five)
-    assert game.size == 600 and formulation(five, game) == "condensed"
+    assert game.size == 600 and formulation(five, game) == "sparse"
+    short = load_config(CONFIGS / "vehicles.yaml", {"game.horizon": 2})
+    game = compile_game(short)
+    assert not game.lq.linear_dynamics and game.size * 3 < SPARSE_WORK and formulation(short, game) == "condensed"
     demo = load_config(CONFIGS / "mcp_demo.yaml", {"game.horizon": 30})
     assert formulation(demo, compile_game(demo)) == "condensed"
 
