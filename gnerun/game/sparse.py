@@ -28,6 +28,7 @@ closed loop; only the cost of a step differs.
 from __future__ import annotations
 
 import itertools
+import math
 from collections.abc import Callable
 from functools import cached_property
 from typing import NamedTuple
@@ -133,16 +134,16 @@ class SparseKKT:
         return layout
 
     def factor_kept(self, kind: str, data: np.ndarray, keep: np.ndarray, at: np.ndarray | None = None,
-                    add: np.ndarray | None = None) -> tuple[BandLU | spla.SuperLU | None, float]:
+                    add: np.ndarray | None = None, estimate: bool = True) -> tuple[BandLU | spla.SuperLU | None, float]:
         """Factors of dF/dw (nonzeros ``data``) restricted to the rows and columns ``keep``, with ``add`` added to
         its diagonal at the positions ``at`` (in ``keep``), and an estimate of the reciprocal 1-norm condition
-        number (0 when singular): banded LU on the stage order where the band is narrow (:class:`KeptLayout`),
-        SuperLU otherwise (``kind``: which of ``orderings``). Either has ``solve(b)`` for a right-hand side over
-        ``keep``."""
+        number (0 when singular; NaN without ``estimate``): banded LU on the stage order where the band is narrow
+        (:class:`KeptLayout`), SuperLU otherwise (``kind``: which of ``orderings``). Either has ``solve(b)`` for a
+        right-hand side over ``keep``."""
         layout = self.layout(keep, at)
         if layout.banded:
-            return layout.factor(data, add)
-        return self.orderings[kind].factor(layout.csc(data, add))
+            return layout.factor(data, add, estimate)
+        return self.orderings[kind].factor(layout.csc(data, add), estimate)
 
     @staticmethod
     def rhs(parts: SparseParts) -> np.ndarray:
@@ -569,9 +570,9 @@ class Ordering:
     def __init__(self) -> None:
         self.spec: str | None = None
 
-    def factor(self, M: sp.csc_matrix) -> tuple[spla.SuperLU | None, float]:
+    def factor(self, M: sp.csc_matrix, estimate: bool = True) -> tuple[spla.SuperLU | None, float]:
         if self.spec is not None:
-            return factor(M, self.spec)
+            return factor(M, self.spec, estimate)
         best: tuple[int, str, spla.SuperLU] | None = None
         for spec in ORDERINGS:
             lu = _splu(M, spec)
@@ -580,7 +581,7 @@ class Ordering:
         if best is None:
             return None, 0.0
         self.spec = best[1]
-        return best[2], _rcond(M, best[2])
+        return best[2], _rcond(M, best[2]) if estimate else math.nan
 
 
 def _splu(M: sp.csc_matrix, spec: str) -> spla.SuperLU | None:
@@ -590,12 +591,13 @@ def _splu(M: sp.csc_matrix, spec: str) -> spla.SuperLU | None:
         return None
 
 
-def factor(M: sp.csc_matrix, permc_spec: str = "MMD_ATA") -> tuple[spla.SuperLU | None, float]:
-    """SuperLU factors of M and an estimate of its reciprocal 1-norm condition number (0 when singular)."""
+def factor(M: sp.csc_matrix, permc_spec: str = "MMD_ATA", estimate: bool = True) -> tuple[spla.SuperLU | None, float]:
+    """SuperLU factors of M and an estimate of its reciprocal 1-norm condition number (0 when singular; NaN
+    without ``estimate``)."""
     lu = _splu(M, permc_spec)
     if lu is None:
         return None, 0.0
-    return lu, _rcond(M, lu)
+    return lu, _rcond(M, lu) if estimate else math.nan
 
 
 def _rcond(M: sp.csc_matrix, lu: spla.SuperLU) -> float:
@@ -740,8 +742,9 @@ class KeptLayout:
             flat[self.flat_at] += add
         return ab.T
 
-    def factor(self, data: np.ndarray, add: np.ndarray | None) -> tuple[BandLU | None, float]:
-        """Banded LU with partial pivoting (LAPACK dgbtrf) and its reciprocal 1-norm condition estimate (dgbcon)."""
+    def factor(self, data: np.ndarray, add: np.ndarray | None, estimate: bool = True) -> tuple[BandLU | None, float]:
+        """Banded LU with partial pivoting (LAPACK dgbtrf) and its reciprocal 1-norm condition estimate (dgbcon's;
+        NaN without ``estimate``)."""
         if not self.size:
             return BandLU(self, np.zeros((self.ld, 0), order="F"), np.zeros(0, dtype=np.int32)), 1.0
         ab = self.band(data, add)
@@ -750,6 +753,8 @@ class KeptLayout:
         if info != 0:  # an exactly zero pivot
             return None, 0.0
         factors = BandLU(self, lu, piv)
+        if not estimate:
+            return factors, math.nan
         inverse = inverse_norm(factors.solve_band, lambda b: factors.solve_band(b, 1), self.size)
         rcond = 1.0 / (norm * inverse) if np.isfinite(inverse) and inverse > 0 else 0.0
         return factors, rcond

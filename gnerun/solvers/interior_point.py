@@ -374,11 +374,15 @@ class SparseBarrier:
         def solve(delta: float):
             if delta:
                 add[:n] = shifts + delta
-            lu, rcond = system.factor_kept("interior", parts.J, keep, self.at, add)
-            if lu is None or not rcond > 0.0:
+            # no condition estimate (it was 18% of a merge iteration): the step needs the factors only; a singular
+            # matrix has no factors, and a solution that overflows is refused like one
+            lu, rcond = system.factor_kept("interior", parts.J, keep, self.at, add, estimate=False)
+            if lu is None:
                 return None
             sol = np.zeros(system.size)
             sol[keep] = lu.solve(rhs)
+            if not np.all(np.isfinite(sol)):
+                return None
             dlam = np.zeros(system.m)
             dlam[I] = sol[lam0 + I]
             dlam[E] = sol[lam0 + E]
