@@ -28,6 +28,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
+import math
 import os
 import platform
 import statistics
@@ -48,7 +49,7 @@ from gnerun.language.config import load_config  # noqa: E402
 from gnerun.log.mcap_log import RunLog  # noqa: E402
 from gnerun.log.messages import MpcError, MpcIterate, MpcState  # noqa: E402
 from gnerun.runs.solving import formulation, make_solver  # noqa: E402
-from gnerun.solvers import hybrid  # noqa: E402
+from gnerun.solvers import hybrid, interior_point  # noqa: E402
 from gnerun.solvers.driver import iterate  # noqa: E402
 from gnerun.solvers.status import Status  # noqa: E402
 
@@ -321,9 +322,10 @@ def robust_rows(row, reps: int, quick: bool) -> None:
 
 def trajectory_iteration_rows(row, quick: bool) -> None:
     """Newton iterations per solve on ALGAMES's random merges and intersections (the default solver, one compiled
-    game per scenario; target: a median of at most 15 and every draw converged), against the hand-over as it was
-    before the active-set correction (``hybrid.HANDOVER_ROUNDS`` = 0, a refused hand-over retried at 0.1 ||Phi||
-    instead of ``hybrid.HANDOVER_RETRY``) in the same run, draw by draw."""
+    game per scenario; target: a median of at most 15 and every draw converged), against the method as it was
+    before Mehrotra's predictor-corrector step (``interior_point.PREDICT_AFTER`` = inf) and the hand-over's
+    active-set correction (``hybrid.HANDOVER_ROUNDS`` = 0, a refused hand-over retried at 0.1 ||Phi|| instead of
+    ``hybrid.HANDOVER_RETRY``), in the same run, draw by draw."""
     from unittest import mock
 
     from .problems import trajectory
@@ -337,7 +339,10 @@ def trajectory_iteration_rows(row, quick: bool) -> None:
         for p in problems:
             x0 = np.asarray(load_config(text=p.config_yaml).game.x0)
             for which in ("now", "before"):
-                with mock.patch.multiple(hybrid, **before) if which == "before" else contextlib.nullcontext():
+                with contextlib.ExitStack() as stack:
+                    if which == "before":
+                        stack.enter_context(mock.patch.multiple(hybrid, **before))
+                        stack.enter_context(mock.patch.object(interior_point, "PREDICT_AFTER", math.inf))
                     solver = make_solver(cfg, game)
                     state = iterate(solver, solver.init(None, x0))
                 counts[which].append((state.k, state.status == Status.CONVERGED))
@@ -351,7 +356,7 @@ def trajectory_iteration_rows(row, quick: bool) -> None:
         _, _, _, was = summary(counts["before"])
         row(f"{label} ({len(problems)} random draws, {formulation(cfg, game)}): Newton iterations per solve", None,
             target="median <= 15, all converged", met=med <= 15 and ok == len(problems),
-            note=f"{now}; before the hand-over's active-set correction: {was}")
+            note=f"{now}; before the predictor-corrector step and the hand-over's active-set correction: {was}")
 
 
 def merge_compile_rows(row, cars: tuple[int, ...]) -> None:
