@@ -51,8 +51,9 @@ first, judged by a nonmonotone watchdog; a more robust method when it fails; res
 6. **A round of best responses** (nonlinear games of several players). When every interior start from z^0 has
    failed, each player's best answer to the others' start plans (:mod:`gnerun.solvers.response_round`) is the new
    start, and the interior phase begins again from it, with the small barrier of a warm start and then its other
-   starting points; once per solve. Cold-started trajectory games (the overtaking game of the robustness suite)
-   stall from z^0 and converge from there.
+   starting points; once per solve. Cold-started trajectory games (the overtaking game of the robustness suite
+   under the barrier's monotone steps alone; Mehrotra's steps of the interior phase solve its zero-input start
+   from z^0) stall from z^0 and converge from there.
 
 One call of ``step`` is one iteration: one accepted step (a Newton step tried and refused costs an extra
 evaluation inside it). The iterate z = (a, lambda) and ||Phi|| are the semismooth Newton method's in every phase,
