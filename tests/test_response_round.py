@@ -104,22 +104,10 @@ def _overtaking(start: int = 0):
 
 @pytest.fixture
 def monotone_barrier(monkeypatch: pytest.MonkeyPatch) -> None:
-    """The interior phase with the barrier's monotone target alone (no Mehrotra step,
-    ``interior_point.PREDICT_AFTER``): from zero inputs all three of its starts stall on the overtaking game, the
-    case the round is for."""
+    """The interior phase with the barrier's monotone target alone (no Mehrotra step in its first start,
+    ``interior_point.PREDICT_AFTER``), as these tests were written for: from zero inputs all three of its starts stall
+    on the overtaking game, the case the round is for."""
     monkeypatch.setattr(interior_point, "PREDICT_AFTER", np.inf)
-
-
-def test_mehrotras_steps_solve_the_cold_overtaking_start_without_a_round(monkeypatch: pytest.MonkeyPatch) -> None:
-    def refuse(*_):
-        raise AssertionError("a round of best responses was asked for")
-
-    monkeypatch.setattr(hybrid, "response_round", refuse)
-    monkeypatch.setattr(hybrid, "SLOW", 10**6)
-    game, solver = _overtaking()
-    state = iterate(solver, solver.init())
-    assert state.status == "converged" and not state.search.answered, state.message
-    assert max(overtaking_model().best_response_gaps(state.z[: game.n]).values()) <= 1e-6
 
 
 def test_the_round_comes_after_every_interior_start_from_the_cold_overtaking_start(

@@ -51,9 +51,8 @@ first, judged by a nonmonotone watchdog; a more robust method when it fails; res
 6. **A round of best responses** (nonlinear games of several players). When every interior start from z^0 has
    failed, each player's best answer to the others' start plans (:mod:`gnerun.solvers.response_round`) is the new
    start, and the interior phase begins again from it, with the small barrier of a warm start and then its other
-   starting points; once per solve. Cold-started trajectory games (the overtaking game of the robustness suite
-   under the barrier's monotone steps alone; Mehrotra's steps of the interior phase solve its zero-input start
-   from z^0) stall from z^0 and converge from there.
+   starting points; once per solve. Cold-started trajectory games (the overtaking game of the robustness suite)
+   stall from z^0 and converge from there.
 
 One call of ``step`` is one iteration: one accepted step (a Newton step tried and refused costs an extra
 evaluation inside it). The iterate z = (a, lambda) and ||Phi|| are the semismooth Newton method's in every phase,
@@ -267,7 +266,10 @@ class HybridNewton:
         memory = replace(memory, phase="interior", best=math.inf, stalls=0, attempt=attempt,
                          handover=memory.handover0, crash=False)
         start = self.newton.advance(state, z, search=memory, k=state.k if k is None else k)
-        memory = replace(memory, interior=self.interior.measure(z, w, start.parts.L, start.parts.c, eps))
+        # Mehrotra's steps in the first start from z^0; the restarts and warm starts keep the monotone barrier
+        predict = attempt == 0 and not warm
+        memory = replace(memory, interior=self.interior.measure(z, w, start.parts.L, start.parts.c, eps,
+                                                                predict=predict))
         start = replace(start, search=memory)
         return start if k is not None else self._interior_step(start, memory)
 
@@ -312,7 +314,7 @@ class HybridNewton:
         new = self.newton.advance(state, z, search=memory, rcond=rcond)
         if new.status in FAILURES:  # NaN or divergence: restart if a start is left
             return self._restart(state, memory, new.status, new.message)
-        it = self.interior.measure(z, w, new.parts.L, new.parts.c, memory.interior.eps, t)
+        it = self.interior.measure(z, w, new.parts.L, new.parts.c, memory.interior.eps, t, memory.interior.predict)
         best, stalls = memory.best, memory.stalls + 1
         if new.residual_norm < 0.9 * best:
             best, stalls = new.residual_norm, 0

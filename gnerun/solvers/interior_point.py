@@ -36,10 +36,12 @@ benchmarks/results/solver-design.md):
 - **No merit function**: every step is taken at its full length to the boundary (a potential-reduction line search
   and residual-based backtracking lost robustness on nonconvex games); instead, the globalized method
   (:mod:`gnerun.solvers.hybrid`) watches for stalls and restarts.
-- **Mehrotra's predictor-corrector step where the last step went (nearly) all the way**: at a start and after a step
-  of at least ``PREDICT_AFTER`` = 0.9 of the Newton step, the affine-scaling direction (eps = 0) is solved first and
+- **Mehrotra's predictor-corrector step where the last step went (nearly) all the way**, in the first start from
+  z^0 (restarts and warm starts keep the monotone target: they are the safety net where it fails, as in FK A.4 from
+  10 with the interior phase alone): at the start and after a step of at least ``PREDICT_AFTER`` = 0.9 of the
+  Newton step, the affine-scaling direction (eps = 0) is solved first and
   the step aims at sigma mu - dlambda_aff o dw_aff, sigma = (mu_aff / mu)^3 at least ``CENTERING`` = 0.1 (Nocedal
-  and Wright, alg. 14.3), unless the predictor goes less than ``PREDICTED`` = 1% of the way (then eps). After short
+  and Wright, alg. 14.3), unless the predictor goes less than ``PREDICTED`` = 5% of the way (then eps). After short
   steps, cut by the boundary one row at a time, the monotone target eps is kept: Mehrotra's target there lets the
   products lambda_i w_i spread and the primal step overshoot on nonconvex constraints (measured on ALGAMES's
   merges: benchmarks/results/solver-design.md).
@@ -74,7 +76,7 @@ START_FLOOR = 0.1  # slacks start at least this far inside
 BOUND_PUSH = 1e-2  # decisions start at least this far (relative) inside their bounds
 REGULARIZATION = 1e-10  # the first multiple of the identity tried where the Newton matrix is singular
 PREDICT_AFTER = 0.9  # a start, or a step that went at least this fraction of the way, is followed by Mehrotra's
-PREDICTED = 0.01  # predictor-corrector step where the predictor goes at least this fraction of the way, and
+PREDICTED = 0.05  # predictor-corrector step where the predictor goes at least this fraction of the way, and
 CENTERING = 0.1  # its centering parameter sigma is at least this
 
 
@@ -88,6 +90,7 @@ class InteriorIterate:
     c: np.ndarray  # c(a)
     eps: float  # the target of lambda_i w_i
     t: float = 1.0  # the step length that led here (fraction of the Newton step)
+    predict: bool = False  # whether this start takes Mehrotra's steps (its first start from z^0: InteriorPoint.step)
 
 
 class InteriorPoint:
@@ -131,25 +134,26 @@ class InteriorPoint:
         return z, w, mu
 
     def measure(self, z: np.ndarray, w: np.ndarray, L: np.ndarray, c: np.ndarray, eps: float,
-                t: float = 1.0) -> InteriorIterate:
-        """The iterate at (z, w) given L and c there; eps shrinks if H_eps is solved to KAPPA eps."""
+                t: float = 1.0, predict: bool = False) -> InteriorIterate:
+        """The iterate at (z, w) given L and c there; eps shrinks if H_eps is solved to KAPPA eps. ``predict``:
+        Mehrotra's steps are taken from it (see :meth:`step`)."""
         I, E = self.I, self.E
         lw = z[self.n + I] * w
         err = max(float(np.max(np.abs(L), initial=0.0)), float(np.max(np.abs(c[I] + w), initial=0.0)),
                   float(np.max(np.abs(c[E]), initial=0.0)), float(np.max(np.abs(lw - eps), initial=0.0)))
-        return InteriorIterate(z, w, L, c, eps * SHRINK if err <= KAPPA * eps else eps, t)
+        return InteriorIterate(z, w, L, c, eps * SHRINK if err <= KAPPA * eps else eps, t, predict)
 
     def step(self, it: InteriorIterate, parts) -> tuple[np.ndarray, np.ndarray, float, float] | tuple[None, str]:
         """The next point (z, w), the step length taken and the reciprocal condition number of the matrix
-        factorised, from ``it`` (``parts``: the derivatives at it.z); or (None, why not). At a start and after a
-        step that went at least ``PREDICT_AFTER`` of the way, the target of lambda_I o w is Mehrotra's
-        (:meth:`_target`) where its predictor is not blocked."""
+        factorised, from ``it`` (``parts``: the derivatives at it.z); or (None, why not). In an iterate that
+        predicts (the first start from z^0), at the start and after a step that went at least ``PREDICT_AFTER`` of
+        the way, the target of lambda_I o w is Mehrotra's (:meth:`_target`) where its predictor is not blocked."""
         n, I, E = self.n, self.I, self.E
         z, w = it.z, it.w
         lam = z[n + I]
         D = w / lam
         comp = it.eps  # the target of lambda_I o w, less a second-order correction
-        if I.size and it.t >= PREDICT_AFTER:
+        if I.size and it.predict and it.t >= PREDICT_AFTER:
             target = self._target(parts, it, D)
             if isinstance(target, str):
                 return None, target

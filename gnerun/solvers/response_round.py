@@ -2,9 +2,8 @@
 
 A trajectory game started cold (zero inputs) can begin far from every equilibrium and infeasible: in the two-car
 overtaking of the robustness suite the faster car drives through the slower one, and at the knot where they coincide
-the collision row's gradient vanishes. The interior phase of :mod:`gnerun.solvers.hybrid` can then stall from each of
-its starting points (it does there with the barrier's monotone steps alone; with Mehrotra's steps that start converges
-from z^0). A start from which it does converge is one round of best responses (a Jacobi round, as in iterated
+the collision row's gradient vanishes. The interior phase of :mod:`gnerun.solvers.hybrid` then stalls from each of its
+starting points. A start from which it does converge is one round of best responses (a Jacobi round, as in iterated
 best-response schemes for games): each player's own problem,
 
     min_{a_i} J_i(a_i, a^0_-i)  s.t.  its own constraints and the shared ones, the others fixed at their start,
