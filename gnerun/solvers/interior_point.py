@@ -39,12 +39,11 @@ benchmarks/results/solver-design.md):
 - **Mehrotra's predictor-corrector step where the last step went (nearly) all the way**, in the first start from
   z^0 (restarts and warm starts keep the monotone target: they are the safety net where it fails, as in FK A.4 from
   10 with the interior phase alone): at the start and after a step of at least ``PREDICT_AFTER`` = 0.9 of the
-  Newton step, the affine-scaling direction (eps = 0) is solved first and
-  the step aims at sigma mu - dlambda_aff o dw_aff, sigma = (mu_aff / mu)^3 at least ``CENTERING`` = 0.1 (Nocedal
-  and Wright, alg. 14.3), unless the predictor goes less than ``PREDICTED`` = 5% of the way (then eps). After short
-  steps, cut by the boundary one row at a time, the monotone target eps is kept: Mehrotra's target there lets the
-  products lambda_i w_i spread and the primal step overshoot on nonconvex constraints (measured on ALGAMES's
-  merges: benchmarks/results/solver-design.md).
+  Newton step, the affine-scaling direction (eps = 0) is solved first and the step aims at sigma mu - dlambda_aff o
+  dw_aff, sigma = (mu_aff / mu)^3 at least ``CENTERING`` = 0.1 (Nocedal and Wright, alg. 14.3), unless the
+  predictor goes less than ``PREDICTED`` = 5% of the way (then eps). After short steps, cut by the boundary one row
+  at a time, the monotone target eps is kept: Mehrotra's target there lets the products lambda_i w_i spread and the
+  primal step overshoot on nonconvex constraints (measured on ALGAMES's merges: benchmarks/results/solver-design.md).
 
 The linear algebra has the two forms of the semismooth Newton step: condensed (the inequality multipliers
 eliminated, one dense factorisation of n unknowns and the equality multipliers; constraint rows with a single
@@ -75,7 +74,7 @@ WARM = 1e-5  # lambda_i w_i at a warm start: a point near an equilibrium (see Hy
 START_FLOOR = 0.1  # slacks start at least this far inside
 BOUND_PUSH = 1e-2  # decisions start at least this far (relative) inside their bounds
 REGULARIZATION = 1e-10  # the first multiple of the identity tried where the Newton matrix is singular
-PREDICT_AFTER = 0.9  # a start, or a step that went at least this fraction of the way, is followed by Mehrotra's
+PREDICT_AFTER = 0.9  # the first start, or a step of it that went at least this far, is followed by Mehrotra's
 PREDICTED = 0.05  # predictor-corrector step where the predictor goes at least this fraction of the way, and
 CENTERING = 0.1  # its centering parameter sigma is at least this
 
