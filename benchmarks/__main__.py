@@ -4,7 +4,8 @@
 certificate` what the certificate costs next to the solve: benchmarks/certificate.py; `python -m benchmarks identical
 record|compare OUT.npz` whether a change left every iterate and status as it was: benchmarks/identical.py; `python -m
 benchmarks runtime` what runtime parameters cost per iteration against constants: benchmarks/runtime.py; `python -m
-benchmarks montecarlo` random merges solved with one compiled game: benchmarks/montecarlo.py.)
+benchmarks montecarlo` random merges solved with one compiled game: benchmarks/montecarlo.py; `python -m benchmarks
+stages` the sparse formulation's banded factorisation against SuperLU: benchmarks/stages.py.)
 
 Prints a markdown table and writes JSON to benchmarks/results/. Every number is a median over repeats;
 every ratio is baseline time / gnerun time, both measured here, in this run.
@@ -18,6 +19,10 @@ Measured:
   logging off and with MCAP logging on (the messages `gnerun simulate` writes, flushed every step);
 - the scalable family of benchmarks/family.py over N agents and horizons T: time per iteration with one
   solver (what is kept per active set reused) and with a fresh solver (every factorisation new);
+- the sparse formulation's factorisation (benchmarks/stages.py): banded LU on the stage order against SuperLU on
+  the matrices a solve factorises (merge at 21 and 41 knots, intersection, 6-robot formation ring, bounded LQ at
+  T = 40, 80), the structure's limit (one banded LU's flops at a dense 39 x 39 LU's GFLOP/s), and the time per
+  iteration on the merge and the intersection with each, as a multiple of the limit;
 - `gnerun --help` (a fresh process) and the config load + compile time of the paper game;
 - if nashopt is installed (`pip install -e ".[bench]"`), nashopt's solvers on configs/variational_gne.yaml,
   a game both can state (benchmarks/peers.py).
@@ -359,6 +364,55 @@ def trajectory_iteration_rows(row, quick: bool) -> None:
             note=f"{now}; before the predictor-corrector step and the hand-over's active-set correction: {was}")
 
 
+def factorization_rows(row, quick: bool) -> None:
+    """The sparse formulation's factorisation: banded LU on the stage order against SuperLU on the same matrices (the
+    ones a solve factorises; assembly, LU and condition estimate), the structure's limit (the flops of one banded LU
+    at the GFLOP/s of a dense 39 x 39 LU, measured here) and the time per iteration on the merge (the sparse
+    formulation forced) and the intersection, with the banded factorisation and with SuperLU, as a multiple of the
+    limit (benchmarks/stages.py)."""
+    from . import stages
+    from .problems import trajectory
+
+    gflops = stages.dense_gflops()
+    row("dense 39 x 39 LU (dgetrf): this machine's GFLOP/s at a stage's size", None, note=f"{gflops:.2f} GFLOP/s")
+    limits = {}
+    for case in stages.cases(quick):
+        c = stages.compare(case, repeats=3 if quick else 7)
+        limit = c.flops / (gflops * 1e9)
+        limits[case.name] = limit
+        row(f"{c.name}: one factorisation, banded LU vs SuperLU", c.banded_s, "SuperLU", c.superlu_s,
+            target="ratio >= 1", met=c.banded_s <= c.superlu_s,
+            note=f"n = {c.size}, kl = {c.lower}, ku = {c.upper}; LU alone {us(c.lu_banded_s)} vs "
+                 f"{us(c.lu_superlu_s)}; limit {us(limit)} ({c.flops / 1e6:.2f} MFLOP); solutions agree to "
+                 f"{c.difference:.0e} (relative), condition estimates to a factor {c.rcond_ratio:.2f}")
+    for label, problems, limit in (
+            ("ALGAMES merge", trajectory.merge_problems(3 if quick else 10), limits["ALGAMES merge, 21 knots"]),
+            ("ALGAMES intersection", trajectory.intersection_problems(2 if quick else 5),
+             limits["ALGAMES intersection, 41 knots"])):
+        cfg = load_config(text=problems[0].config_yaml)
+        cfg = cfg.model_copy(update={"solver": cfg.solver.model_copy(update={"formulation": "sparse"})})
+        game = compile_game(cfg)
+        times = {}
+        for banded in (True, False):
+            solver = make_solver(cfg, game)
+            solver.newton.system.stage_order.banded = banded
+            per, its = [], []
+            for rep in range(2):  # the first round warms up (the orderings and layouts of the game)
+                for p in problems:
+                    x0 = np.asarray(load_config(text=p.config_yaml).game.x0)
+                    t0 = time.perf_counter()
+                    state = iterate(solver, solver.init(None, x0))
+                    if rep:
+                        per.append((time.perf_counter() - t0) / max(state.k, 1))
+                        its.append(state.k)
+            times[banded] = (statistics.median(per), its)
+        solver.newton.system.stage_order.banded = None
+        (t_band, its_band), (t_lu, its_lu) = times[True], times[False]
+        row(f"{label} ({game.size} unknowns, sparse): one iteration, banded LU vs SuperLU", t_band, "SuperLU", t_lu,
+            note=f"median over {len(problems)} random initial states, iterations {its_band} (SuperLU {its_lu}); "
+                 f"{t_band / limit:.0f}x the structure's limit ({us(limit)} per banded LU)")
+
+
 def merge_compile_rows(row, cars: tuple[int, ...]) -> None:
     """configs/algames_merge_n.yaml (one file for any N): load and expand, compile, and the first step (which builds
     the derivatives the solver needs), then the rest of a cold solve from zero inputs; the target is the 8-car
@@ -437,6 +491,65 @@ def trajectory_loop_rows(row, quick: bool) -> None:
         target="<= 60 s", met=wall <= 60,
         note=f"compile and logging included; fallback steps {[len(r.fallback_steps) for r in sim.values()]}, "
              f"worst violation {worst:.1e}")
+
+
+def kernel_rows(row, quick: bool) -> None:
+    """Compiled stage kernels (solver.compile): one evaluation of the sparse system and one iteration of solves from
+    random states, compiled C against CasADi's interpreter in the same process (the same iterates); the compiler's
+    time on an empty cache and the second build's (a cache hit: nothing compiled)."""
+    from gnerun.game.sparse import compile_sparse
+
+    from .problems import trajectory
+
+    cases = [("ALGAMES merge, 21 knots", trajectory.merge_problems(3 if quick else 10)),
+             ("ALGAMES intersection", trajectory.intersection_problems(2 if quick else 5)),
+             ("MPC merge, 41 knots", [load_config(ROOT / "configs" / "algames_merge_mpc.yaml")])]
+    with tempfile.TemporaryDirectory() as cache:
+        saved = os.environ.get("GNERUN_CACHE_DIR")
+        os.environ["GNERUN_CACHE_DIR"] = cache
+        try:
+            for label, problems in cases:
+                cfgs = [p if not hasattr(p, "config_yaml") else load_config(text=p.config_yaml) for p in problems]
+                per_mode = {}
+                for mode in ("compiled", "interpreted"):
+                    cfg = cfgs[0].model_copy(update={"solver": cfgs[0].solver.model_copy(
+                        update={"compile": mode, "formulation": "sparse"})})
+                    game = compile_game(cfg)
+                    t0 = time.perf_counter()
+                    system = compile_sparse(cfg, game)
+                    built = time.perf_counter() - t0
+                    z = game.z_start()
+                    t_eval = _median_time(lambda system=system, z=z: system.evaluate(z, None), 7, 20)
+                    game.derived["sparse"] = system
+                    solver = make_solver(cfg, game)
+                    solver.init()
+                    per, its = [], []
+                    for c in cfgs:
+                        t0 = time.perf_counter()
+                        state = iterate(solver, solver.init(None, np.asarray(c.game.x0)))
+                        per.append((time.perf_counter() - t0) / max(state.k, 1))
+                        its.append(state.k)
+                    per_mode[mode] = (t_eval, statistics.median(per), its, built, system.kernels)
+                (ec, ic, its_c, built_c, rep), (ei, ii, its_i, _, _) = per_mode["compiled"], per_mode["interpreted"]
+                row(f"{label}: sparse system evaluation, compiled stage kernels vs interpreted", ec, "interpreted", ei,
+                    target="ratio >= 1", met=ei >= ec, note=f"{rep.stages} stage functions for {rep.horizon} stages")
+                row(f"{label}: one iteration (sparse), compiled vs interpreted", ic, "interpreted", ii,
+                    target="ratio >= 1", met=ii >= ic,
+                    note=f"median over {len(cfgs)} solves; iterations {its_c} and {its_i}")
+                game = compile_game(cfgs[0])
+                cfg = cfgs[0].model_copy(update={"solver": cfgs[0].solver.model_copy(
+                    update={"compile": "compiled", "formulation": "sparse"})})
+                t0 = time.perf_counter()
+                again = compile_sparse(cfg, game).kernels
+                t_again = time.perf_counter() - t0
+                row(f"{label}: sparse system build, a second time (cache hit)", t_again, "first build", built_c,
+                    target="cache hit", met=again.cache_hit,
+                    note=f"first: gcc {rep.compile_s:.2f} s; the second compiles nothing")
+        finally:
+            if saved is None:
+                del os.environ["GNERUN_CACHE_DIR"]
+            else:
+                os.environ["GNERUN_CACHE_DIR"] = saved
 
 
 def us(v: float) -> str:
@@ -558,9 +671,11 @@ def main(argv: list[str] | None = None) -> int:
     # trajectory games' cost per iteration
     robust_rows(row, reps, args.quick)
     trajectory_iteration_rows(row, args.quick)
+    factorization_rows(row, args.quick)
 
     # 6. closed loops on the trajectory games
     trajectory_loop_rows(row, args.quick)
+    kernel_rows(row, args.quick)
 
     # 3. peers: nashopt (optional extra `bench`) on a game both can state, last (importing it loads JAX)
     if peers.available():
@@ -610,6 +725,10 @@ if __name__ == "__main__":
         from .montecarlo import main as montecarlo
 
         sys.exit(montecarlo(sys.argv[2:]))
+    if sys.argv[1:2] == ["stages"]:
+        from .stages import main as stages_main
+
+        sys.exit(stages_main(sys.argv[2:]))
     if sys.argv[1:2] == ["identical"]:
         from .identical import main as identical
 

@@ -25,7 +25,7 @@ def _full_step(solver, state) -> np.ndarray:
 @pytest.mark.parametrize("name", CASES)
 def test_reduced_step_equals_the_full_newton_step(name: str) -> None:
     cfg = load_config(CONFIGS / f"{name}.yaml", {"solver.kind": "ssn", "solver.globalization": "none",
-                                                  "solver.complementarity": "min"})
+                                                  "solver.complementarity": "min", "solver.formulation": "condensed"})
     game = compile_game(cfg)
     solver = make_solver(cfg, game)
     assert solver.reduced

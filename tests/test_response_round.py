@@ -97,7 +97,8 @@ def test_no_feasible_answer_for_anyone_is_none() -> None:
 
 
 def _overtaking(start: int = 0):
-    cfg = load_config(text=overtaking_problems()[start].config_yaml)
+    # the condensed formulation: the one with the line-search phase (auto takes the sparse one for this game)
+    cfg = load_config(text=overtaking_problems()[start].config_yaml, overrides={"solver.formulation": "condensed"})
     game = compile_game(cfg)
     return game, make_solver(cfg, game)
 

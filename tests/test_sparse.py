@@ -93,14 +93,18 @@ def test_sparse_and_condensed_give_the_same_closed_loop(name: str) -> None:
 
 
 def test_nonlinear_dynamics_choose_by_unknowns_times_stages() -> None:
-    """The 41-knot MPC merge (600 unknowns, 40 stages) is sparse, the 21-knot 5-car merge (600 unknowns, 20 stages)
-    condensed; the demo's linear dynamics keep the count of unknowns (403 at T = 30: condensed)."""
+    """The 41-knot MPC merge (600 unknowns, 40 stages) and the 21-knot 5-car merge (600 unknowns, 20 stages) are
+    sparse, two vehicles over 3 stages (U (T + 1) below SPARSE_WORK) condensed; the demo's linear dynamics keep the
+    count of unknowns (403 at T = 30: condensed)."""
     mpc = load_config(CONFIGS / "algames_merge_mpc.yaml")
     game = compile_game(mpc)
     assert game.size * 40 >= SPARSE_WORK and formulation(mpc, game) == "sparse"
     five = load_config(CONFIGS / "algames_merge_n.yaml", {"game.parameters.N": 5})
     game = compile_game(five)
-    assert game.size == 600 and formulation(five, game) == "condensed"
+    assert game.size == 600 and formulation(five, game) == "sparse"
+    short = load_config(CONFIGS / "vehicles.yaml", {"game.horizon": 2})
+    game = compile_game(short)
+    assert not game.lq.linear_dynamics and game.size * 3 < SPARSE_WORK and formulation(short, game) == "condensed"
     demo = load_config(CONFIGS / "mcp_demo.yaml", {"game.horizon": 30})
     assert formulation(demo, compile_game(demo)) == "condensed"
 
@@ -295,3 +299,103 @@ def test_the_sparse_system_is_built_with_the_game_before_the_run(command: str, t
     else:
         closed_loop.simulate(cfg, tmp_path / "run")
     assert at_claim == [1] and len(built) == 1
+
+
+def _merge_system():
+    """ALGAMES's merge in the sparse formulation, a point of its solve (after the Newton phase and a few interior
+    steps: multipliers of all sizes) and that point's parts."""
+    cfg = load_config(CONFIGS / "algames_merge.yaml", {"solver.formulation": "sparse"})
+    game = compile_game(cfg)
+    solver = make_solver(cfg, game)
+    state = solver.init()
+    for _ in range(12):
+        state = solver.step(state)
+    return game, solver, state
+
+
+def test_the_stage_order_makes_the_merge_banded() -> None:
+    """Every row and column belongs to one stage and touches only the neighbouring ones: ordered stage by stage, the
+    band reaches less than a stage (39 unknowns: 6 decisions, 12 states, 12 costates, 9 multipliers) to either side
+    of the diagonal, and the order of kinds within a stage makes it about half a stage below."""
+    game, solver, _ = _merge_system()
+    system = solver.newton.system
+    order = system.stage_order
+    stages = game.horizon + 1
+    assert system.size == 39 * stages
+    assert order.upper < 39 and order.lower < 20
+    M = system.matrix(np.ones(system.pattern.nnz)).toarray()
+    rows, cols = np.argsort(order.row_key, kind="stable"), np.argsort(order.col_key, kind="stable")
+    i, j = np.nonzero(M[rows][:, cols])
+    assert (i - j).max() <= order.lower and (j - i).max() <= order.upper
+
+
+def test_banded_and_superlu_factors_solve_the_reduced_and_interior_systems() -> None:
+    """Both factorisations of the matrices the steps factorise (the reduced Newton system of an active set, the
+    interior matrix with additions to its diagonal) solve them as a dense solve does, and their condition estimates
+    bound the true reciprocal condition number from above by less than a factor 3 (LAPACK's estimator)."""
+    from gnerun.game.sparse import KeptLayout
+
+    game, solver, state = _merge_system()
+    system = solver.newton.system
+    J = system.matrix(state.parts.J).toarray()
+    n, lam0 = game.n, system.size - game.m
+    rng = np.random.default_rng(2)
+    A = np.flatnonzero(state.z[n:] > 1e-3)  # the rows whose multipliers the interior phase has made large
+    assert 0 < A.size < game.m
+    everything = np.arange(system.size)
+    at = np.concatenate([np.arange(n), lam0 + np.arange(game.m)])
+    add = np.concatenate([rng.uniform(0, 1e-2, n), -rng.uniform(0.1, 10, game.m)])
+    for keep, where, extra in ((system.kept(A), None, None), (everything, at, add)):
+        M = J[keep][:, keep]
+        if where is not None:
+            M[where, where] += extra
+        b = rng.standard_normal(keep.size)
+        x = np.linalg.solve(M, b)
+        exact = 1.0 / (np.abs(M).sum(axis=0).max() * np.abs(np.linalg.inv(M)).sum(axis=0).max())
+        for banded in (True, False):
+            layout = KeptLayout(system.stage_order, keep, where, banded=banded)
+            lu, rcond = layout.factor(state.parts.J, extra) if banded else \
+                system.orderings["newton"].factor(layout.csc(state.parts.J, extra))
+            np.testing.assert_allclose(lu.solve(b), x, rtol=0, atol=1e-9 * np.abs(x).max())
+            assert exact * (1 - 1e-9) <= rcond <= 3 * exact
+
+
+def test_the_inverse_norm_estimate_is_lapacks() -> None:
+    """Hager's and Higham's estimate of ||A^-1||_1 from solves: the one LAPACK's dgecon computes (same algorithm),
+    on matrices where it is exact and where it is not."""
+    from scipy.linalg import lapack
+
+    from gnerun.game.sparse import inverse_norm
+
+    rng = np.random.default_rng(3)
+    for k in range(20):
+        n = 5 + 7 * k
+        M = rng.standard_normal((n, n)) + (k % 3) * np.eye(n)
+        lu, piv, info = lapack.dgetrf(M)
+        norm = np.abs(M).sum(axis=0).max()
+        rcond, _ = lapack.dgecon(lu, norm)
+        est = inverse_norm(lambda b, lu=lu, piv=piv: lapack.dgetrs(lu, piv, b)[0],
+                           lambda b, lu=lu, piv=piv: lapack.dgetrs(lu, piv, b, trans=1)[0], n)
+        assert est == pytest.approx(1.0 / (rcond * norm), rel=1e-9)
+        assert est <= np.abs(np.linalg.inv(M)).sum(axis=0).max() * (1 + 1e-9)
+
+
+def test_the_players_blocks_of_the_interior_complement() -> None:
+    """Each player's block of the interior matrix's Schur complement on (a, lambda_E), found stage-structured (banded
+    triangular solves with the dynamics' blocks), equals the dense complement K_ii - K_iR K_RR^-1 K_Ri (R: the states,
+    costates and inequality multipliers)."""
+    from gnerun.solvers.interior_point import InteriorPoint
+
+    game, solver, state = _merge_system()
+    system = solver.newton.system
+    ip = InteriorPoint(solver.newton)
+    n, lam0 = game.n, system.size - game.m
+    D = np.random.default_rng(4).uniform(0.01, 100, ip.I.size)
+    K = system.matrix(state.parts.J).toarray()
+    K[lam0 + ip.I, lam0 + ip.I] -= D
+    R = np.concatenate([np.arange(n, lam0), lam0 + ip.I])
+    for sl, blocks in zip(game.agent_slices, ip.linear._blocks(), strict=True):
+        i = np.arange(sl.start, sl.stop)
+        dense = K[np.ix_(i, i)] - K[np.ix_(i, R)] @ np.linalg.solve(K[np.ix_(R, R)], K[np.ix_(R, i)])
+        np.testing.assert_allclose(blocks.complement(state.parts.J, D), dense, rtol=0,
+                                   atol=1e-8 * np.abs(dense).max())

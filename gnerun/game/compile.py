@@ -498,11 +498,13 @@ class _Expressions:
     dynamics: ca.Function | None
     defects: list[ca.SX] = field(default_factory=list)  # with given states: f(xi(tau), u(tau)) - xi(tau+1)
     domain: dict = field(default_factory=dict)  # per agent: (kind, margin) of each log, sqrt, asin, acos of its cost
+    stage_costs: dict = field(default_factory=dict)  # with given states: per agent, l_i at tau = 0..T, then Psi_i
 
 
 # long: the static and the dynamic walks share the parsed data and `constrain`; split, each would take a dozen arguments
 def _expressions(g: StaticGame | DynamicGame, lay: _Layout, a: ca.SX, x: ca.SX, agents: list[int],
-                 *, shared_as_own: bool = False, states: ca.SX | None = None, smoothing: float = 0.0) -> _Expressions:
+                 *, shared_as_own: bool = False, states: ca.SX | None = None, smoothing: float = 0.0,
+                 local_time: bool = False) -> _Expressions:
     """Costs and constraints of ``agents`` only, as CasADi expressions in (a, x); x holds the plant state and then
     the runtime values (``lay.runtime``), if any.
 
@@ -513,7 +515,9 @@ def _expressions(g: StaticGame | DynamicGame, lay: _Layout, a: ca.SX, x: ca.SX, 
 
     Dynamic games are condensed (the states are functions of x and a), unless ``states`` gives the
     states xi(1), ..., xi(T+1) as variables (stage-major): then the dynamics become the defects
-    f(xi(tau), u(tau)) - xi(tau+1), with xi(0) = x (the sparse formulation).
+    f(xi(tau), u(tau)) - xi(tau+1), with xi(0) = x (the sparse formulation). With ``local_time``, the time t of
+    every stage is the first runtime value itself (t + dt in the terminal cost): each stage as if it were the first,
+    for stage functions that take their own time (gnerun.game.kernels).
     """
     # where the log, sqrt, asin, acos of each agent's cost are defined is recorded (gnerun.language.expr)
     domain: dict[int, list] = {i: [] for i in agents}
@@ -581,6 +585,7 @@ def _expressions(g: StaticGame | DynamicGame, lay: _Layout, a: ca.SX, x: ca.SX, 
     stage_cost = {i: parse_expression(g.agents[i].stage_cost) for i in agents}
     terminal_cost = {i: parse_expression(g.agents[i].terminal_cost) for i in agents}
     total = {i: ca.SX(0) for i in agents}
+    stage_costs: dict[int, list[ca.SX]] = {i: [] for i in agents}
     xi = x
     defects: list[ca.SX] = []
     for tau in range(lay.horizon + 1):
@@ -595,18 +600,28 @@ def _expressions(g: StaticGame | DynamicGame, lay: _Layout, a: ca.SX, x: ca.SX, 
         env["tau"] = float(tau)
         if rt is not None:
             rt.at_stage(env, p, per_stage, tau)
+            if local_time and rt.time:
+                env["t"] = p[0]
         env.update({s: xi[k] for k, s in enumerate(g.states)})
         env.update({name: u[k] for k, (_, _, name) in enumerate(inputs)})
         for i in agents:
-            total[i] += evaluate(stage_cost[i], env, cost_fns[i])
+            l_i = evaluate(stage_cost[i], env, cost_fns[i])
+            total[i] += l_i
+            if states is not None:
+                stage_costs[i].append(ca.SX(l_i))
         constrain(env, tau)
     env_T = dict(params)
     if rt is not None:
         rt.at_stage(env_T, p, per_stage, lay.horizon + 1)
+        if local_time and rt.time:
+            env_T["t"] = p[0] + rt.dt
     env_T.update({s: xi[k] for k, s in enumerate(g.states)})
     for i in agents:
-        costs[i] = ca.SX(total[i] + evaluate(terminal_cost[i], env_T, cost_fns[i]))
-    return _Expressions(costs, own, common, dynamics, defects, domain)
+        psi = evaluate(terminal_cost[i], env_T, cost_fns[i])
+        costs[i] = ca.SX(total[i] + psi)
+        if states is not None:
+            stage_costs[i].append(ca.SX(psi))
+    return _Expressions(costs, own, common, dynamics, defects, domain, stage_costs)
 
 
 def shared_rows_carried(common: list, start: int, agent: int) -> np.ndarray:

@@ -27,10 +27,11 @@ SPARSE_LIMIT = 250_000  # refused: minutes to build
 NODES_WARN = 100_000  # expression nodes over all stages: 25-85 us each to build, so a few seconds
 NODES_LIMIT = 10_000_000
 # auto's choice (gnerun.runs.solving.formulation): sparse from SPARSE_FROM unknowns with linear dynamics, from
-# SPARSE_WORK unknowns times stages with nonlinear ones; dynamics written as expressions count as nonlinear here
-# (they are found linear only when compiled), which errs towards the dense formulation and its stricter limits
+# SPARSE_WORK unknowns times stages with nonlinear ones; dynamics written as expressions may be found linear only when
+# compiled, so below SPARSE_FROM unknowns they count as dense here: the estimate errs towards the dense formulation
+# and its stricter limits (far above SPARSE_FROM)
 SPARSE_FROM = 800
-SPARSE_WORK = 20_000
+SPARSE_WORK = 1_000
 LOOP_STEPS_WARN = 10_000_000  # from this many solver steps of a simulate on (sum over K of run.steps * K)
 # The certificate of a solve builds every agent's own problem, condensed and dense (gnerun.game.compile_agent_problem):
 # its decisions and constraint rows, the others' decisions as parameters; its time and memory grow with the square of
@@ -175,7 +176,7 @@ def estimate(cfg: Config) -> Size:
         nodes += sum(_expression_nodes(text, False) for text in equations.values()) * stages
     loop_steps = cfg.run.steps * sum(dict.fromkeys(cfg.run.K))
     kkt = decisions + multipliers
-    if auto_condensed and (kkt < SPARSE_FROM if linear else kkt * stages < SPARSE_WORK):
+    if auto_condensed and (kkt < SPARSE_FROM or (not linear and kkt * stages < SPARSE_WORK)):
         dense = True
     responses = tuple((len(a.inputs) + _bounds(a.inputs)) * stages + sum(at(c) for c in a.constraints)
                       + sum(at(c) for c in g.shared_constraints if a.name in (constraint_agents(c) or [a.name]))
@@ -208,6 +209,6 @@ def from_extent(extent: Any, game: dict, solver: SolverConfig, disturbance: Dist
     dynamics = game.get("dynamics")
     linear = isinstance(dynamics, dict) and "A" in dynamics
     kkt = decisions + multipliers
-    if solver.formulation == "auto" and (kkt < SPARSE_FROM if linear else kkt * stages < SPARSE_WORK):
+    if solver.formulation == "auto" and (kkt < SPARSE_FROM or (not linear and kkt * stages < SPARSE_WORK)):
         dense = True
     return Size(decisions, multipliers, states, nodes, dense, 0)

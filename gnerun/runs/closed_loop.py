@@ -29,6 +29,7 @@ import numpy as np
 from ..errors import InputError
 from ..game.building import no_check, polled
 from ..game.compile import CompiledGame, StageConstraints, compile_game, compile_stage_constraints
+from ..game.kernels import kernel_report
 from ..language.config import Config, PlantDisturbance
 from ..language.runtime import References
 from ..language.vehicles import vehicles
@@ -161,6 +162,11 @@ class Simulation(dict[int, ClosedLoopResult]):
     log_time_s: float = 0.0  # writing the run directory (0 without one)
 
     @property
+    def kernels(self):
+        """How the sparse system was evaluated (compiled C or interpreted), where the loops took that formulation."""
+        return None if self.game is None else kernel_report(self.game)
+
+    @property
     def solver_time_s(self) -> float:
         """The solver's time over every loop, the shared t = 0 solve counted once."""
         return float(sum(r.solve_time_s[int(r.shares_first):r.done].sum() for r in self.values()))
@@ -195,6 +201,7 @@ class Simulation(dict[int, ClosedLoopResult]):
             "input_names": [u for names in self.game.variable_names for u in names],
             "agents": self.game.agent_names,
             "by_K": {str(k): r.summary(self.game) for k, r in self.items()},
+            **({"kernels": report.as_dict()} if (report := kernel_report(self.game)) is not None else {}),
         }
 
 

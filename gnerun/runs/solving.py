@@ -15,6 +15,7 @@ import numpy as np
 
 from ..game.building import no_check, polled
 from ..game.compile import CompiledGame, compile_game
+from ..game.kernels import KernelReport, kernel_report
 from ..language.config import Config
 from ..log import topics
 from ..log.mcap_log import json_ready
@@ -318,6 +319,11 @@ class SolveResult:
         return self.status == Status.CONVERGED
 
     @property
+    def kernels(self) -> KernelReport | None:
+        """How the sparse system was evaluated (compiled C or interpreted), where the solve took that formulation."""
+        return kernel_report(self.game)
+
+    @property
     def a(self) -> np.ndarray:
         return self.z[: self.game.n]
 
@@ -355,6 +361,7 @@ class SolveResult:
             "time_s": self.time_s,
             "certificate_time_s": self.certificate_time_s,
             "compile_time_s": self.compile_time_s,
+            **({"kernels": self.kernels.as_dict()} if self.kernels is not None else {}),
             **({"parameters": self.parameters} if self.parameters else {}),
         })
 

@@ -241,7 +241,18 @@ class NewtonResponses:
                 free.setdefault(self.game.constraints[r].label, []).append(k)
             order = np.array([free[c.label].pop(0) if free.get(c.label) else -1 for c in problem.constraints],
                              dtype=int)
-            self._solvers[agent] = (problem, globalized(SemismoothNewton(problem, opts)), order)
+            full = self.game.derived.get("sparse")  # the game was solved in the sparse formulation
+            if full is not None and (order >= 0).all():
+                # the agent's problem as a part of the game's sparse system: no dense derivatives of its own
+                from ..game.sparse import AgentSparseKKT
+                from .sparse_ssn import SparseSemismoothNewton
+
+                system = AgentSparseKKT(full, problem, agent, rows[order])
+                newton = SparseSemismoothNewton(problem, opts.model_copy(update={"formulation": "sparse"}), None,
+                                                system)
+            else:
+                newton = SemismoothNewton(problem, opts)
+            self._solvers[agent] = (problem, globalized(newton), order)
         return self._solvers[agent]
 
     def solve_from(self, agent: int, a: np.ndarray, x: np.ndarray | None, starts: list[np.ndarray],

@@ -34,14 +34,16 @@ def make_solver(cfg: Config, game: CompiledGame, *, disturbed: bool = True) -> S
 
 # auto, nonlinear dynamics: the sparse formulation once the condensed system's size times the number of stages,
 # U (T + 1), reaches SPARSE_WORK: the condensed derivatives are dense and nest through the dynamics (their cost grows
-# with both), the sparse system's grow with T alone. Measured per iteration, condensed / sparse (this machine,
-# OPENBLAS_NUM_THREADS=1, loaded): ALGAMES's merge N = 2..5 at T = 19 (U (T + 1) = 3,600..12,000) 0.37, 0.61, 0.93,
-# 0.65; the 41-knot MPC merge at T = 9, 19, 29, 39 (1,500..24,000) 0.65, 0.60, 1.13, 1.10; the intersection (27,200)
-# 1.70. A count of unknowns alone (500) took the sparse form for the 5-car merge (1.5 times slower there).
+# with both), the sparse system's grow with T alone, and its stage kernels are compiled, its matrices banded.
+# Measured per iteration, condensed / sparse (second solve from the config's x0, best of 3; this machine,
+# OPENBLAS_NUM_THREADS=1, loaded): the 41-knot MPC merge at T = 9 and 19 (U (T + 1) = 1,500 and 6,000) 2.80, 3.35;
+# algames_merge_n at N = 2 and 3 (3,600 and 6,000) 2.75, 1.39; tracking (2,646) 2.84; two vehicles at T = 10 and 20
+# (1,573 and 5,733) 1.09, 1.69; the intersection (27,200) 5.07; the overtaking game (1,521) 0.90, the one case
+# measured where the condensed form is faster. (Before the stage kernels and the banded LU the crossover was 20,000.)
 # Linear dynamics: from SPARSE_FROM unknowns, the measured crossover of LQ games, whose condensed matrices are
 # constant (no evaluation, factorisations kept per active set): the bounded LQ family's plain GNE at T = 40 (492
 # unknowns, 20,000 by the other measure) takes 0.23 s sparse against 16 ms condensed through its interior phase.
-SPARSE_WORK = 20_000
+SPARSE_WORK = 1_000
 SPARSE_FROM = 800
 
 

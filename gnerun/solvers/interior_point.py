@@ -48,8 +48,8 @@ benchmarks/results/solver-design.md):
 The linear algebra has the two forms of the semismooth Newton step: condensed (the inequality multipliers
 eliminated, one dense factorisation of n unknowns and the equality multipliers; constraint rows with a single
 nonzero, such as bounds, add to the diagonal) and sparse (the full-space system of a dynamic game with -D on its
-multiplier block, factorised by SuperLU; the players' blocks of its Schur complement made positive definite in the
-same way, so that both forms take the same direction).
+multiplier block, factorised once per step by banded LU on the stage order; the players' blocks of its Schur
+complement made positive definite in the same way, so that both forms take the same direction).
 
 Rows that no decision variable reaches (a condition on the plant state alone) take no part: their multipliers stay zero.
 """
@@ -340,34 +340,37 @@ class DenseBarrier:
 
 class SparseBarrier:
     """The interior-point Newton system in the sparse formulation of a dynamic game: the full-space matrix K of
-    (a, xi, p, lambda) with -D on the inequality multipliers' diagonal, factorised by SuperLU. Its Schur
-    complement on (a, lambda_E) is the condensed matrix, as for the semismooth Newton step; each player's own
-    block of that complement is made positive definite as in the condensed form (:func:`convexify`), by a shift
-    of the player's diagonal in K (which shifts the complement's block by the same), so both forms take the same
-    direction.
+    (a, xi, p, lambda) with -D on the inequality multipliers' diagonal, factorised once per step (banded LU on the
+    stage order, or SuperLU: :meth:`~gnerun.game.sparse.SparseKKT.factor_kept`). Its Schur complement on
+    (a, lambda_E) is the condensed matrix, as for the semismooth Newton step; each player's own block of that
+    complement is made positive definite as in the condensed form (:func:`convexify`), by a shift of the player's
+    diagonal in K (which shifts the complement's block by the same), so both forms take the same direction.
 
     Player i's block S_ii = K_ii + K_iR y, where K_RR y = -K_Ri over what the complement eliminates
     (R: states, costates, inequality multipliers), is found stage-structured, without factorising K_RR: the
-    dynamics' rows give the states' response to a_i (a block-triangular solve), the inequality rows the
-    multipliers' (a division by D), and agent i's costate rows its costates' response; K_iR touches no other
-    agent's costates."""
+    dynamics' rows give the states' response to a_i (a banded triangular solve: -I on the diagonal, the dynamics'
+    Jacobian below it), the inequality rows the multipliers' (a division by D), and agent i's costate rows its
+    costates' response (the transposed solve); K_iR touches no other agent's costates. The sub-blocks of K are
+    gathered from its nonzeros into arrays and sparse matrices built once (the pattern is fixed)."""
 
     def __init__(self, system, ip: InteriorPoint) -> None:
         self.system = system
         self.ip = ip
         self.scale = 1.0
-        size, m = system.size, system.m
+        size, m, n = system.size, system.m, ip.n
         self.lam0 = size - m
         keep = np.ones(size, dtype=bool)
         keep[self.lam0 + ip.fixed] = False
         self.keep = np.flatnonzero(keep)
-        self._templates: list[dict] | None = None
+        # the diagonal entries added to K (in keep): the decisions' shifts, then -D on the inequality multipliers
+        self.at = np.concatenate([np.arange(n), np.searchsorted(self.keep, self.lam0 + ip.I)])
+        self._templates: list[_AgentBlocks] | None = None
+        self._diagonal: np.ndarray | None = None
 
-    def _blocks(self) -> list[dict]:
-        """Per agent, the sub-blocks of K that its block of the complement is built from, as gathers from K's
-        nonzeros (the pattern is fixed: sliced once)."""
+    def _blocks(self) -> list[_AgentBlocks]:
+        """Per agent, the sub-blocks of K that its block of the complement is built from (sliced once)."""
         if self._templates is None:
-            import scipy.sparse as sp
+            import scipy.sparse as sp  # loaded by the sparse formulation only
 
             ip, system = self.ip, self.system
             n, S, lam0 = ip.n, system.S, self.lam0
@@ -380,79 +383,126 @@ class SparseBarrier:
             self._templates = []
             for ai, pi, own in zip(ip.newton.game.agent_slices, system.costates, system.states, strict=True):
                 a_cols = np.arange(ai.start, ai.stop)
-                d_rows, x_cols = n + P + own, n + own
                 g_rows, p_cols = np.arange(n + pi.start, n + pi.stop), np.arange(n + S + pi.start, n + S + pi.stop)
-                blocks = {"Dx": (d_rows, x_cols), "Da": (d_rows, a_cols), "Cx": (lam_I, x_cols), "Ca": (lam_I, a_cols),
-                          "Gx": (g_rows, x_cols), "Gl": (g_rows, lam_I), "Ga": (g_rows, a_cols),
-                          "Aa": (a_cols, a_cols), "Ax": (a_cols, x_cols), "Ap": (a_cols, p_cols), "Al": (a_cols, lam_I)}
-                self._templates.append({k: _Gather(numbered, r, c) for k, (r, c) in blocks.items()})
+                self._templates.append(_AgentBlocks(numbered, n + P + own, n + own, a_cols, g_rows, p_cols, lam_I))
+            # where K's diagonal entries of the decisions are among its nonzeros (-1: not in the pattern)
+            diagonal = numbered.diagonal()[:n].astype(np.int64) - 1
+            self._diagonal = diagonal
         return self._templates
 
     def _shifts(self, data: np.ndarray, D: np.ndarray) -> tuple[np.ndarray, float] | None:
         """Per decision, the shift that makes its player's block of the Schur complement positive definite, and
         the largest diagonal entry of the shifted complement (the condensed form's scale); ``None`` if a
         dynamics block is singular (then no shift). ``data``: K's nonzeros without -D."""
-        from scipy.sparse import linalg as spla
-
         ip = self.ip
         shift = np.zeros(ip.n)
         scale = 1.0
         for ai, b in zip(ip.newton.game.agent_slices, self._blocks(), strict=True):
-            Dx = b["Dx"].sparse(data)
-            if Dx.shape[0]:
-                # the states' response D_x Y_x = -D_a: block lower-triangular with -I on the diagonal, factorised
-                # without pivoting or reordering (no fill); the costates' block of K is D_x^T
-                try:
-                    lu = spla.splu(Dx, permc_spec="NATURAL", diag_pivot_thresh=0.0)
-                except RuntimeError:
-                    return None
-                Yx = -lu.solve(b["Da"].dense(data))
-            else:
-                Yx = np.zeros((0, ai.stop - ai.start))
-            Ylam = (b["Cx"].sparse(data) @ Yx + b["Ca"].dense(data)) / D[:, None]
-            rhs = -(b["Ga"].dense(data) + b["Gx"].sparse(data) @ Yx + b["Gl"].sparse(data) @ Ylam)
-            Yp = lu.solve(rhs, trans="T") if Dx.shape[0] else rhs
-            block = (b["Aa"].dense(data) + b["Ax"].sparse(data) @ Yx + b["Ap"].sparse(data) @ Yp
-                     + b["Al"].sparse(data) @ Ylam)
+            block = b.complement(data, D)
+            if block is None:
+                return None
             shift[ai] = convexifying_shift(block)
             scale = max(scale, float(np.max(np.abs(np.diag(block) + shift[ai]), initial=0.0)))
         return shift, scale
 
     def direction(self, parts, it: InteriorIterate, D: np.ndarray, rhs_I: np.ndarray):
-        import scipy.sparse as sp
-
         ip, system = self.ip, self.system
-        ordering = system.orderings["interior"]
         n, I, E, lam0, keep = ip.n, ip.I, ip.E, self.lam0, self.keep
-        diag = np.zeros(system.size)
-        diag[lam0 + I] = -D
-        J = system.matrix(parts.J)
-        base = (J + sp.diags(diag)).tocsc()[keep][:, keep]
         rhs = -parts.F.copy()
         rhs[lam0 + I] = rhs_I
         rhs[lam0 + E] = -it.c[E]
+        rhs = rhs[keep]
         convex = self._shifts(parts.J, D)
+        shifts = np.zeros(n)
         if convex is None:
-            self.scale = max(1.0, float(np.max(np.abs(base.diagonal()[:n]), initial=0.0)))
+            at = self._diagonal
+            diagonal = np.where(at >= 0, parts.J[at], 0.0)
+            self.scale = max(1.0, float(np.max(np.abs(diagonal), initial=0.0)))
         else:
             shifts, self.scale = convex
-            if shifts.any():
-                base = (base + sp.diags(np.concatenate([shifts, np.zeros(keep.size - n)]))).tocsc()
-        shift = np.zeros(keep.size)
+        add = np.concatenate([shifts, -D])
 
         def solve(delta: float):
-            shift[:n] = delta
-            lu, rcond = ordering.factor((base + sp.diags(shift)).tocsc() if delta else base)
+            if delta:
+                add[:n] = shifts + delta
+            lu, rcond = system.factor_kept("interior", parts.J, keep, self.at, add)
             if lu is None or not rcond > 0.0:
                 return None
             sol = np.zeros(system.size)
-            sol[keep] = lu.solve(rhs[keep])
+            sol[keep] = lu.solve(rhs)
             dlam = np.zeros(system.m)
             dlam[I] = sol[lam0 + I]
             dlam[E] = sol[lam0 + E]
             return sol[:n], dlam, rcond
 
         return solve
+
+
+class _AgentBlocks:
+    """One agent's sub-blocks of K, by its dynamics rows (d), states (x), decisions (a), costate rows (g), costates
+    (p) and the inequality multipliers (l) of the rows it touches: D_x (banded lower triangular), D_a, then
+    [C; G; A] x (x, a) and [G; A] x l stacked, and A x p, each gathered from K's nonzeros (``numbered``: the pattern
+    with its nonzeros numbered 1, 2, ...)."""
+
+    def __init__(self, numbered, d_rows, x_cols, a_cols, g_rows, p_cols, lam_I) -> None:
+        self.states, self.decisions = x_cols.size, a_cols.size
+        # the inequality rows that involve the agent's states or decisions, or whose multipliers enter its rows: the
+        # others' multipliers do not respond to its decisions
+        touched = numbered[lam_I][:, np.concatenate([x_cols, a_cols])].getnnz(axis=1) > 0
+        touched |= numbered[np.concatenate([g_rows, a_cols])][:, lam_I].getnnz(axis=0) > 0
+        self.touched = np.flatnonzero(touched)
+        lam_I = lam_I[self.touched]
+        self.counts = (lam_I.size, g_rows.size)  # the rows of C and G in the stacks
+        Dx = numbered[d_rows][:, x_cols].tocoo()
+        below = Dx.row - Dx.col
+        self.width = int(below.max(initial=0))
+        diagonal = np.zeros(self.states, dtype=bool)
+        diagonal[Dx.row[below == 0]] = True
+        # the defects f(xi(tau), u) - xi(tau + 1), stage-major: -I on the diagonal, the dynamics' Jacobian below it
+        if not (np.all(below >= 0) and diagonal.all()):
+            raise AssertionError("the dynamics' block of the sparse system is not lower triangular")
+        # its band for LAPACK's triangular solves (the transpose of the Fortran-ordered band, as for banded LU)
+        self._band = (Dx.col * (self.width + 1) + below, Dx.data.astype(np.int64) - 1)
+        self._Da = _Gather(numbered, d_rows, a_cols)
+        stacked = np.concatenate([lam_I, g_rows, a_cols])
+        self._Ka = _Gather(numbered, stacked, a_cols)
+        self._Kx = _Product(numbered, stacked, x_cols)
+        self._Kl = _Product(numbered, np.concatenate([g_rows, a_cols]), lam_I)
+        self._Ap = _Product(numbered, a_cols, p_cols)
+
+    def complement(self, data: np.ndarray, D: np.ndarray) -> np.ndarray | None:
+        """The agent's block of the Schur complement, or None if D_x is singular."""
+        nI, ng = self.counts
+        band = np.zeros((self.states, self.width + 1))
+        if self.states:
+            flat, positions = self._band
+            band.reshape(-1)[flat] = data[positions]
+            Yx, info = lapack.dtbtrs(band.T, -self._Da.dense(data), uplo="L")
+            if info != 0:  # a zero on the diagonal
+                return None
+        else:
+            Yx = np.zeros((0, self.decisions))
+        Ka = self._Ka.dense(data)
+        KY = self._Kx(data) @ Yx
+        Ylam = (KY[:nI] + Ka[:nI]) / D[self.touched, None]
+        LY = self._Kl(data) @ Ylam
+        rhs = -(Ka[nI:nI + ng] + KY[nI:nI + ng] + LY[:ng])
+        Yp = lapack.dtbtrs(band.T, rhs, uplo="L", trans="T")[0] if self.states else rhs
+        return Ka[nI + ng:] + KY[nI + ng:] + self._Ap(data) @ Yp + LY[ng:]
+
+
+class _Product:
+    """One sub-block (rows, cols) of a fixed sparsity pattern as a sparse matrix built once, its values refreshed
+    from the pattern's nonzeros at every call (building a sparse matrix costs more than the product it serves)."""
+
+    def __init__(self, numbered, rows: np.ndarray, cols: np.ndarray) -> None:
+        self.matrix = numbered[rows][:, cols].tocsr()
+        self.matrix.sort_indices()
+        self.positions = self.matrix.data.astype(np.int64) - 1
+
+    def __call__(self, data: np.ndarray):
+        self.matrix.data[:] = data[self.positions]
+        return self.matrix
 
 
 class _Gather:
@@ -467,11 +517,6 @@ class _Gather:
         self.indices, self.indptr = sub.indices, sub.indptr
         self.positions = sub.data.astype(np.int64) - 1
         self.col_of = np.repeat(np.arange(sub.shape[1]), np.diff(sub.indptr))
-
-    def sparse(self, data: np.ndarray):
-        import scipy.sparse as sp
-
-        return sp.csc_matrix((data[self.positions], self.indices, self.indptr), shape=self.shape)
 
     def dense(self, data: np.ndarray) -> np.ndarray:
         out = np.zeros(self.shape)

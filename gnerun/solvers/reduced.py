@@ -94,34 +94,32 @@ class DenseReduced:
 
 
 class SparseReduced:
-    """The reduced system in the sparse formulation's full space, by SuperLU; its reciprocal condition number is
-    SuperLU's 1-norm estimate. For LQ games the matrix depends on the active set only, and its factorisation is kept
-    (at most 64)."""
+    """The reduced system in the sparse formulation's full space, factorised by banded LU on the stage order or by
+    SuperLU (:meth:`~gnerun.game.sparse.SparseKKT.factor_kept`), with its reciprocal 1-norm condition estimate. For
+    LQ games the matrix depends on the active set only, and its factorisation is kept (at most 64)."""
 
     def __init__(self, game, system, min_rcond: float) -> None:
         self.game = game
         self.system = system
         self.min_rcond = min_rcond
-        self._J = system.matrix(system.evaluate(game.z_start(), game.x0).J) if system.affine else None
-        self._lus = FactorCache(64)  # LQ games: (SuperLU factors or None, rcond) per active set
-
+        self._J = system.evaluate(game.z_start(), game.x0).J if system.affine else None
+        self._lus = FactorCache(64)  # LQ games: (factors or None, rcond) per active set
 
     def forget(self) -> None:
         """Drop the factorisations kept per active set."""
         self._lus.clear()
+
     def point(self, state, A: np.ndarray) -> tuple[np.ndarray | None, float]:
-        """The min-map Newton step for the rows A, and SuperLU's reciprocal condition estimate."""
+        """The min-map Newton step for the rows A, and the reciprocal condition estimate."""
         system, parts, z = self.system, state.parts, state.z
         keep = system.kept(A)
         if self._J is not None:  # LQ: a constant matrix, one factorisation per active set
-            J = self._J
             key = A.tobytes()
             entry = self._lus.get(key)
             if entry is None:
-                entry = self._lus.keep(key, system.orderings["newton"].factor(J[keep][:, keep].tocsc()))
+                entry = self._lus.keep(key, system.factor_kept("newton", self._J, keep))
         else:
-            J = system.matrix(parts.J)
-            entry = system.orderings["newton"].factor(J[keep][:, keep].tocsc())
+            entry = system.factor_kept("newton", parts.J, keep)
         lu, rcond = entry
         if lu is None or not rcond >= self.min_rcond:
             return None, rcond
