@@ -320,8 +320,9 @@ def robust_rows(row, reps: int, quick: bool) -> None:
             state = iterate(solver, solver.init(None, x0))
             per.append((time.perf_counter() - t0) / max(state.k, 1))
             its.append(state.k)
+        goal = 0.3e-3 if "merge" in label else 0.6e-3  # the structure allows about this (benchmarks/stages.py)
         row(f"{label} ({game.size} unknowns, {formulation(cfg, game)}): one iteration", statistics.median(per),
-            target="<= 5 ms", met=statistics.median(per) <= 5e-3,
+            target=f"<= {goal * 1e3:g} ms", met=statistics.median(per) <= goal,
             note=f"median over {len(problems)} random initial states; iterations {min(its)}-{max(its)}")
 
 
@@ -463,7 +464,7 @@ def trajectory_loop_rows(row, quick: bool) -> None:
         return [t0, *marks], sim
 
     steps = 20 if quick else 50
-    good = []
+    good, fast, rates = [], [], {}
     for K in (3, 5):
         with tempfile.TemporaryDirectory() as tmp:
             marks, sim = loop(ROOT / "configs" / "algames_merge_mpc.yaml",
@@ -474,6 +475,9 @@ def trajectory_loop_rows(row, quick: bool) -> None:
         converged = r.status.count("converged")
         if hz >= 40 and np.median(walls) <= 25e-3 and converged > steps / 2:
             good.append(f"K = {K}")
+        rates[K] = 1.0 / float(np.median(walls))
+        if K == 3 and rates[K] >= 1000 and converged == steps:
+            fast.append(f"K = {K}")
         row(f"ALGAMES MPC merge (41 knots, 3 cars), K = {K}: median sampling time, logging on", float(np.median(walls)),
             note=f"{hz:.0f} Hz over t = 1..{steps - 1} (p90 {np.percentile(walls, 90) * 1e3:.1f} ms, max "
                  f"{walls.max() * 1e3:.0f} ms); {converged} of {steps} sampling times converged, "
@@ -481,6 +485,8 @@ def trajectory_loop_rows(row, quick: bool) -> None:
                  f"first sampling time (solved) {np.diff(marks)[0]:.2f} s")
     row("ALGAMES MPC merge: a K with most sampling times converged at >= 40 Hz, median <= 25 ms", None,
         target="one K", met=bool(good), note=", ".join(good) or "none")
+    row("ALGAMES MPC merge, K = 3: median sampling rate >= 1 kHz, every sampling time converged", None,
+        target=">= 1 kHz", met=bool(fast), note=", ".join(fast) or f"{rates[3]:.0f} Hz at K = 3")
     with tempfile.TemporaryDirectory() as tmp:
         t0 = time.perf_counter()
         marks, sim = loop(ROOT / "configs" / "mcp_demo.yaml",

@@ -53,6 +53,7 @@ SINGLES = ("fk", "lq", "mcp-demo", "overtaking")  # families reported problem by
 
 METHODS = {
     "default": {},
+    "default (condensed)": {"solver.formulation": "condensed"},  # the formulation auto took for most of them before
     "local": {"solver.globalization": "none"},
     "FB + line search": {"solver.globalization": "line_search", "solver.complementarity": "fischer_burmeister"},
     "interior point": {"solver.globalization": "interior_point"},
