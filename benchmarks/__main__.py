@@ -31,7 +31,9 @@ Measured:
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
+import math
 import os
 import platform
 import statistics
@@ -52,6 +54,7 @@ from gnerun.language.config import load_config  # noqa: E402
 from gnerun.log.mcap_log import RunLog  # noqa: E402
 from gnerun.log.messages import MpcError, MpcIterate, MpcState  # noqa: E402
 from gnerun.runs.solving import formulation, make_solver  # noqa: E402
+from gnerun.solvers import hybrid, interior_point  # noqa: E402
 from gnerun.solvers.driver import iterate  # noqa: E402
 from gnerun.solvers.status import Status  # noqa: E402
 
@@ -321,6 +324,45 @@ def robust_rows(row, reps: int, quick: bool) -> None:
         row(f"{label} ({game.size} unknowns, {formulation(cfg, game)}): one iteration", statistics.median(per),
             target=f"<= {goal * 1e3:g} ms", met=statistics.median(per) <= goal,
             note=f"median over {len(problems)} random initial states; iterations {min(its)}-{max(its)}")
+
+
+def trajectory_iteration_rows(row, quick: bool) -> None:
+    """Newton iterations per solve on ALGAMES's random merges and intersections (the default solver, one compiled
+    game per scenario; target: a median of at most 15 and every draw converged), against the method as it was
+    before Mehrotra's predictor-corrector step (``interior_point.PREDICT_AFTER`` = inf) and the hand-over's
+    active-set correction (``hybrid.HANDOVER_ROUNDS`` = 0, a refused hand-over retried at 0.1 ||Phi|| instead of
+    ``hybrid.HANDOVER_RETRY``), in the same run, draw by draw."""
+    from unittest import mock
+
+    from .problems import trajectory
+
+    before = {"HANDOVER_ROUNDS": 0, "HANDOVER_RETRY": 0.1}
+    for label, problems in (("ALGAMES merges", trajectory.merge_problems(10 if quick else 100)),
+                            ("ALGAMES intersections", trajectory.intersection_problems(3 if quick else 20))):
+        cfg = load_config(text=problems[0].config_yaml)
+        game = compile_game(cfg)
+        counts: dict[str, list[tuple[int, bool]]] = {"now": [], "before": []}
+        for p in problems:
+            x0 = np.asarray(load_config(text=p.config_yaml).game.x0)
+            for which in ("now", "before"):
+                with contextlib.ExitStack() as stack:
+                    if which == "before":
+                        stack.enter_context(mock.patch.multiple(hybrid, **before))
+                        stack.enter_context(mock.patch.object(interior_point, "PREDICT_AFTER", math.inf))
+                    solver = make_solver(cfg, game)
+                    state = iterate(solver, solver.init(None, x0))
+                counts[which].append((state.k, state.status == Status.CONVERGED))
+
+        def summary(rows: list[tuple[int, bool]]) -> tuple[float, float, int, str]:
+            its = [k for k, _ in rows]
+            med, p90, ok = statistics.median(its), float(np.percentile(its, 90)), sum(c for _, c in rows)
+            return med, p90, ok, f"median {med:g}, p90 {p90:.0f}, {ok}/{len(rows)} converged"
+
+        med, _, ok, now = summary(counts["now"])
+        _, _, _, was = summary(counts["before"])
+        row(f"{label} ({len(problems)} random draws, {formulation(cfg, game)}): Newton iterations per solve", None,
+            target="median <= 15, all converged", met=med <= 15 and ok == len(problems),
+            note=f"{now}; before the predictor-corrector step and the hand-over's active-set correction: {was}")
 
 
 def factorization_rows(row, quick: bool) -> None:
@@ -634,6 +676,7 @@ def main(argv: list[str] | None = None) -> int:
     # 5. robust solving: the globalized default against the local method, the LQ family against its peers, the
     # trajectory games' cost per iteration
     robust_rows(row, reps, args.quick)
+    trajectory_iteration_rows(row, args.quick)
     factorization_rows(row, args.quick)
 
     # 6. closed loops on the trajectory games

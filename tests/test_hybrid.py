@@ -268,6 +268,26 @@ def test_merges_from_random_states_converge_and_are_equilibria() -> None:
         assert max(gaps.values()) <= 1e-5, gaps
 
 
+@pytest.mark.slow
+def test_a_hand_over_refused_on_the_interior_guess_is_taken_on_the_corrected_active_set(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """ALGAMES's merge, draw 0: at the first hand-over try the interior iterate's active set (lambda_j > w_j)
+    holds rows that are inactive at the solution, and the plain min-map step climbs; the same step on the active
+    set it points to halves ||Phi||."""
+    from benchmarks.problems import trajectory
+
+    problem = trajectory.merge_problems(1)[0]
+    cfg = load_config(text=problem.config_yaml)
+    solver = make_solver(cfg, compile_game(cfg))
+    state = iterate(solver, solver.init(), finish=False,
+                    stop=lambda s: s.search.phase == "interior" and s.residual_norm <= s.search.handover)
+    assert state.search.phase == "interior" and state.status == Status.RUNNING
+    taken = solver._handover(state)
+    assert taken is not None and taken.residual_norm <= hybrid.HANDOVER_DECREASE * state.residual_norm
+    monkeypatch.setattr(hybrid, "HANDOVER_ROUNDS", 0)
+    assert solver._handover(state) is None
+
+
 def test_a_kkt_point_that_is_not_an_equilibrium_is_left_from_the_best_responses(monkeypatch) -> None:
     """FK A.2 from x = 1: the method reaches a KKT point at which players 2 to 4 (nonconvex in their own
     variables) can improve alone; from their best responses it reaches an equilibrium."""

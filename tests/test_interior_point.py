@@ -174,3 +174,73 @@ def test_a_matrix_with_an_infinite_entry_ends_the_phase_instead_of_shifting_fore
         signal.signal(signal.SIGALRM, previous)
     assert res.status != "converged" or res.residual_norm <= 1e-10
     assert res.message
+
+
+def test_the_predictor_corrector_target_is_mehrotras() -> None:
+    """The target of lambda_I o w after a full step: sigma mu - dlambda_aff o dw_aff, the affine-scaling direction
+    (eps = 0) solved here on the unreduced system, sigma = (mu_aff / mu)^3 floored at CENTERING."""
+    cfg = load_config(CONFIGS / "harker.yaml")
+    game = compile_game(cfg)
+    newton = SemismoothNewton(game, cfg.solver)
+    rng = np.random.default_rng(3)
+    ip = InteriorPoint(newton)
+    I, n = ip.I, game.n
+    z = np.concatenate([game.a_start + 0.3 * rng.standard_normal(n), np.zeros(game.m)])
+    z[n + I] = rng.uniform(0.1, 2.0, I.size)
+    w = rng.uniform(0.1, 2.0, I.size)
+    _, it, parts = _interior(newton, z, w, 0.05)
+    lam = z[n + I]
+    target = ip._target(parts, it, w / lam)
+    _, ref_lam, ref_w = _unreduced_direction(game, parts, z, w, 0.0, I)
+    dlam = ref_lam[I]
+
+    def longest(v, dv):
+        return min(1.0, float(np.min(-v[dv < 0] / dv[dv < 0]))) if (dv < 0).any() else 1.0
+
+    t_p, t_d = longest(w, ref_w), longest(lam, dlam)
+    assert min(t_p, t_d) >= interior_point.PREDICTED
+    mu, mu_aff = np.mean(lam * w), np.mean((w + t_p * ref_w) * (lam + t_d * dlam))
+    sigma = min(1.0, max(interior_point.CENTERING, (mu_aff / mu) ** 3))
+    np.testing.assert_allclose(target, sigma * mu - dlam * ref_w, rtol=1e-8, atol=1e-12)
+
+
+def _fk_a3_from_10(monkeypatch: pytest.MonkeyPatch, **constants) -> float:
+    from benchmarks.problems import fk
+    from gnerun.solvers.driver import iterate
+
+    for name, value in constants.items():
+        monkeypatch.setattr(interior_point, name, value)
+    problem = next(p for p in fk.problems() if p.name == "A.3" and p.start == "x0 = 10")
+    cfg = load_config(text=problem.config_yaml)
+    game = compile_game(cfg)
+    solver = make_solver(cfg, game)
+    state = iterate(solver, solver.init())
+    assert state.converged, state.message
+    return float(np.max(np.abs(state.z[: game.n] - problem.reference)))
+
+
+def test_a_blocked_predictor_keeps_the_barriers_target(monkeypatch: pytest.MonkeyPatch) -> None:
+    """FK A.3 from its upper bounds: the predictor of the interior start goes 0.5% of the way; taking Mehrotra's
+    target anyway leads to another KKT point, 10 away from the literature's equilibrium."""
+    assert _fk_a3_from_10(monkeypatch) <= 1e-8
+    assert _fk_a3_from_10(monkeypatch, PREDICTED=0.0) > 1.0
+
+
+@pytest.mark.slow
+def test_the_predictor_corrector_step_ends_a_stalled_merge(monkeypatch: pytest.MonkeyPatch) -> None:
+    """ALGAMES's merge, draw 4: with the barrier's monotone target alone the interior phase cycles at eps = 8e-6
+    and is restarted twice (136 iterations); with Mehrotra's steps it converges without a restart."""
+    from benchmarks.problems import trajectory
+    from gnerun.solvers.driver import iterate
+
+    problem = trajectory.merge_problems(5)[4]
+    cfg = load_config(text=problem.config_yaml)
+    game = compile_game(cfg)
+    iterations = []
+    for after in (interior_point.PREDICT_AFTER, np.inf):
+        monkeypatch.setattr(interior_point, "PREDICT_AFTER", after)
+        solver = make_solver(cfg, game)
+        state = iterate(solver, solver.init())
+        assert state.converged, state.message
+        iterations.append(state.k)
+    assert iterations[0] <= 40 < 100 <= iterations[1], iterations

@@ -10,7 +10,7 @@ from benchmarks.problems.trajectory import overtaking_model, overtaking_problems
 from gnerun.game.compile import compile_game
 from gnerun.language.config import load_config
 from gnerun.runs.solving import iterate, make_solver
-from gnerun.solvers import hybrid, response_round
+from gnerun.solvers import hybrid, interior_point, response_round
 from gnerun.solvers.response_round import answer_starts, best_answer
 
 from .conftest import CONFIGS
@@ -103,8 +103,16 @@ def _overtaking(start: int = 0):
     return game, make_solver(cfg, game)
 
 
+@pytest.fixture
+def monotone_barrier(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The interior phase with the barrier's monotone target alone (no Mehrotra step in its first start,
+    ``interior_point.PREDICT_AFTER``), as these tests were written for: from zero inputs all three of its starts stall
+    on the overtaking game, the case the round is for."""
+    monkeypatch.setattr(interior_point, "PREDICT_AFTER", np.inf)
+
+
 def test_the_round_comes_after_every_interior_start_from_the_cold_overtaking_start(
-        monkeypatch: pytest.MonkeyPatch) -> None:
+        monkeypatch: pytest.MonkeyPatch, monotone_barrier: None) -> None:
     """From zero inputs the three interior starts stall (the cars coincide at a knot, where the collision row has no
     gradient); after the round the warm interior start converges, to a point both cars' independent numpy best
     responses confirm. (The line-search phase, which the default tries at iteration SLOW in the third start, is set
@@ -128,7 +136,8 @@ def test_the_round_comes_after_every_interior_start_from_the_cold_overtaking_sta
     assert max(gaps.values()) <= 1e-6
 
 
-def test_without_answers_the_cold_overtaking_start_stalls_and_says_why(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_without_answers_the_cold_overtaking_start_stalls_and_says_why(monkeypatch: pytest.MonkeyPatch,
+                                                                       monotone_barrier: None) -> None:
     monkeypatch.setattr(hybrid, "response_round", lambda game, a, x: None)
     monkeypatch.setattr(hybrid, "SLOW", 10**6)
     _, solver = _overtaking()
@@ -137,7 +146,8 @@ def test_without_answers_the_cold_overtaking_start_stalls_and_says_why(monkeypat
     assert "after 3 start(s): " in state.message and "no player has a feasible best answer" in state.message
 
 
-def test_a_stall_after_the_answers_says_how_many_starts_it_took(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_a_stall_after_the_answers_says_how_many_starts_it_took(monkeypatch: pytest.MonkeyPatch,
+                                                                monotone_barrier: None) -> None:
     """Answers that are the zero-input plan itself: the three interior starts from them stall as before (the
     line-search phase set aside)."""
     monkeypatch.setattr(hybrid, "response_round", lambda game, a, x: np.array(a, dtype=float))

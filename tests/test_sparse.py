@@ -308,7 +308,7 @@ def _merge_system():
     game = compile_game(cfg)
     solver = make_solver(cfg, game)
     state = solver.init()
-    for _ in range(12):
+    for _ in range(15):
         state = solver.step(state)
     return game, solver, state
 

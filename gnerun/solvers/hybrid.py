@@ -28,7 +28,12 @@ first, judged by a nonmonotone watchdog; a more robust method when it fails; res
    (where JPhi is singular there, as on a continuum of solutions, the Levenberg-Marquardt step with mu = ||Phi||,
    which converges to a point of the set under an error bound); when it reduces ||Phi|| at least
    ``HANDOVER_DECREASE``-fold, the Newton phase resumes (and with it Q-quadratic convergence at a regular
-   solution), keeping the interior iterate to return to.
+   solution), keeping the interior iterate to return to. Where it does not, the step is tried again (up to
+   ``HANDOVER_ROUNDS`` times) on the active set the step itself points to, as a primal-dual active-set method
+   corrects its guess: rows whose multiplier came out negative leave it, rows the step violates join it. An
+   interior iterate's guess (lambda_j > w_j) is wrong for the rows that are inactive at the solution with a slack
+   below sqrt(eps), and these make the plain step climb far (||Phi|| times 80-380 on ALGAMES's merges). A refused
+   hand-over is tried again once ||Phi|| is below ``HANDOVER_RETRY`` times its value there.
 4. **Pivoting** (LQ games only). When every interior start has failed, the KKT system, a linear complementarity
    problem, is solved by Lemke's method from z^0 (covering vectors: all ones, then seeded random ones). The
    central path of the interior phase gives the copies of a shared constraint equal multipliers, so it misses
@@ -77,6 +82,8 @@ BLOWUP = 1e3  # a Newton step that multiplies the nonmonotone reference by more 
 SUFFICIENT = 0.1  # progress: ||Phi|| at least this fraction below the best so far
 HANDOVER_AT = 1e-2  # try the Newton step from an interior iterate once ||Phi|| <= this x min(||Phi(z^0)||, 1)
 HANDOVER_DECREASE = 0.5  # ... and take it when it reduces ||Phi|| at least by this factor
+HANDOVER_RETRY = 0.5  # after a refused hand-over, the next try once ||Phi|| is below this fraction of where it was
+HANDOVER_ROUNDS = 3  # a refused hand-over step is tried again this many times with its active set corrected
 STALL = 25  # interior steps without a new best ||Phi|| (by 10%) before a restart
 RESTARTS = len(STARTS) - 1
 LM_FAR = 1e-4  # far from a solution, a singular JPhi gets the Levenberg-Marquardt step with mu = LM_FAR ||Phi||
@@ -128,6 +135,9 @@ class HybridNewton:
         # the line-search phase: the condensed formulation's Newton method on the Fischer-Burmeister function, built
         # on first use (the sparse formulation takes min-map steps alone; a perturbed method is studied as it is)
         self.searches = handover and exact and newton.condensed
+        # the rows a hand-over's active set may hold: inequalities that a decision reaches
+        self._inequalities = np.zeros(self.game.m, dtype=bool)
+        self._inequalities[self.interior.I] = True
 
     def forget(self) -> None:
         """Drop the Newton method's factorisations kept per active set."""
@@ -256,24 +266,38 @@ class HybridNewton:
         memory = replace(memory, phase="interior", best=math.inf, stalls=0, attempt=attempt,
                          handover=memory.handover0, crash=False)
         start = self.newton.advance(state, z, search=memory, k=state.k if k is None else k)
-        memory = replace(memory, interior=self.interior.measure(z, w, start.parts.L, start.parts.c, eps))
+        # Mehrotra's steps in the first start from z^0; the restarts and warm starts keep the monotone barrier
+        predict = attempt == 0 and not warm
+        memory = replace(memory, interior=self.interior.measure(z, w, start.parts.L, start.parts.c, eps,
+                                                                predict=predict))
         start = replace(start, search=memory)
         return start if k is not None else self._interior_step(start, memory)
 
     def _handover(self, state: SSNState) -> SSNState | None:
         """The Newton step from an interior iterate (Levenberg-Marquardt where JPhi is singular), if it reduces
-        ||Phi|| HANDOVER_DECREASE-fold: judged on the residual alone, so a refused step costs no derivatives."""
+        ||Phi|| HANDOVER_DECREASE-fold: judged on the residual alone, so a refused step costs no derivatives. A
+        refused min-map step is tried again on the active set it points to (``HANDOVER_ROUNDS`` times at most)."""
         newton = self.newton
         z, rcond = newton.newton_point(state)
         if z is None:
             z = newton.regularized_point(state, state.residual_norm)
-        if z is None:
-            return None
-        phi, _ = newton.phi(*newton.kkt_residual(z, state.x), z)
-        if not norm(phi) <= HANDOVER_DECREASE * state.residual_norm:
-            return None
-        candidate = newton.advance(state, z, rcond=rcond)
-        return candidate if candidate.status == Status.RUNNING else None
+        rounds = HANDOVER_ROUNDS if newton.reduced else 0  # the min map without noise: the active set is the step's
+        active = state.active
+        for _ in range(rounds + 1):
+            if z is None:
+                return None
+            L, c = newton.kkt_residual(z, state.x)
+            phi, _ = newton.phi(L, c, z)
+            if norm(phi) <= HANDOVER_DECREASE * state.residual_norm:
+                candidate = newton.advance(state, z, rcond=rcond)
+                return candidate if candidate.status == Status.RUNNING else None
+            # the step's own active set: negative multipliers leave, violated rows join (inequalities only)
+            corrected = ((active & (z[self.game.n:] >= 0.0)) | (~active & (c > 0.0))) & self._inequalities
+            if np.array_equal(corrected, active):
+                return None
+            active = corrected
+            z, rcond = newton.newton_point(replace(state, active=active))
+        return None
 
     def _interior_step(self, state: SSNState, memory: Memory) -> SSNState:
         if state.residual_norm <= memory.handover:
@@ -282,7 +306,7 @@ class HybridNewton:
                 merit = candidate.residual_norm
                 return replace(candidate, search=replace(memory, phase="newton", merits=(state.residual_norm, merit),
                                                          best=merit, stalls=0))
-            memory = replace(memory, handover=0.1 * state.residual_norm)
+            memory = replace(memory, handover=HANDOVER_RETRY * state.residual_norm)
         proposal = self.interior.step(memory.interior, state.parts)
         if proposal[0] is None:
             return self._restart(state, memory, Status.SINGULAR_JACOBIAN, proposal[1])
@@ -290,7 +314,7 @@ class HybridNewton:
         new = self.newton.advance(state, z, search=memory, rcond=rcond)
         if new.status in FAILURES:  # NaN or divergence: restart if a start is left
             return self._restart(state, memory, new.status, new.message)
-        it = self.interior.measure(z, w, new.parts.L, new.parts.c, memory.interior.eps, t)
+        it = self.interior.measure(z, w, new.parts.L, new.parts.c, memory.interior.eps, t, memory.interior.predict)
         best, stalls = memory.best, memory.stalls + 1
         if new.residual_norm < 0.9 * best:
             best, stalls = new.residual_norm, 0

@@ -36,6 +36,14 @@ benchmarks/results/solver-design.md):
 - **No merit function**: every step is taken at its full length to the boundary (a potential-reduction line search
   and residual-based backtracking lost robustness on nonconvex games); instead, the globalized method
   (:mod:`gnerun.solvers.hybrid`) watches for stalls and restarts.
+- **Mehrotra's predictor-corrector step where the last step went (nearly) all the way**, in the first start from
+  z^0 (restarts and warm starts keep the monotone target: they are the safety net where it fails, as in FK A.4 from
+  10 with the interior phase alone): at the start and after a step of at least ``PREDICT_AFTER`` = 0.9 of the
+  Newton step, the affine-scaling direction (eps = 0) is solved first and the step aims at sigma mu - dlambda_aff o
+  dw_aff, sigma = (mu_aff / mu)^3 at least ``CENTERING`` = 0.1 (Nocedal and Wright, alg. 14.3), unless the
+  predictor goes less than ``PREDICTED`` = 5% of the way (then eps). After short steps, cut by the boundary one row
+  at a time, the monotone target eps is kept: Mehrotra's target there lets the products lambda_i w_i spread and the
+  primal step overshoot on nonconvex constraints (measured on ALGAMES's merges: benchmarks/results/solver-design.md).
 
 The linear algebra has the two forms of the semismooth Newton step: condensed (the inequality multipliers
 eliminated, one dense factorisation of n unknowns and the equality multipliers; constraint rows with a single
@@ -66,6 +74,9 @@ WARM = 1e-5  # lambda_i w_i at a warm start: a point near an equilibrium (see Hy
 START_FLOOR = 0.1  # slacks start at least this far inside
 BOUND_PUSH = 1e-2  # decisions start at least this far (relative) inside their bounds
 REGULARIZATION = 1e-10  # the first multiple of the identity tried where the Newton matrix is singular
+PREDICT_AFTER = 0.9  # the first start, or a step of it that went at least this far, is followed by Mehrotra's
+PREDICTED = 0.05  # predictor-corrector step where the predictor goes at least this fraction of the way, and
+CENTERING = 0.1  # its centering parameter sigma is at least this
 
 
 @dataclass(slots=True)
@@ -78,6 +89,7 @@ class InteriorIterate:
     c: np.ndarray  # c(a)
     eps: float  # the target of lambda_i w_i
     t: float = 1.0  # the step length that led here (fraction of the Newton step)
+    predict: bool = False  # whether this start takes Mehrotra's steps (its first start from z^0: InteriorPoint.step)
 
 
 class InteriorPoint:
@@ -121,36 +133,36 @@ class InteriorPoint:
         return z, w, mu
 
     def measure(self, z: np.ndarray, w: np.ndarray, L: np.ndarray, c: np.ndarray, eps: float,
-                t: float = 1.0) -> InteriorIterate:
-        """The iterate at (z, w) given L and c there; eps shrinks if H_eps is solved to KAPPA eps."""
+                t: float = 1.0, predict: bool = False) -> InteriorIterate:
+        """The iterate at (z, w) given L and c there; eps shrinks if H_eps is solved to KAPPA eps. ``predict``:
+        Mehrotra's steps are taken from it (see :meth:`step`)."""
         I, E = self.I, self.E
         lw = z[self.n + I] * w
         err = max(float(np.max(np.abs(L), initial=0.0)), float(np.max(np.abs(c[I] + w), initial=0.0)),
                   float(np.max(np.abs(c[E]), initial=0.0)), float(np.max(np.abs(lw - eps), initial=0.0)))
-        return InteriorIterate(z, w, L, c, eps * SHRINK if err <= KAPPA * eps else eps, t)
+        return InteriorIterate(z, w, L, c, eps * SHRINK if err <= KAPPA * eps else eps, t, predict)
 
     def step(self, it: InteriorIterate, parts) -> tuple[np.ndarray, np.ndarray, float, float] | tuple[None, str]:
         """The next point (z, w), the step length taken and the reciprocal condition number of the matrix
-        factorised, from ``it`` (``parts``: the derivatives at it.z); or (None, why not)."""
+        factorised, from ``it`` (``parts``: the derivatives at it.z); or (None, why not). In an iterate that
+        predicts (the first start from z^0), at the start and after a step that went at least ``PREDICT_AFTER`` of
+        the way, the target of lambda_I o w is Mehrotra's (:meth:`_target`) where its predictor is not blocked."""
         n, I, E = self.n, self.I, self.E
-        z, w, eps = it.z, it.w, it.eps
+        z, w = it.z, it.w
         lam = z[n + I]
         D = w / lam
-        rhs_I = -(it.c[I] + eps / lam)
-        solve = self.linear.direction(parts, it, D, rhs_I)
-        delta = 0.0
-        while True:
-            solved = solve(delta)
-            if solved is not None:
-                da, dlam, rcond = solved
-                if np.all(np.isfinite(da)) and np.all(np.isfinite(dlam)):
-                    break
-            delta = REGULARIZATION * self.linear.scale if delta == 0.0 else 100.0 * delta
-            if not math.isfinite(delta):  # a matrix with an infinite entry: no shift helps
-                return None, "the interior-point Newton matrix is not finite (an expression overflows here)"
-            if delta > 1e10 * self.linear.scale:
-                return None, "the interior-point Newton matrix is singular even when regularised"
-        dw = eps / lam - w - D * dlam[I]
+        comp = it.eps  # the target of lambda_I o w, less a second-order correction
+        if I.size and it.predict and it.t >= PREDICT_AFTER:
+            target = self._target(parts, it, D)
+            if isinstance(target, str):
+                return None, target
+            if target is not None:
+                comp = target
+        solved = self._direction(parts, it, D, -(it.c[I] + comp / lam))
+        if isinstance(solved, str):
+            return None, solved
+        da, dlam, rcond = solved
+        dw = comp / lam - w - D * dlam[I]
         t_p = _to_boundary(w, dw)
         t_d = _to_boundary(lam, dlam[I])
         z_new = z.copy()
@@ -159,13 +171,52 @@ class InteriorPoint:
         z_new[n + E] += t_d * dlam[E]
         return z_new, w + t_p * dw, min(t_p, t_d), rcond
 
+    def _target(self, parts, it: InteriorIterate, D: np.ndarray) -> np.ndarray | str | None:
+        """Mehrotra's predictor-corrector target (Nocedal and Wright, alg. 14.3): the affine-scaling direction
+        (eps = 0) predicts how far complementarity can fall, mu_aff after the longest steps to the boundary; the
+        step then aims at sigma mu - dlambda_aff o dw_aff with sigma = (mu_aff / mu)^3, at least ``CENTERING``.
+        Returns the target per row; None where the predictor goes less than ``PREDICTED`` of the way (it says
+        nothing there: the barrier's own target eps is kept); or why the prediction failed."""
+        I = self.I
+        w, lam = it.w, it.z[self.n + I]
+        solved = self._direction(parts, it, D, -it.c[I])
+        if isinstance(solved, str):
+            return solved
+        dlam = solved[1][I]
+        dw = -w - D * dlam
+        t_p, t_d = _to_boundary(w, dw, 1.0), _to_boundary(lam, dlam, 1.0)
+        if min(t_p, t_d) < PREDICTED:
+            return None
+        mu = float(np.mean(lam * w))
+        mu_aff = float(np.mean((w + t_p * dw) * (lam + t_d * dlam)))
+        sigma = min(1.0, max(CENTERING, (mu_aff / mu) ** 3))
+        return sigma * mu - dlam * dw
 
-def _to_boundary(v: np.ndarray, dv: np.ndarray) -> float:
-    """BOUNDARY times the largest t <= 1 with v + t dv >= 0 (v > 0), or 1."""
+    def _direction(self, parts, it: InteriorIterate, D: np.ndarray,
+                   rhs_I: np.ndarray) -> tuple[np.ndarray, np.ndarray, float] | str:
+        """(da, dlambda, rcond) of the Newton system with right-hand side ``rhs_I`` on the inequality rows, the
+        matrix regularised by a multiple of the identity where it is singular; or why there is none."""
+        solve = self.linear.direction(parts, it, D, rhs_I)
+        delta = 0.0
+        while True:
+            solved = solve(delta)
+            if solved is not None:
+                da, dlam, rcond = solved
+                if np.all(np.isfinite(da)) and np.all(np.isfinite(dlam)):
+                    return da, dlam, rcond
+            delta = REGULARIZATION * self.linear.scale if delta == 0.0 else 100.0 * delta
+            if not math.isfinite(delta):  # a matrix with an infinite entry: no shift helps
+                return "the interior-point Newton matrix is not finite (an expression overflows here)"
+            if delta > 1e10 * self.linear.scale:
+                return "the interior-point Newton matrix is singular even when regularised"
+
+
+def _to_boundary(v: np.ndarray, dv: np.ndarray, fraction: float = BOUNDARY) -> float:
+    """``fraction`` times the largest t <= 1 with v + t dv >= 0 (v > 0), or 1."""
     neg = dv < 0
     if not neg.any():
         return 1.0
-    return min(1.0, BOUNDARY * float(np.min(-v[neg] / dv[neg])))
+    return min(1.0, fraction * float(np.min(-v[neg] / dv[neg])))
 
 
 class DenseBarrier:
