@@ -123,15 +123,18 @@ def test_under_the_papers_rule_the_demo_flies_off_at_K1() -> None:
 
 @pytest.mark.parametrize("safeguard", ["none", "fallback"])
 def test_the_safeguard_keeps_the_demo_in_its_arena_from_the_previous_iterate(safeguard: str) -> None:
-    """Warm-started from the last iterate as it is (warm_start: previous), the demo's budgeted iterates at K = 2 and 5
-    drive the players out of the arena (to |p| = 37 at K = 2); the safeguard applies another plan at those sampling
-    times, and the players keep their distance inside the arena."""
+    """Warm-started from the last iterate as it is (warm_start: previous), the demo's budgeted iterates at K = 2
+    drive the players out of the arena (to |p| = 39; at K = 5 they did before the interior phase took Mehrotra's steps,
+    and stay inside now); the safeguard applies another plan at the sampling times that need one, and the players keep
+    their distance inside the arena at both K."""
     sim = simulate(load_config(DEMO, {"run.K": [2, 5], "run.steps": 50, "run.reference": "none",
                                       "run.warm_start": "previous", "run.safeguard": safeguard}))
     for K, r in sim.items():
         reach = np.abs(r.x[:, [0, 1, 4, 5]]).max()
         if safeguard == "none":
-            assert reach > EDGE and r.max_constraint_violation > 0.1 and not r.fallback_steps, K
+            assert not r.fallback_steps, K
+            if K == 2:
+                assert reach > EDGE and r.max_constraint_violation > 0.1
         else:
             assert reach <= EDGE and r.max_constraint_violation <= 1e-9, K
             assert 1.0 - _distances(r.x[1:]).min() ** 2 <= 1e-9, K
