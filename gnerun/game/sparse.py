@@ -324,7 +324,7 @@ def compile_sparse(cfg: Config, game: CompiledGame, *, build_c: bool = True) -> 
                              lay.runtime.dt if timed else None)
             if build_c:
                 lib, hit, seconds = build_library(staged[:2], f"sparse_kkt_{T + 1}")
-                function, residual = ca.external("sparse_kkt", str(lib)), ca.external("sparse_residual", str(lib))
+                function, residual = _externals(lib)
                 report = KernelReport("compiled", path=str(lib), cache_hit=hit, compile_s=seconds,
                                       stages=staged[2], horizon=T + 1)
                 if key is not None:
@@ -345,6 +345,11 @@ def compile_sparse(cfg: Config, game: CompiledGame, *, build_c: bool = True) -> 
     return system
 
 
+def _externals(library) -> tuple[ca.Function, ca.Function]:
+    """The sparse system's function and its residual function from a compiled library (:func:`_staged`'s names)."""
+    return ca.external("sparse_kkt", str(library)), ca.external("sparse_residual", str(library))
+
+
 def _from_cache(game: CompiledGame, key: str, horizon: int, mode: str) -> SparseKKT | None:
     """The game's compiled sparse system from the cache (gnerun.game.kernels), if it is there (and for ``auto``, the
     game is one it compiles): nothing is built."""
@@ -355,7 +360,7 @@ def _from_cache(game: CompiledGame, key: str, horizon: int, mode: str) -> Sparse
     if mode == "auto" and int(arr["operations"]) < AUTO_FROM:
         return None
     try:
-        function, residual = ca.external("sparse_kkt", str(library)), ca.external("sparse_residual", str(library))
+        function, residual = _externals(library)
     except RuntimeError:  # a library that does not load: built again
         return None
     size = int(arr["size"])

@@ -201,7 +201,7 @@ class Simulation(dict[int, ClosedLoopResult]):
             "input_names": [u for names in self.game.variable_names for u in names],
             "agents": self.game.agent_names,
             "by_K": {str(k): r.summary(self.game) for k, r in self.items()},
-            **({"kernels": report.as_dict()} if (report := kernel_report(self.game)) is not None else {}),
+            **({"kernels": self.kernels.as_dict()} if self.kernels is not None else {}),
         }
 
 
