@@ -68,11 +68,11 @@ def record(case: Case, limit: int = 400) -> tuple[SparseKKT, list[tuple], int]:
     seen: list[tuple] = []
     factor = system.factor_kept
 
-    def recording(kind, data, keep, at=None, add=None):
+    def recording(kind, data, keep, at=None, add=None, estimate=True):
         if len(seen) < limit:
             seen.append((kind, data.copy(), keep.copy(), None if at is None else at.copy(),
                          None if add is None else add.copy()))
-        return factor(kind, data, keep, at, add)
+        return factor(kind, data, keep, at, add, estimate)
 
     system.factor_kept = recording
     iterations = 0
