@@ -122,11 +122,15 @@ def _fail(exc: BaseException) -> NoReturn:
 
 @contextlib.contextmanager
 def _reported() -> Iterator[None]:
-    """Every failure inside becomes one message and an exit code (Ctrl-C is left to main)."""
+    """Every failure inside becomes one message and an exit code; so does a Ctrl-C that reaches it (during loading
+    or imports, before a command's own handler, which says what the run left behind)."""
     try:
         yield
-    except (typer.Exit, KeyboardInterrupt):
+    except typer.Exit:
         raise
+    except KeyboardInterrupt:
+        typer.echo("interrupted", err=True)
+        raise typer.Exit(130) from None
     except Exception as e:  # noqa: BLE001 - the one place where errors become messages
         _fail(e)
 

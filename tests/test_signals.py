@@ -362,13 +362,18 @@ def test_a_signal_while_compiling_ends_at_once_with_no_directory(tmp_path) -> No
     run directory is left (or, if the compile had ended, a complete one)."""
     out = tmp_path / "run"
     proc = subprocess.Popen([*gnerun_command(), "solve", str(CONFIGS / "paper_study1.yaml"), "--set",
-                             "game.horizon=3000", "--out", str(out), "-q"], stdout=subprocess.PIPE,
+                             "game.horizon=3000", "--out", str(out)], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, stdin=subprocess.DEVNULL)
     try:
-        time.sleep(3.0)  # the config is loaded (about 1 s), its game being built
+        # the config is loaded once its size warning is out (about 1 s on a quiet machine, more on a loaded one);
+        # its game is then being built for several seconds
+        first = proc.stderr.readline()
+        assert "a large game" in first, first
+        time.sleep(1.0)
         t0 = time.monotonic()
         proc.send_signal(signal.SIGINT)
-        _, stderr = proc.communicate(timeout=60)
+        _, rest = proc.communicate(timeout=60)
+        stderr = first + rest
         elapsed = time.monotonic() - t0
     finally:
         if proc.poll() is None:
