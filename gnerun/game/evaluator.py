@@ -31,3 +31,26 @@ class Evaluator:
         self._eval()
         # CasADi stores dense matrices column by column
         return [r.reshape(shape, order="F").copy() for r, shape in zip(self._res, self._shapes, strict=True)]
+
+
+class DenseOutputs:
+    """A Function with sparse outputs, evaluated as dense numpy arrays: the Function computes the nonzeros alone and
+    they are placed into zeros. (A Function whose outputs are densified also writes every structural zero: on the
+    condensed KKT function of the paper's game, 4,963 operations against 1,706 and twice the time.)"""
+
+    def __init__(self, f: ca.Function):
+        self.function = f
+        self._nonzeros = Evaluator(f, dense=False)
+        self._places = []
+        for i in range(f.n_out()):
+            rows, cols = f.size_out(i)
+            r, c = f.sparsity_out(i).get_triplet()  # in the order the nonzeros are stored
+            self._places.append((rows, cols, np.asarray(r, dtype=np.intp) * cols + np.asarray(c, dtype=np.intp)))
+
+    def __call__(self, *args: np.ndarray) -> list[np.ndarray]:
+        out = []
+        for nz, (rows, cols, flat) in zip(self._nonzeros(*args), self._places, strict=True):
+            dense = np.zeros(rows * cols)
+            dense[flat] = nz
+            out.append(dense.reshape(rows, cols))
+        return out
