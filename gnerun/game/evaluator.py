@@ -41,15 +41,26 @@ class DenseOutputs:
     def __init__(self, f: ca.Function):
         self.function = f
         self._nonzeros = Evaluator(f, dense=False)
-        self._places = []
+        self._places = []  # per output: its shape, and the flat (C-order) position of each nonzero (None: dense)
         for i in range(f.n_out()):
             rows, cols = f.size_out(i)
-            r, c = f.sparsity_out(i).get_triplet()  # in the order the nonzeros are stored
+            sp = f.sparsity_out(i)
+            if sp.is_dense():
+                self._places.append((rows, cols, None))
+                continue
+            r, c = sp.get_triplet()  # in the order the nonzeros are stored
             self._places.append((rows, cols, np.asarray(r, dtype=np.intp) * cols + np.asarray(c, dtype=np.intp)))
 
     def __call__(self, *args: np.ndarray) -> list[np.ndarray]:
+        ev = self._nonzeros
+        for buf, arg in zip(ev._args, args, strict=True):
+            buf[:] = arg
+        ev._eval()
         out = []
-        for nz, (rows, cols, flat) in zip(self._nonzeros(*args), self._places, strict=True):
+        for nz, (rows, cols, flat) in zip(ev._res, self._places, strict=True):
+            if flat is None:  # stored column by column
+                out.append(nz.reshape((rows, cols), order="F").copy())
+                continue
             dense = np.zeros(rows * cols)
             dense[flat] = nz
             out.append(dense.reshape(rows, cols))
