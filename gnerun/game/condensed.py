@@ -76,7 +76,8 @@ def _compile(game: CompiledGame) -> KernelReport:
                             reason=f"condensed KKT function of {operations:,} operations, compiled up to "
                                    f"{COMPILE_UP_TO:,}: use solver.formulation: sparse")
     try:
-        library, hit, seconds = build_library([kkt.function, residual.function], f"condensed_kkt_{game.n}", FLAGS)
+        library, hit, seconds = build_library([kkt.function, residual.function], f"condensed_kkt_{game.n}", FLAGS,
+                                             all_outputs=True)
         compiled = (DenseOutputs(ca.external(kkt.function.name(), str(library))),
                     Evaluator(ca.external(residual.function.name(), str(library))))
     except (RuntimeError, ValueError) as why:  # a compiler's or CasADi's failure: the interpreted path stays

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import re
 import shutil
 import subprocess
 import tempfile
@@ -144,10 +145,20 @@ def load_entry(key: str) -> tuple[Path, dict[str, np.ndarray]] | None:
     return (library, arrays) if library.exists() else None
 
 
-def build_library(functions: list[ca.Function], name: str, flags: tuple[str, ...] = FLAGS) -> tuple[Path, bool, float]:
+# CasADi's C code checks an output's pointer before every entry it writes: one branch per output nonzero
+_GUARD = re.compile(r"if \(res\[\d+\]!=0\) ")
+
+
+def build_library(functions: list[ca.Function], name: str, flags: tuple[str, ...] = FLAGS, *,
+                  all_outputs: bool = False) -> tuple[Path, bool, float]:
     """C code for ``functions`` (and every Function they call), compiled with ``flags`` into a shared library in the
     cache unless one built from the same source, CasADi version, compiler and flags is there. Returns its path,
-    whether it was a cache hit, and the compile time in seconds. Raises RuntimeError when the compiler fails."""
+    whether it was a cache hit, and the compile time in seconds. Raises RuntimeError when the compiler fails.
+
+    ``all_outputs``: the library's functions are always called with every output buffer (gnerun.game.evaluator does),
+    so the check of an output's pointer before each entry written is left out of the C code: thousands of branches
+    in one function, half of gcc's time on the condensed KKT functions of the FK library (A.9b: 7.3 s of gcc -O1 CPU
+    time with them, 3.9 s without). Functions called by the MX graph of another (the stage kernels) must keep them."""
     cc = compiler()
     if cc is None:
         raise RuntimeError("no C compiler found (gcc, cc or $CC)")
@@ -155,6 +166,8 @@ def build_library(functions: list[ca.Function], name: str, flags: tuple[str, ...
     for f in functions:
         gen.add(f)
     source = gen.dump()
+    if all_outputs:
+        source = _GUARD.sub("", source)
     key = hashlib.sha256("\n".join([source, ca.__version__, cc, *flags]).encode()).hexdigest()[:24]
     folder = cache_dir()
     lib = folder / f"{name}-{key}.so"
