@@ -21,6 +21,7 @@ import casadi as ca
 
 from ..errors import one_line
 from ..language.config import Config
+from .building import stoppable
 from .compile import CompiledGame
 from .evaluator import DenseOutputs, Evaluator
 from .kernels import KernelReport, build_library, compiler
@@ -29,6 +30,7 @@ FLAGS = ("-O1", "-fPIC", "-shared")
 COMPILE_UP_TO = 100_000  # operations of the condensed KKT function (the overtaking game's 170,000: 36 s of gcc -O1)
 
 
+@stoppable  # gcc may take seconds: Ctrl-C stops the wait
 def condensed_kernels(cfg: Config, game: CompiledGame) -> KernelReport:
     """Evaluate ``game``'s condensed KKT function as ``cfg.solver.compile`` asks (compiled C or CasADi's interpreter)
     from now on; the report is kept in ``game.derived["condensed"]`` (gnerun.game.kernels.kernel_report). A game asked
@@ -70,7 +72,9 @@ def _compile(game: CompiledGame) -> KernelReport:
     kkt = game._derivatives["kkt"]
     residual = game._residual
     operations = kkt.function.n_instructions()
-    constant = "; constant derivatives, evaluated once" if game.affine else ""
+    constant = ""
+    if game.affine:  # evaluated for the constant matrices, and for the offsets of each state unless they are affine
+        constant = "; constant derivatives, evaluated once" + ("" if game.lq.offset_map is not None else " per state")
     if operations > COMPILE_UP_TO:
         return KernelReport("interpreted", form="condensed", operations=operations,
                             reason=f"condensed KKT function of {operations:,} operations, compiled up to "
