@@ -5,7 +5,9 @@ certificate` what the certificate costs next to the solve: benchmarks/certificat
 record|compare OUT.npz` whether a change left every iterate and status as it was: benchmarks/identical.py; `python -m
 benchmarks runtime` what runtime parameters cost per iteration against constants: benchmarks/runtime.py; `python -m
 benchmarks montecarlo` random merges solved with one compiled game: benchmarks/montecarlo.py; `python -m benchmarks
-stages` the sparse formulation's banded factorisation against SuperLU: benchmarks/stages.py.)
+stages` the sparse formulation's banded factorisation against SuperLU: benchmarks/stages.py; `python -m benchmarks
+condensed` the condensed KKT function compiled against interpreted on the FK library and the paper's game, iterate by
+iterate: benchmarks/condensed.py.)
 
 Prints a markdown table and writes JSON to benchmarks/results/. Every number is a median over repeats;
 every ratio is baseline time / gnerun time, both measured here, in this run.
@@ -735,6 +737,10 @@ if __name__ == "__main__":
         from .stages import main as stages_main
 
         sys.exit(stages_main(sys.argv[2:]))
+    if sys.argv[1:2] == ["condensed"]:
+        from .condensed import main as condensed
+
+        sys.exit(condensed(sys.argv[2:]))
     if sys.argv[1:2] == ["identical"]:
         from .identical import main as identical
 

@@ -47,7 +47,7 @@ from ..language.runtime import RuntimeLayout, runtime_layout
 from .affine import LQStructure, derivatives_affine, offset_map
 from .agents import AgentFunctions
 from .building import stoppable
-from .evaluator import Evaluator
+from .evaluator import DenseOutputs, Evaluator
 from .horizon import Horizon
 from .pattern import Pattern
 
@@ -125,11 +125,11 @@ class CompiledGame:
         dc = ca.jacobian(c, a) if self.m else ca.SX(0, self.n)
         # abs, min, max of the decisions have a zero second derivative almost everywhere, and are not affine
         affine = derivatives_affine(sym, dL, dc) and not self.lq.piecewise
-        kkt = ca.Function("kkt", [a, lam, x], [ca.densify(v) for v in (L, c, dL, dc)], ["a", "lam", "x"],
+        kkt = ca.Function("kkt", [a, lam, x], [ca.densify(L), ca.densify(c), dL, dc], ["a", "lam", "x"],
                           ["L", "c", "dL_dz", "dc_da"])
         # [L; c] at z = 0 as a function of the state: for LQ dynamic games it is affine in x as well
         offsets = offset_map(sym, self.n, self.m) if affine else None
-        return {"kkt": Evaluator(kkt), "sparsity": (dL.sparsity(), dc.sparsity()), "affine": affine,
+        return {"kkt": DenseOutputs(kkt), "sparsity": (dL.sparsity(), dc.sparsity()), "affine": affine,
                 "offset_map": offsets}
 
     @property

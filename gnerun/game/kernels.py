@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import re
 import shutil
 import subprocess
 import tempfile
@@ -52,11 +53,20 @@ class KernelReport:
     compile_s: float = 0.0  # gcc's time (0 on a cache hit)
     stages: int = 0  # stage Functions in the C code (distinct stages)
     horizon: int = 0
+    form: str = "stages"  # "stages": the sparse system's stage kernels; "condensed": the condensed KKT function
+    operations: int = 0  # the condensed KKT function's
+    note: str = ""  # after the line's parenthesis (a condensed function evaluated once)
 
     def as_dict(self) -> dict:
         """For summary.json."""
         out: dict = {"mode": self.mode}
-        if self.mode == "compiled":
+        if self.form == "condensed":
+            out["function"] = "condensed"
+            if self.operations:
+                out["operations"] = self.operations
+        if self.mode == "compiled" and self.form == "condensed":
+            out.update(cache_hit=self.cache_hit, compile_s=self.compile_s, library=self.path)
+        elif self.mode == "compiled":
             out.update(cache_hit=self.cache_hit, compile_s=self.compile_s, library=self.path,
                        stage_functions=self.stages, stages=self.horizon)
         elif self.reason:
@@ -67,6 +77,9 @@ class KernelReport:
         if self.mode != "compiled":
             return f"kernels: interpreted ({self.reason})" if self.reason else "kernels: interpreted"
         how = "cache hit" if self.cache_hit else f"compiled in {self.compile_s:.1f} s"
+        if self.form == "condensed":
+            return (f"kernels: compiled C, the condensed KKT function of {self.operations:,} operations ({how}; "
+                    f"{self.path}){self.note}")
         return (f"kernels: compiled C, {self.stages} stage function{'s' if self.stages != 1 else ''} for "
                 f"{self.horizon} stages ({how}; {self.path})")
 
@@ -132,10 +145,20 @@ def load_entry(key: str) -> tuple[Path, dict[str, np.ndarray]] | None:
     return (library, arrays) if library.exists() else None
 
 
-def build_library(functions: list[ca.Function], name: str) -> tuple[Path, bool, float]:
-    """C code for ``functions`` (and every Function they call), compiled into a shared library in the cache unless
-    one built from the same source, CasADi version and compiler is there. Returns its path, whether it was a cache
-    hit, and the compile time in seconds. Raises RuntimeError when the compiler fails."""
+# CasADi's C code checks an output's pointer before every entry it writes: one branch per output nonzero
+_GUARD = re.compile(r"if \(res\[\d+\]!=0\) ")
+
+
+def build_library(functions: list[ca.Function], name: str, flags: tuple[str, ...] = FLAGS, *,
+                  all_outputs: bool = False) -> tuple[Path, bool, float]:
+    """C code for ``functions`` (and every Function they call), compiled with ``flags`` into a shared library in the
+    cache unless one built from the same source, CasADi version, compiler and flags is there. Returns its path,
+    whether it was a cache hit, and the compile time in seconds. Raises RuntimeError when the compiler fails.
+
+    ``all_outputs``: the library's functions are always called with every output buffer (gnerun.game.evaluator does),
+    so the check of an output's pointer before each entry written is left out of the C code: thousands of branches
+    in one function, half of gcc's time on the condensed KKT functions of the FK library (A.9b: 7.3 s of gcc -O1 CPU
+    time with them, 3.9 s without). Functions called by the MX graph of another (the stage kernels) must keep them."""
     cc = compiler()
     if cc is None:
         raise RuntimeError("no C compiler found (gcc, cc or $CC)")
@@ -143,7 +166,9 @@ def build_library(functions: list[ca.Function], name: str) -> tuple[Path, bool, 
     for f in functions:
         gen.add(f)
     source = gen.dump()
-    key = hashlib.sha256("\n".join([source, ca.__version__, cc, *FLAGS]).encode()).hexdigest()[:24]
+    if all_outputs:
+        source = _GUARD.sub("", source)
+    key = hashlib.sha256("\n".join([source, ca.__version__, cc, *flags]).encode()).hexdigest()[:24]
     folder = cache_dir()
     lib = folder / f"{name}-{key}.so"
     if lib.exists():
@@ -154,7 +179,7 @@ def build_library(functions: list[ca.Function], name: str) -> tuple[Path, bool, 
         src = Path(tmp) / f"{name}.c"
         src.write_text(source)
         out = Path(tmp) / lib.name
-        run = subprocess.run([cc, *FLAGS, str(src), "-o", str(out), "-lm"], capture_output=True, text=True)
+        run = subprocess.run([cc, *flags, str(src), "-o", str(out), "-lm"], capture_output=True, text=True)
         if run.returncode != 0:
             raise RuntimeError(f"{Path(cc).name} failed: {run.stderr.strip()[:300]}")
         os.replace(out, lib)  # atomic: a concurrent run sees the whole library or none
@@ -224,6 +249,9 @@ def pattern_positions(pattern: ca.Sparsity, rows: np.ndarray, cols: np.ndarray) 
 
 
 def kernel_report(game) -> KernelReport | None:
-    """How ``game``'s sparse system is evaluated, if it has one (None: no sparse system was built)."""
+    """How ``game``'s KKT system is evaluated: its sparse system, if one was built, else its condensed KKT function
+    (gnerun.game.condensed), if a solver asked for it (None: neither)."""
     system = game.derived.get("sparse")
-    return None if system is None else system.kernels
+    if system is not None:
+        return system.kernels
+    return game.derived.get("condensed")

@@ -289,9 +289,10 @@ class SolverConfig(Strict):
         "auto", description="dynamic games, ssn: states eliminated (condensed, dense) or kept as unknowns (sparse, "
                             "linear in the horizon); auto: sparse for long horizons. Same iterates either way")
     compile: Literal["auto", "compiled", "interpreted"] = Field(
-        "auto", description="dynamic games, sparse formulation: the KKT system's stage functions as C compiled once "
-                            "and cached (auto and compiled, where a C compiler is found), or evaluated by CasADi's "
-                            "interpreter (interpreted). Same iterates up to rounding")
+        "auto", description="the KKT system as C compiled once and cached, where a C compiler is found, or evaluated "
+                            "by CasADi's interpreter (interpreted). Sparse formulation: its stage functions (auto and "
+                            "compiled); condensed formulation and static games, ssn: the condensed KKT function "
+                            "(compiled only; auto keeps it interpreted). Same iterates up to rounding")
     # kind: distributed (agent-distributed proximal response); ignored by ssn and jn
     scheme: Literal["jacobi", "gauss_seidel"] = "jacobi"
     tau: float = Field(1.0, ge=0, description="proximal weight: tau/2 ||a_i - abar_i||^2")

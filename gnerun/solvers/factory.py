@@ -4,6 +4,7 @@ compiled game."""
 from __future__ import annotations
 
 from ..game.compile import CompiledGame
+from ..game.condensed import condensed_kernels
 from ..game.sparse import sparse_system
 from ..language.config import Config, sparse_obstacles
 from ..threads import single_threaded_blas
@@ -20,6 +21,8 @@ def make_solver(cfg: Config, game: CompiledGame, *, disturbed: bool = True) -> S
     (unless not ``disturbed``). Asks for one BLAS thread (:mod:`gnerun.threads`)."""
     single_threaded_blas()
     disturbance = cfg.disturbance if disturbed else None
+    if cfg.solver.kind != "ssn":
+        condensed_kernels(cfg, game)  # says why nothing is compiled
     if cfg.solver.kind == "distributed":
         return ProximalResponse(cfg if disturbed else cfg.model_copy(update={"disturbance": type(cfg.disturbance)()}),
                                 game)
@@ -28,6 +31,7 @@ def make_solver(cfg: Config, game: CompiledGame, *, disturbed: bool = True) -> S
     if formulation(cfg, game) == "sparse":
         newton: SemismoothNewton = SparseSemismoothNewton(game, cfg.solver, disturbance, sparse_system(cfg, game))
     else:
+        condensed_kernels(cfg, game)  # the condensed KKT function compiled, where solver.compile asks for it
         newton = SemismoothNewton(game, cfg.solver, disturbance)
     return globalized(newton)
 
