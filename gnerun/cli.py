@@ -414,7 +414,7 @@ def solve(config: ConfigArg, out: OutOpt = None, set_: SetOpt = None, quiet: Qui
     checking = f"certificate {result.certificate_time_s * 1e3:.0f} ms; " if "best_response_gap" in cert else ""
     typer.echo(f"solver time {result.time_s * 1e3:.2f} ms ({_plural(result.iterations, 'iteration')}); {checking}"
                f"compile {result.compile_time_s * 1e3:.0f} ms")
-    if result.kernels is not None:
+    if result.kernels is not None and not result.kernels.quiet:
         typer.echo(result.kernels.line())
     typer.echo(f"run directory: {result.run_dir}")
     typer.echo(clock.line(TIMING_ORDER))
@@ -476,7 +476,7 @@ def simulate(config: ConfigArg, out: OutOpt = None, set_: SetOpt = None, quiet: 
     for r in sim.values():
         if r.message:  # a loop that ended early: why
             typer.echo(one_line(r.message))
-    if (kernels := sim.kernels) is not None:
+    if (kernels := sim.kernels) is not None and not kernels.quiet:
         typer.echo(kernels.line())
     typer.echo(f"run directory: {sim.run_dir}")
     typer.echo(clock.line(TIMING_ORDER))

@@ -44,7 +44,8 @@ def condensed_kernels(cfg: Config, game: CompiledGame) -> KernelReport:
         game._derivatives["kkt"], game.__dict__["_residual"] = interpreted
     why = _why_interpreted(mode, cfg.solver.kind)
     if why:
-        report = KernelReport("interpreted", reason=why, form="condensed")
+        # the default (auto) keeps a condensed function interpreted: said in summary.json, not on the terminal
+        report = KernelReport("interpreted", reason=why, form="condensed", quiet=mode == "auto")
     else:
         report = _compile(game)
     game.derived["condensed"] = report

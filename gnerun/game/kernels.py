@@ -56,6 +56,7 @@ class KernelReport:
     form: str = "stages"  # "stages": the sparse system's stage kernels; "condensed": the condensed KKT function
     operations: int = 0  # the condensed KKT function's
     note: str = ""  # after the line's parenthesis (a condensed function evaluated once)
+    quiet: bool = False  # the default's choice that needs no line on the terminal (summary.json still has it)
 
     def as_dict(self) -> dict:
         """For summary.json."""
