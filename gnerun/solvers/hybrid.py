@@ -24,7 +24,11 @@ first, judged by a nonmonotone watchdog; a more robust method when it fails; res
    this takes exactly the paper's steps.
 2. **Interior phase** (:mod:`gnerun.solvers.interior_point`), from the start: interior-point steps, well defined
    at singular and degenerate points, that also reach a point of a non-isolated solution set (plain GNEs whose
-   shared constraints several players carry). If ||Phi|| makes no new best for ``STALL`` steps, or a step cannot
+   shared constraints several players carry). While ||Phi|| is above ``RESET_ABOVE`` times the hand-over threshold,
+   each step is followed by the slack reset (:meth:`~gnerun.solvers.interior_point.InteriorPoint.reset_slacks`:
+   rows guessed inactive whose constraint lies further inside than the slack says); near a solution the slack's
+   lag is of second order in the step and the reset only perturbs the steps (on ALGAMES's merges and
+   intersections it then makes some of them cycle). If ||Phi|| makes no new best for ``STALL`` steps, or a step cannot
    be computed, the phase restarts from the start with the next starting point of the interior-point method;
    after ``RESTARTS`` restarts the solve ends with the status of what went wrong.
 3. **Hand-over.** Once ||Phi|| at an interior iterate is below a threshold, the Newton step is tried from it
@@ -94,6 +98,7 @@ FLAT = 1e-2  # a Levenberg-Marquardt step that changes ||Phi|| by less than this
 PIVOTS = 8  # LQ games: Lemke's method from this many covering vectors after the interior phase's restarts
 SLOW = 60  # iterations without convergence, in the interior phase, after which the line-search phase is tried (once)
 SEARCH_STEPS = 30  # the line-search phase's budget of iterations
+RESET_ABOVE = 3.0  # the interior phase resets its slacks while ||Phi|| is above this times the hand-over threshold
 FIRST_STEP = 1.0  # nonlinear games: the first Newton step from z^0 is refused if it multiplies ||Phi|| by more
 
 
@@ -323,6 +328,9 @@ class HybridNewton:
         if proposal[0] is None:
             return self._restart(state, memory, Status.SINGULAR_JACOBIAN, proposal[1])
         z, w, t, rcond = proposal
+        if self.handover and self.interior.I.size and state.residual_norm > RESET_ABOVE * memory.handover0:
+            # the slack reset, far from a solution (the interior phase alone keeps its slacks)
+            z, w = self.interior.reset_slacks(z, w, self.newton.kkt_residual(z, state.x)[1])
         new = self.newton.advance(state, z, search=memory, rcond=rcond)
         if new.status in FAILURES:  # NaN or divergence: restart if a start is left
             return self._restart(state, memory, new.status, new.message)
