@@ -331,14 +331,15 @@ def robust_rows(row, reps: int, quick: bool) -> None:
 def trajectory_iteration_rows(row, quick: bool) -> None:
     """Newton iterations per solve on ALGAMES's random merges and intersections (the default solver, one compiled
     game per scenario; target: a median of at most 15 and every draw converged), against the method as it was
-    before Mehrotra's predictor-corrector step (``interior_point.PREDICT_AFTER`` = inf) and the hand-over's
+    before Mehrotra's predictor-corrector step (``interior_point.PREDICT_AFTER`` = inf), the hand-over's
     active-set correction (``hybrid.HANDOVER_ROUNDS`` = 0, a refused hand-over retried at 0.1 ||Phi|| instead of
-    ``hybrid.HANDOVER_RETRY``), in the same run, draw by draw."""
+    ``hybrid.HANDOVER_RETRY``), the first-step rule (``hybrid.FIRST_STEP`` = inf) and the slack reset
+    (``hybrid.RESET_ABOVE`` = inf), in the same run, draw by draw."""
     from unittest import mock
 
     from .problems import trajectory
 
-    before = {"HANDOVER_ROUNDS": 0, "HANDOVER_RETRY": 0.1}
+    before = {"HANDOVER_ROUNDS": 0, "HANDOVER_RETRY": 0.1, "FIRST_STEP": math.inf, "RESET_ABOVE": math.inf}
     for label, problems in (("ALGAMES merges", trajectory.merge_problems(10 if quick else 100)),
                             ("ALGAMES intersections", trajectory.intersection_problems(3 if quick else 20))):
         cfg = load_config(text=problems[0].config_yaml)
@@ -364,7 +365,8 @@ def trajectory_iteration_rows(row, quick: bool) -> None:
         _, _, _, was = summary(counts["before"])
         row(f"{label} ({len(problems)} random draws, {formulation(cfg, game)}): Newton iterations per solve", None,
             target="median <= 15, all converged", met=med <= 15 and ok == len(problems),
-            note=f"{now}; before the predictor-corrector step and the hand-over's active-set correction: {was}")
+            note=f"{now}; before the predictor-corrector step, the hand-over's active-set correction, the first-step "
+                 f"rule and the slack reset: {was}")
 
 
 def factorization_rows(row, quick: bool) -> None:

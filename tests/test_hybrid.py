@@ -333,6 +333,37 @@ def test_a_certificate_restart_begins_in_the_interior_phase_with_the_warm_barrie
         assert np.any(np.isclose(scaled, interior_point.WARM))
 
 
+@pytest.mark.slow
+def test_a_first_newton_step_that_climbs_hands_a_nonlinear_game_to_the_interior_phase(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """ALGAMES's merge, draw 0: the first Newton step from z^0 multiplies ||Phi|| by 8.5; that iteration is the
+    interior phase's first step instead (||Phi|| falls), where the watchdog took three climbing steps before."""
+    from benchmarks.problems import trajectory
+
+    problem = trajectory.merge_problems(1)[0]
+    cfg = load_config(text=problem.config_yaml)
+    game = compile_game(cfg)
+    solver = make_solver(cfg, game)
+    start = solver.init()
+    first = solver.step(start)
+    assert first.search.phase == "interior" and first.residual_norm < start.residual_norm
+    monkeypatch.setattr(hybrid, "FIRST_STEP", np.inf)
+    phases = _newton_steps_before_the_interior_phase(cfg, game)
+    assert len(phases) == 5 and phases[1] > 8.0 * phases[0], phases  # z^0, three climbing steps, the interior start
+
+
+def test_an_lq_games_first_newton_step_may_climb(no_avi_step: None) -> None:
+    """FK A.7 from 0 (affine KKT system): the first min-map Newton step multiplies ||Phi|| by 22 and the next two
+    solve the game; the rule for nonlinear games leaves it alone."""
+    cfg = load_config(text=_fk("A.7", "x0 = 0").config_yaml)
+    game = compile_game(cfg)
+    solver = make_solver(cfg, game)
+    state = iterate(solver, solver.init())
+    assert state.converged and state.k == 3, (state.k, state.message)
+    merits = _newton_steps_before_the_interior_phase(cfg, game)
+    assert merits[1] > 20.0 * merits[0], merits
+
+
 def _newton_steps_before_the_interior_phase(cfg, game) -> list[float]:
     solver = make_solver(cfg, game)
     state = solver.init()

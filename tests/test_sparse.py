@@ -11,6 +11,7 @@ from gnerun import simulate, solve
 from gnerun.game.compile import compile_game
 from gnerun.language.config import ConfigError, load_config
 from gnerun.runs.solving import SPARSE_FROM, SPARSE_WORK, formulation, make_solver
+from gnerun.solvers import hybrid
 from gnerun.solvers.sparse_ssn import SparseSemismoothNewton
 from gnerun.solvers.ssn import SemismoothNewton, Status
 
@@ -224,12 +225,13 @@ def _dynamics(cfg):
 
 
 @pytest.mark.slow
-def test_the_globalized_sparse_method_takes_the_condensed_iterates() -> None:
-    """On the 3-car merge from zero inputs the default method meets singular Newton systems (Levenberg-Marquardt
-    steps) and enters its interior phase; the sparse formulation takes the same iterates through all of it: its
-    Levenberg-Marquardt step is the condensed one (the states and costates eliminated, not regularised), and its
-    interior direction makes each player's block of the Schur complement positive definite as the condensed
-    form does."""
+def test_the_globalized_sparse_method_takes_the_condensed_iterates(monkeypatch: pytest.MonkeyPatch) -> None:
+    """On the 3-car merge from zero inputs the default method (its Newton phase kept past a first step that climbs)
+    meets singular Newton systems (Levenberg-Marquardt steps) and enters its interior phase; the sparse formulation
+    takes the same iterates through all of it: its Levenberg-Marquardt step is the condensed one (the states and
+    costates eliminated, not regularised), and its interior direction makes each player's block of the Schur
+    complement positive definite as the condensed form does."""
+    monkeypatch.setattr(hybrid, "FIRST_STEP", np.inf)
     cfg = load_config(CONFIGS / "algames_merge_n.yaml")
     game = compile_game(cfg)
     solvers = {f: make_solver(cfg.model_copy(update={"solver": cfg.solver.model_copy(update={"formulation": f})}),

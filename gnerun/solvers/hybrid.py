@@ -17,11 +17,18 @@ first, judged by a nonmonotone watchdog; a more robust method when it fails; res
    last ``MEMORY`` values), as PATH's watchdog does: the local method's own path may climb before it converges.
    ``WATCHDOG`` steps without a new best value (``SUFFICIENT`` below the best), a non-finite Phi or a refused
    step end the phase. Where JPhi is singular, the Levenberg-Marquardt step is taken instead (a proximal
-   perturbation of the singular matrix, mu = ``LM_FAR`` ||Phi||). On the paper's games this takes exactly the
-   paper's steps.
+   perturbation of the singular matrix, mu = ``LM_FAR`` ||Phi||). In a nonlinear game (unperturbed), the first
+   step from z^0 must not raise ||Phi|| (more than ``FIRST_STEP``-fold): the linearisation at z^0 is then no
+   guide, and the interior phase takes this iteration instead of the watchdog's climb (on an LQ game the min-map
+   Newton steps are an exact active-set search whose climbs lead to the solution: FK A.7). On the paper's games
+   this takes exactly the paper's steps.
 2. **Interior phase** (:mod:`gnerun.solvers.interior_point`), from the start: interior-point steps, well defined
    at singular and degenerate points, that also reach a point of a non-isolated solution set (plain GNEs whose
-   shared constraints several players carry). If ||Phi|| makes no new best for ``STALL`` steps, or a step cannot
+   shared constraints several players carry). While ||Phi|| is above ``RESET_ABOVE`` times the hand-over threshold,
+   each step is followed by the slack reset (:meth:`~gnerun.solvers.interior_point.InteriorPoint.reset_slacks`:
+   rows guessed inactive whose constraint lies further inside than the slack says); near a solution the slack's
+   lag is of second order in the step and the reset only perturbs the steps (on ALGAMES's merges and
+   intersections it then makes some of them cycle). If ||Phi|| makes no new best for ``STALL`` steps, or a step cannot
    be computed, the phase restarts from the start with the next starting point of the interior-point method;
    after ``RESTARTS`` restarts the solve ends with the status of what went wrong.
 3. **Hand-over.** Once ||Phi|| at an interior iterate is below a threshold, the Newton step is tried from it
@@ -91,6 +98,8 @@ FLAT = 1e-2  # a Levenberg-Marquardt step that changes ||Phi|| by less than this
 PIVOTS = 8  # LQ games: Lemke's method from this many covering vectors after the interior phase's restarts
 SLOW = 60  # iterations without convergence, in the interior phase, after which the line-search phase is tried (once)
 SEARCH_STEPS = 30  # the line-search phase's budget of iterations
+RESET_ABOVE = 3.0  # the interior phase resets its slacks while ||Phi|| is above this times the hand-over threshold
+FIRST_STEP = 1.0  # nonlinear games: the first Newton step from z^0 is refused if it multiplies ||Phi|| by more
 
 
 @dataclass(slots=True, frozen=True, kw_only=True)
@@ -135,6 +144,7 @@ class HybridNewton:
         # the line-search phase: the condensed formulation's Newton method on the Fischer-Burmeister function, built
         # on first use (the sparse formulation takes min-map steps alone; a perturbed method is studied as it is)
         self.searches = handover and exact and newton.condensed
+        self.exact = exact
         # the rows a hand-over's active set may hold: inequalities that a decision reaches
         self._inequalities = np.zeros(self.game.m, dtype=bool)
         self._inequalities[self.interior.I] = True
@@ -241,7 +251,8 @@ class HybridNewton:
         # a Levenberg-Marquardt step that barely changes ||Phi|| (neither a decrease nor a climb the watchdog may
         # allow) has met a stationary point of the merit that is no solution, and further ones stay there
         flat = regularized and abs(merit - state.residual_norm) < FLAT * state.residual_norm
-        if candidate.status == Status.RUNNING and not flat and merit <= BLOWUP * max(memory.merits[-MEMORY:]):
+        if candidate.status == Status.RUNNING and not flat and not self._climbs_first(memory, state, merit) \
+                and merit <= BLOWUP * max(memory.merits[-MEMORY:]):
             best, stalls = memory.best, memory.stalls + 1
             if merit < (1.0 - SUFFICIENT) * best:
                 best, stalls = merit, 0
@@ -255,6 +266,12 @@ class HybridNewton:
         memory = replace(memory, phase="interior", best=math.inf, stalls=0,
                          handover=0.1 * min(memory.handover, state.residual_norm))
         return self._interior_step(self.newton.advance(state, it.z, search=memory, k=state.k), memory)
+
+    def _climbs_first(self, memory: Memory, state: SSNState, merit: float) -> bool:
+        """Whether this is a nonlinear game's first Newton step from z^0 (unperturbed) and it raises ||Phi|| more
+        than ``FIRST_STEP``-fold: the Newton phase then ends at once."""
+        first = len(memory.merits) == 1 and memory.interior is None and memory.attempt == 0
+        return first and self.exact and merit > FIRST_STEP * state.residual_norm and not self._affine()
 
     def _start_interior(self, state: SSNState, attempt: int, *, k: int | None = None,
                         warm: bool = False) -> SSNState:
@@ -311,6 +328,9 @@ class HybridNewton:
         if proposal[0] is None:
             return self._restart(state, memory, Status.SINGULAR_JACOBIAN, proposal[1])
         z, w, t, rcond = proposal
+        if self.handover and self.interior.I.size and state.residual_norm > RESET_ABOVE * memory.handover0:
+            # the slack reset, far from a solution (the interior phase alone keeps its slacks)
+            z, w = self.interior.reset_slacks(z, w, self.newton.kkt_residual(z, state.x)[1])
         new = self.newton.advance(state, z, search=memory, rcond=rcond)
         if new.status in FAILURES:  # NaN or divergence: restart if a start is left
             return self._restart(state, memory, new.status, new.message)

@@ -45,6 +45,12 @@ benchmarks/results/solver-design.md):
   at a time, the monotone target eps is kept: Mehrotra's target there lets the products lambda_i w_i spread and the
   primal step overshoot on nonconvex constraints (measured on ALGAMES's merges: benchmarks/results/solver-design.md).
 
+- **Slack reset** (by the globalized method, far from a solution: :meth:`InteriorPoint.reset_slacks`): after a
+  step, a row guessed inactive (lambda_j <= w_j) whose constraint lies further inside than its slack (-c_j > w_j:
+  the linearisation of a concave constraint, such as a collision distance, underestimates how far inside a step
+  goes) gets w_j = -c_j, its multiplier scaled to keep lambda_j w_j. Otherwise such a slack is driven towards zero
+  by the linearisation and cuts the next steps at the boundary, one row at a time (ALGAMES's merges).
+
 The linear algebra has the two forms of the semismooth Newton step: condensed (the inequality multipliers
 eliminated, one dense factorisation of n unknowns and the equality multipliers; constraint rows with a single
 nonzero, such as bounds, add to the diagonal) and sparse (the full-space system of a dynamic game with -D on its
@@ -141,6 +147,23 @@ class InteriorPoint:
         err = max(float(np.max(np.abs(L), initial=0.0)), float(np.max(np.abs(c[I] + w), initial=0.0)),
                   float(np.max(np.abs(c[E]), initial=0.0)), float(np.max(np.abs(lw - eps), initial=0.0)))
         return InteriorIterate(z, w, L, c, eps * SHRINK if err <= KAPPA * eps else eps, t, predict)
+
+    def reset_slacks(self, z: np.ndarray, w: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The slack reset after a step to (z, w) with c = c(a) there: a row guessed inactive (lambda_j <= w_j) whose
+        constraint is further inside than its slack says (-c_j > w_j, as the linearisation of a concave constraint,
+        a collision distance, underestimates) gets w_j = -c_j, and its multiplier is scaled by the old slack over
+        the new, so that lambda_j w_j, the row's place on the central path, is kept. Returns (z, w), copies where
+        changed."""
+        lam = z[self.n + self.I]
+        inside = -c[self.I]
+        reset = (inside > w) & (lam <= w) & np.isfinite(inside)
+        if not reset.any():
+            return z, w
+        z, w = z.copy(), w.copy()
+        rows = self.n + self.I[reset]
+        z[rows] *= w[reset] / inside[reset]
+        w[reset] = inside[reset]
+        return z, w
 
     def step(self, it: InteriorIterate, parts) -> tuple[np.ndarray, np.ndarray, float, float] | tuple[None, str]:
         """The next point (z, w), the step length taken and the reciprocal condition number of the matrix
