@@ -347,6 +347,10 @@ def test_a_first_newton_step_that_climbs_hands_a_nonlinear_game_to_the_interior_
     start = solver.init()
     first = solver.step(start)
     assert first.search.phase == "interior" and first.residual_norm < start.residual_norm
+    # the same point as a closed loop's warm start: the Newton step is kept, climbing (a budget of K steps from the
+    # last plan is better spent on Newton steps than on leaving it for the interior)
+    warm = solver.step(solver.init(warm=True))
+    assert warm.search.phase == "newton" and warm.residual_norm > 8.0 * start.residual_norm
     monkeypatch.setattr(hybrid, "FIRST_STEP", np.inf)
     phases = _newton_steps_before_the_interior_phase(cfg, game)
     assert len(phases) == 5 and phases[1] > 8.0 * phases[0], phases  # z^0, three climbing steps, the interior start

@@ -482,7 +482,7 @@ class ClosedLoop:
         solver = solver or self.solver
         budget = cfg.solver.max_iter if t == 0 and cfg.run.initial == "solve" else self.K
         t0 = time.perf_counter()
-        state = solver.init(z_warm, x, self.rng)
+        state = solver.init(z_warm, x, self.rng, warm=t > 0)
         elapsed = time.perf_counter() - t0
         state, trace, stepping = self._iterate(state, budget, seen, solver)
         self.rng = state.rng

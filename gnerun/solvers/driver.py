@@ -23,7 +23,9 @@ class Solver(Protocol):
     """What :func:`iterate` needs of a solver (every solver of :mod:`gnerun.solvers` has it)."""
 
     def init(self, z0: np.ndarray | None = None, x: np.ndarray | None = None,
-             rng: np.random.Generator | None = None) -> SSNState: ...
+             rng: np.random.Generator | None = None, warm: bool = False) -> SSNState:
+        """The state at z0 for the plant state x; ``warm``: z0 is a closed loop's warm start (the plan of the last
+        sampling time), which only the globalized method's first step takes into account."""
 
     def step(self, state: SSNState) -> SSNState: ...
 

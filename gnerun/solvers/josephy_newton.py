@@ -139,7 +139,7 @@ class JosephyNewton:
         self.disturbance = self.kkt.disturbance
 
     def init(self, z0: np.ndarray | None = None, x: np.ndarray | None = None,
-             rng: np.random.Generator | None = None) -> SSNState:
+             rng: np.random.Generator | None = None, warm: bool = False) -> SSNState:
         if rng is None and self.disturbance.kind == "pseudogradient":
             rng = np.random.default_rng(self.disturbance.seed)
         return self.kkt.init(z0, x, rng)

@@ -145,7 +145,7 @@ class KKTSystem:
 
     # ------------------------------------------------------------------------------------
     def init(self, z0: np.ndarray | None = None, x: np.ndarray | None = None,
-             rng: np.random.Generator | None = None) -> SSNState:
+             rng: np.random.Generator | None = None, warm: bool = False) -> SSNState:
         """State at z0 (default: the config's start values, multipliers zero) and plant state x."""
         game = self.game
         if z0 is None:

@@ -31,7 +31,7 @@ class LineSearchNewton:
         self.newton.forget()
 
     def init(self, z0: np.ndarray | None = None, x: np.ndarray | None = None,
-             rng: np.random.Generator | None = None) -> SSNState:
+             rng: np.random.Generator | None = None, warm: bool = False) -> SSNState:
         return self.newton.init(z0, x, rng)
 
     def terminate(self, state: SSNState) -> tuple[bool, Status]:

@@ -84,7 +84,7 @@ class ProximalResponse:
         self.gauss_seidel = cfg.solver.scheme == "gauss_seidel"
 
     def init(self, z0: np.ndarray | None = None, x: np.ndarray | None = None,
-             rng: np.random.Generator | None = None) -> SSNState:
+             rng: np.random.Generator | None = None, warm: bool = False) -> SSNState:
         return self.kkt.init(z0, x, rng)
 
     def terminate(self, state: SSNState) -> tuple[bool, Status]:
