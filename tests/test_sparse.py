@@ -394,8 +394,8 @@ def test_the_players_blocks_of_the_interior_complement() -> None:
     K = system.matrix(state.parts.J).toarray()
     K[lam0 + ip.I, lam0 + ip.I] -= D
     R = np.concatenate([np.arange(n, lam0), lam0 + ip.I])
-    for sl, blocks in zip(game.agent_slices, ip.linear._blocks(), strict=True):
+    blocks = ip.linear._blocks().complement(state.parts.J, D)
+    for sl, block in zip(game.agent_slices, blocks, strict=True):
         i = np.arange(sl.start, sl.stop)
         dense = K[np.ix_(i, i)] - K[np.ix_(i, R)] @ np.linalg.solve(K[np.ix_(R, R)], K[np.ix_(R, i)])
-        np.testing.assert_allclose(blocks.complement(state.parts.J, D), dense, rtol=0,
-                                   atol=1e-8 * np.abs(dense).max())
+        np.testing.assert_allclose(block, dense, rtol=0, atol=1e-8 * np.abs(dense).max())
