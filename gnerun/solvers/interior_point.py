@@ -62,6 +62,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import lapack
 
+from ..game.sparse import band_solve
 from .linalg import factor
 
 BOUNDARY = 0.995  # a step goes at most this fraction of the way to the boundary lambda_I = 0 or w = 0
@@ -405,7 +406,9 @@ class SparseBarrier:
                 a_cols = np.arange(ai.start, ai.stop)
                 g_rows, p_cols = np.arange(n + pi.start, n + pi.stop), np.arange(n + S + pi.start, n + S + pi.stop)
                 agents.append((n + P + own, n + own, a_cols, g_rows, p_cols))
-            self._templates = _AgentBlocks(numbered, agents, lam_I)
+            # the players' dynamics blocks solved by compiled code where the system's kernels are
+            compiled = getattr(getattr(system, "kernels", None), "mode", "") == "compiled"
+            self._templates = _AgentBlocks(numbered, agents, lam_I, compiled)
             # where K's diagonal entries of the decisions are among its nonzeros (-1: not in the pattern)
             diagonal = numbered.diagonal()[:n].astype(np.int64) - 1
             self._diagonal = diagonal
@@ -504,7 +507,9 @@ class _AgentBlocks:
     one product serve every agent: the per-agent calls cost more than their arithmetic. The blocks are zero between
     agents, so each agent's entries are computed by the same operations as on its own."""
 
-    def __init__(self, numbered, agents: list[tuple[np.ndarray, ...]], lam_I: np.ndarray) -> None:
+    def __init__(self, numbered, agents: list[tuple[np.ndarray, ...]], lam_I: np.ndarray,
+                 compiled: bool = False) -> None:
+        self.compiled = compiled  # the triangular solves by the compiled loop (gnerun.game.sparse.band_solve)
         self.states = np.array([x.size for _, x, _, _, _ in agents])
         self.decisions = np.array([a.size for _, _, a, _, _ in agents])
         width = dmax = 0
@@ -556,7 +561,7 @@ class _AgentBlocks:
             band = np.zeros((ng, self.width + 1))
             flat, positions = self._band
             band.reshape(-1)[flat] = data[positions]
-            Yx, info = lapack.dtbtrs(band.T, -self._Da.dense(data), uplo="L")
+            Yx, info = band_solve(band, -self._Da.dense(data), compiled=self.compiled)
             if info != 0:  # a zero on the diagonal
                 return None
         else:
@@ -566,7 +571,7 @@ class _AgentBlocks:
         Ylam = (KY[:nI] + Ka[:nI]) / D[self.touched, None]
         LY = self._Kl(data) @ Ylam
         rhs = -(Ka[nI:nI + ng] + KY[nI:nI + ng] + LY[:ng])
-        Yp = lapack.dtbtrs(band.T, rhs, uplo="L", trans="T")[0] if ng else rhs
+        Yp = band_solve(band, rhs, trans=True, compiled=self.compiled)[0] if ng else rhs
         S = Ka[nI + ng:] + KY[nI + ng:] + self._Ap(data) @ Yp + LY[ng:]
         rows = self._rows
         return [S[rows[i]:rows[i + 1], :k] for i, k in enumerate(self.decisions)]
