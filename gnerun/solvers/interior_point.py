@@ -555,26 +555,33 @@ class _AgentBlocks:
         self._rows = np.concatenate([[0], np.cumsum(self.decisions)])  # each agent's rows of the result
 
     def complement(self, data: np.ndarray, D: np.ndarray) -> list[np.ndarray] | None:
-        """Each agent's block of the Schur complement, or None if some D_x is singular."""
+        """Each agent's block of the Schur complement, or None if some D_x is singular. (In place where it can: the
+        arrays are of the size of all agents' states times decisions, and allocating and adding them costs more than
+        the products; every entry is the same sum, in the same order, as without.)"""
         nI, ng = self.counts
         if ng:
             band = np.zeros((ng, self.width + 1))
             flat, positions = self._band
             band.reshape(-1)[flat] = data[positions]
-            Yx, info = band_solve(band, -self._Da.dense(data), compiled=self.compiled)
+            Yx, info = band_solve(band, self._Da.dense(data, -1.0), compiled=self.compiled, overwrite=True)
             if info != 0:  # a zero on the diagonal
                 return None
         else:
             Yx = np.zeros((0, self.columns))
-        Ka = self._Ka.dense(data)
-        KY = self._Kx(data) @ Yx
-        Ylam = (KY[:nI] + Ka[:nI]) / D[self.touched, None]
+        K = self._Kx(data) @ Yx  # [C; G; A] Y_x, then plus [C; G; A]_a
+        self._Ka.add_to(K, data)
+        Ylam = K[:nI]
+        Ylam /= D[self.touched, None]
         LY = self._Kl(data) @ Ylam
-        rhs = -(Ka[nI:nI + ng] + KY[nI:nI + ng] + LY[:ng])
-        Yp = band_solve(band, rhs, trans=True, compiled=self.compiled)[0] if ng else rhs
-        S = Ka[nI + ng:] + KY[nI + ng:] + self._Ap(data) @ Yp + LY[ng:]
+        G = K[nI:nI + ng]
+        G += LY[:ng]
+        np.negative(G, out=G)  # the right-hand side of the costates' equations
+        Yp = band_solve(band, G, trans=True, compiled=self.compiled, overwrite=True)[0] if ng else G
+        S = K[nI + ng:]
+        S += self._Ap(data) @ Yp
+        S += LY[ng:]
         rows = self._rows
-        return [S[rows[i]:rows[i + 1], :k] for i, k in enumerate(self.decisions)]
+        return [S[rows[i]:rows[i + 1], :k].copy() for i, k in enumerate(self.decisions)]  # not K's memory
 
 
 def _placed(numbered, blocks: list[tuple[np.ndarray, np.ndarray, int]]):
@@ -619,10 +626,15 @@ class _Gather:
     def __init__(self, numbered, blocks: list[tuple[np.ndarray, np.ndarray, int]]) -> None:
         (self.rows, self.cols, self.positions), self.shape = _placed(numbered, blocks)
 
-    def dense(self, data: np.ndarray) -> np.ndarray:
+    def dense(self, data: np.ndarray, sign: float = 1.0) -> np.ndarray:
+        """The blocks (times ``sign``)."""
         out = np.zeros(self.shape)
-        out[self.rows, self.cols] = data[self.positions]
+        out[self.rows, self.cols] = data[self.positions] if sign == 1.0 else sign * data[self.positions]
         return out
+
+    def add_to(self, out: np.ndarray, data: np.ndarray) -> None:
+        """``out`` += the blocks, in place (each entry once: the positions are distinct)."""
+        out[self.rows, self.cols] += data[self.positions]
 
 
 def convexify(S: np.ndarray, blocks: list[slice]) -> None:
