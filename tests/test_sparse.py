@@ -410,62 +410,10 @@ def test_the_players_blocks_of_the_interior_complement(system) -> None:
     K = system.matrix(state.parts.J).toarray()
     K[lam0 + ip.I, lam0 + ip.I] -= D
     R = np.concatenate([np.arange(n, lam0), lam0 + ip.I])
-    stacked = ip.linear._blocks()
-    for compiled in (True, False):  # the triangular solves by the compiled loop and by LAPACK
-        stacked.compiled = compiled
-        blocks = stacked.complement(state.parts.J, D)
-        assert [b.shape for b in blocks] == [(sl.stop - sl.start,) * 2 for sl in game.agent_slices]
-        for sl, block in zip(game.agent_slices, blocks, strict=True):
-            i = np.arange(sl.start, sl.stop)
-            dense = K[np.ix_(i, i)] - K[np.ix_(i, R)] @ np.linalg.solve(K[np.ix_(R, R)], K[np.ix_(R, i)])
-            np.testing.assert_allclose(block, dense, rtol=0, atol=1e-8 * np.abs(dense).max())
+    blocks = ip.linear._blocks().complement(state.parts.J, D)
+    assert [b.shape for b in blocks] == [(sl.stop - sl.start,) * 2 for sl in game.agent_slices]
+    for sl, block in zip(game.agent_slices, blocks, strict=True):
+        i = np.arange(sl.start, sl.stop)
+        dense = K[np.ix_(i, i)] - K[np.ix_(i, R)] @ np.linalg.solve(K[np.ix_(R, R)], K[np.ix_(R, i)])
+        np.testing.assert_allclose(block, dense, rtol=0, atol=1e-8 * np.abs(dense).max())
 
-
-def _lower_band(rng: np.random.Generator, n: int, w: int) -> tuple[np.ndarray, np.ndarray]:
-    """A lower-triangular matrix with w diagonals below the main one, dense and in band_solve's storage."""
-    band = rng.uniform(-1.0, 1.0, (n, w + 1))
-    band[:, 0] = rng.choice([-1.0, 1.0], n) * rng.uniform(0.5, 2.0, n)
-    L = np.zeros((n, n))
-    for j in range(n):
-        for k in range(min(w, n - 1 - j) + 1):
-            L[j + k, j] = band[j, k]
-    return band, L
-
-
-@pytest.mark.parametrize("compiled", [True, False])
-def test_the_band_solve_solves_both_triangular_systems(compiled: bool, tmp_path, monkeypatch) -> None:
-    """The players' triangular solves (compiled loop, or LAPACK's dtbtrs without it) against dense solves with L and
-    L^T, several right-hand sides; a zero on the diagonal is reported as LAPACK does (info = its row, from 1)."""
-    import gnerun.game.sparse as sparse_module
-    from gnerun.game.sparse import band_solve
-
-    monkeypatch.setenv("GNERUN_CACHE_DIR", str(tmp_path))
-    monkeypatch.setattr(sparse_module, "_band_solve", False)  # built afresh in this cache
-    rng = np.random.default_rng(7)
-    for n, w, m in ((1, 0, 1), (12, 3, 5), (80, 4, 40), (30, 6, 1)):
-        band, L = _lower_band(rng, n, w)
-        R = rng.standard_normal((n, m))
-        for trans, M in ((False, L), (True, L.T)):
-            Y, info = band_solve(band, R, trans=trans, compiled=compiled)
-            assert info == 0 and Y.shape == R.shape
-            np.testing.assert_allclose(Y, np.linalg.solve(M, R), rtol=0, atol=1e-12 * np.abs(Y).max())
-        assert np.array_equal(band_solve(band, R, compiled=compiled)[0], band_solve(band, R, compiled=compiled)[0])
-        band[n // 2, 0] = 0.0
-        assert band_solve(band, R, compiled=compiled)[1] == n // 2 + 1
-    assert callable(sparse_module._band_solve) == compiled  # not even built when not asked for
-    if compiled:
-        assert [f.name.startswith("band_solve-") for f in (tmp_path / "kernels").iterdir()] == [True]
-
-
-def test_the_band_solve_without_a_compiler_is_lapacks(tmp_path, monkeypatch) -> None:
-    import gnerun.game.sparse as sparse_module
-    from gnerun.game.sparse import band_solve
-
-    monkeypatch.setenv("GNERUN_CACHE_DIR", str(tmp_path))
-    monkeypatch.setenv("CC", "no-such-compiler")
-    monkeypatch.setattr(sparse_module, "_band_solve", False)
-    band, L = _lower_band(np.random.default_rng(8), 20, 2)
-    R = np.ones((20, 3))
-    Y, info = band_solve(band, R)
-    assert sparse_module._band_solve is None and info == 0 and not (tmp_path / "kernels").exists()
-    np.testing.assert_allclose(Y, np.linalg.solve(L, R), rtol=1e-12)

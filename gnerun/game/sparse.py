@@ -27,13 +27,8 @@ closed loop; only the cost of a step differs.
 
 from __future__ import annotations
 
-import ctypes
-import hashlib
 import itertools
 import math
-import os
-import subprocess
-import tempfile
 from collections.abc import Callable
 from functools import cached_property
 from typing import NamedTuple
@@ -52,7 +47,6 @@ from .kernels import (
     KernelReport,
     Stages,
     build_library,
-    cache_dir,
     compiler,
     entry_key,
     load_entry,
@@ -834,106 +828,3 @@ def banded_wins(size: int, lower: int, upper: int) -> bool:
     all stages) has a band as wide as the matrix, where SuperLU's fill-reducing orderings keep the work linear in the
     horizon and the band's is cubic."""
     return lower + upper + 1 <= BAND_FRACTION * size
-
-
-# Triangular solves with a banded lower-triangular matrix and many right-hand sides: LAPACK's dtbtrs solves one
-# right-hand side at a time (dtbsv), whose calls cost ten times their arithmetic on the players' dynamics blocks (80
-# to 160 states, bandwidth 4, 40 to 80 right-hand sides); this loop runs over all right-hand sides at once, in
-# LAPACK's order of operations for each.
-_BAND_SOLVE_C = r"""
-/* L Y = R (trans = 0) or L^T Y = R (trans = 1), Y overwriting R (n x m, row-major); L lower triangular with w
-   diagonals below the main one, band[j * (w + 1) + k] = L[j + k][j]. Returns 0, or j + 1 if L[j][j] = 0. */
-int gnerun_band_solve(int n, int w, int m, const double *band, double *y, int trans)
-{
-    int j, k, c;
-    for (j = 0; j < n; j++)
-        if (band[(long)j * (w + 1)] == 0.0)
-            return j + 1;
-    if (!trans) {
-        for (j = 0; j < n; j++) {
-            const double *col = band + (long)j * (w + 1);
-            double *yj = y + (long)j * m;
-            for (c = 0; c < m; c++)
-                yj[c] /= col[0];
-            for (k = 1; k <= w && j + k < n; k++) {
-                double l = col[k];
-                double *yi = y + (long)(j + k) * m;
-                if (l != 0.0)
-                    for (c = 0; c < m; c++)
-                        yi[c] -= l * yj[c];
-            }
-        }
-    } else {
-        for (j = n - 1; j >= 0; j--) {
-            const double *col = band + (long)j * (w + 1);
-            double *yj = y + (long)j * m;
-            for (k = (j + w < n ? w : n - 1 - j); k >= 1; k--) {
-                double l = col[k];
-                const double *yi = y + (long)(j + k) * m;
-                if (l != 0.0)
-                    for (c = 0; c < m; c++)
-                        yj[c] -= l * yi[c];
-            }
-            for (c = 0; c < m; c++)
-                yj[c] /= col[0];
-        }
-    }
-    return 0;
-}
-"""
-_BAND_SOLVE_FLAGS = ("-O3", "-fPIC", "-shared")  # -O3 vectorizes the loops over the right-hand sides (3x -O2's speed)
-_band_solve: Callable | None | bool = False  # False: not yet loaded; None: no compiler (LAPACK's dtbtrs then)
-
-
-def _band_solve_library() -> Callable | None:
-    """The compiled band solve, built once into the kernels' cache (named by a hash of its source, the compiler and
-    its flags) and loaded; None where there is no C compiler or it fails."""
-    global _band_solve
-    if _band_solve is False:
-        _band_solve = None
-        cc = compiler()
-        if cc is not None:
-            key = hashlib.sha256("\n".join([_BAND_SOLVE_C, cc, *_BAND_SOLVE_FLAGS]).encode()).hexdigest()[:24]
-            folder = cache_dir()
-            lib = folder / f"band_solve-{key}.so"
-            try:
-                if not lib.exists():
-                    folder.mkdir(parents=True, exist_ok=True)
-                    with tempfile.TemporaryDirectory(dir=folder) as tmp:
-                        src = os.path.join(tmp, "band_solve.c")
-                        with open(src, "w") as f:
-                            f.write(_BAND_SOLVE_C)
-                        out = os.path.join(tmp, lib.name)
-                        run = subprocess.run([cc, *_BAND_SOLVE_FLAGS, src, "-o", out], capture_output=True, text=True)
-                        if run.returncode != 0:
-                            return None
-                        os.replace(out, lib)  # atomic: a concurrent run sees the whole library or none
-                function = ctypes.CDLL(str(lib)).gnerun_band_solve
-            except OSError:  # an unwritable cache or an unloadable library: LAPACK's solve stays
-                return None
-            double_p = ctypes.POINTER(ctypes.c_double)
-            function.argtypes = [ctypes.c_int, ctypes.c_int, ctypes.c_int, double_p, double_p, ctypes.c_int]
-            function.restype = ctypes.c_int
-            _band_solve = function
-    return _band_solve
-
-
-def band_solve(band: np.ndarray, rhs: np.ndarray, trans: bool = False, compiled: bool = True,
-               overwrite: bool = False) -> tuple[np.ndarray, int]:
-    """Y with L Y = rhs (``trans``: L^T Y = rhs) and LAPACK's info (j + 1 where L's diagonal entry j is zero), for
-    the lower-triangular L with ``band[j, k]`` = L[j + k, j] (n x (w + 1), LAPACK's lower band storage transposed):
-    by the compiled loop over all right-hand sides (``compiled``, where a C compiler is found), else by LAPACK's
-    dtbtrs. Both give the same solution up to rounding. ``overwrite``: rhs may hold Y afterwards (the compiled loop
-    solves in place a C-ordered float array)."""
-    function = _band_solve_library() if compiled else None
-    if function is None:
-        Y, info = lapack.dtbtrs(band.T, rhs, uplo="L", trans="T" if trans else "N")
-        return Y, int(info)
-    n, w1 = band.shape
-    band = np.ascontiguousarray(band, dtype=float)
-    in_place = overwrite and rhs.dtype == float and rhs.flags.c_contiguous
-    Y = rhs if in_place else np.array(rhs, dtype=float, order="C")
-    double_p = ctypes.POINTER(ctypes.c_double)
-    info = function(n, w1 - 1, Y.shape[1] if Y.ndim == 2 else 1, band.ctypes.data_as(double_p),
-                    Y.ctypes.data_as(double_p), int(trans))
-    return Y, int(info)

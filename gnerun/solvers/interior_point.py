@@ -62,7 +62,6 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import lapack
 
-from ..game.sparse import band_solve
 from .linalg import factor
 
 BOUNDARY = 0.995  # a step goes at most this fraction of the way to the boundary lambda_I = 0 or w = 0
@@ -406,9 +405,7 @@ class SparseBarrier:
                 a_cols = np.arange(ai.start, ai.stop)
                 g_rows, p_cols = np.arange(n + pi.start, n + pi.stop), np.arange(n + S + pi.start, n + S + pi.stop)
                 agents.append((n + P + own, n + own, a_cols, g_rows, p_cols))
-            # the players' dynamics blocks solved by compiled code where the system's kernels are
-            compiled = getattr(getattr(system, "kernels", None), "mode", "") == "compiled"
-            self._templates = _AgentBlocks(numbered, agents, lam_I, compiled)
+            self._templates = _AgentBlocks(numbered, agents, lam_I)
             # where K's diagonal entries of the decisions are among its nonzeros (-1: not in the pattern)
             diagonal = numbered.diagonal()[:n].astype(np.int64) - 1
             self._diagonal = diagonal
@@ -507,9 +504,7 @@ class _AgentBlocks:
     one product serve every agent: the per-agent calls cost more than their arithmetic. The blocks are zero between
     agents, so each agent's entries are computed by the same operations as on its own."""
 
-    def __init__(self, numbered, agents: list[tuple[np.ndarray, ...]], lam_I: np.ndarray,
-                 compiled: bool = False) -> None:
-        self.compiled = compiled  # the triangular solves by the compiled loop (gnerun.game.sparse.band_solve)
+    def __init__(self, numbered, agents: list[tuple[np.ndarray, ...]], lam_I: np.ndarray) -> None:
         self.states = np.array([x.size for _, x, _, _, _ in agents])
         self.decisions = np.array([a.size for _, _, a, _, _ in agents])
         width = dmax = 0
@@ -557,13 +552,15 @@ class _AgentBlocks:
     def complement(self, data: np.ndarray, D: np.ndarray) -> list[np.ndarray] | None:
         """Each agent's block of the Schur complement, or None if some D_x is singular. (In place where it can: the
         arrays are of the size of all agents' states times decisions, and allocating and adding them costs more than
-        the products; every entry is the same sum, in the same order, as without.)"""
+        the products; every entry is the same sum, in the same order, as without.) The triangular solves are
+        LAPACK's: a loop over all right-hand sides at once is 2-3 times faster, but its rounding (no fused
+        multiply-add) changed a best response the certificate finds on one of ten ALGAMES merges."""
         nI, ng = self.counts
         if ng:
             band = np.zeros((ng, self.width + 1))
             flat, positions = self._band
             band.reshape(-1)[flat] = data[positions]
-            Yx, info = band_solve(band, self._Da.dense(data, -1.0), compiled=self.compiled, overwrite=True)
+            Yx, info = lapack.dtbtrs(band.T, self._Da.dense(data, -1.0), uplo="L")
             if info != 0:  # a zero on the diagonal
                 return None
         else:
@@ -576,7 +573,7 @@ class _AgentBlocks:
         G = K[nI:nI + ng]
         G += LY[:ng]
         np.negative(G, out=G)  # the right-hand side of the costates' equations
-        Yp = band_solve(band, G, trans=True, compiled=self.compiled, overwrite=True)[0] if ng else G
+        Yp = lapack.dtbtrs(band.T, G, uplo="L", trans="T")[0] if ng else G
         S = K[nI + ng:]
         S += self._Ap(data) @ Yp
         S += LY[ng:]
