@@ -583,8 +583,8 @@ class _AgentBlocks:
 
 def _placed(numbered, blocks: list[tuple[np.ndarray, np.ndarray, int]]):
     """Sub-blocks (rows, cols) of a fixed sparsity pattern (``numbered``: the pattern with its nonzeros numbered 1,
-    2, ...), one below the other, each from its column ``offset`` on: (rows, cols, positions of the nonzeros), the
-    shape, and the number of the nonzeros in the pattern."""
+    2, ...), one below the other, each from its column ``offset`` on: their nonzeros' (rows, cols, positions in the
+    pattern's data), and the shape of the whole."""
     rows, cols, numbers = [], [], []
     top = width = 0
     for r, c, offset in blocks:
