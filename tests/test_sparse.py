@@ -382,13 +382,29 @@ def test_the_inverse_norm_estimate_is_lapacks() -> None:
         assert est <= np.abs(np.linalg.inv(M)).sum(axis=0).max() * (1 + 1e-9)
 
 
-def test_the_players_blocks_of_the_interior_complement() -> None:
+def _unequal_vehicles():
+    """configs/vehicles.yaml with the second car's heading fixed: one input (speed) reaching two states against the
+    first car's two inputs reaching three (the players' blocks of unequal sizes), at a point of its solve."""
+    text = (CONFIGS / "vehicles.yaml").read_text()
+    text = text.replace('th2: "th2 + dt*w2"', 'th2: "th2"').replace(", w2: {lower: -1.5, upper: 1.5, start: 0}", "")
+    text = text.replace("r*(w2**2 + (v2 - 1)**2)", "r*(v2 - 1)**2")
+    cfg = load_config(text=text, overrides={"solver.formulation": "sparse", "solver.globalization": "auto"})
+    game = compile_game(cfg)
+    solver = make_solver(cfg, game)
+    state = solver.init()
+    for _ in range(3):
+        state = solver.step(state)
+    return game, solver, state
+
+
+@pytest.mark.parametrize("system", [_merge_system, _unequal_vehicles], ids=["merge", "unequal players"])
+def test_the_players_blocks_of_the_interior_complement(system) -> None:
     """Each player's block of the interior matrix's Schur complement on (a, lambda_E), found stage-structured (banded
-    triangular solves with the dynamics' blocks), equals the dense complement K_ii - K_iR K_RR^-1 K_Ri (R: the states,
-    costates and inequality multipliers)."""
+    triangular solves with the dynamics' blocks, all players at once), equals the dense complement
+    K_ii - K_iR K_RR^-1 K_Ri (R: the states, costates and inequality multipliers)."""
     from gnerun.solvers.interior_point import InteriorPoint
 
-    game, solver, state = _merge_system()
+    game, solver, state = system()
     system = solver.newton.system
     ip = InteriorPoint(solver.newton)
     n, lam0 = game.n, system.size - game.m
@@ -396,8 +412,10 @@ def test_the_players_blocks_of_the_interior_complement() -> None:
     K = system.matrix(state.parts.J).toarray()
     K[lam0 + ip.I, lam0 + ip.I] -= D
     R = np.concatenate([np.arange(n, lam0), lam0 + ip.I])
-    for sl, blocks in zip(game.agent_slices, ip.linear._blocks(), strict=True):
+    blocks = ip.linear._blocks().complement(state.parts.J, D)
+    assert [b.shape for b in blocks] == [(sl.stop - sl.start,) * 2 for sl in game.agent_slices]
+    for sl, block in zip(game.agent_slices, blocks, strict=True):
         i = np.arange(sl.start, sl.stop)
         dense = K[np.ix_(i, i)] - K[np.ix_(i, R)] @ np.linalg.solve(K[np.ix_(R, R)], K[np.ix_(R, i)])
-        np.testing.assert_allclose(blocks.complement(state.parts.J, D), dense, rtol=0,
-                                   atol=1e-8 * np.abs(dense).max())
+        np.testing.assert_allclose(block, dense, rtol=0, atol=1e-8 * np.abs(dense).max())
+

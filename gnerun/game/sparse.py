@@ -753,7 +753,7 @@ class KeptLayout:
         if not self.size:
             return BandLU(self, np.zeros((self.ld, 0), order="F"), np.zeros(0, dtype=np.int32)), 1.0
         ab = self.band(data, add)
-        norm = float(np.abs(ab).sum(axis=0).max())
+        norm = float(np.abs(ab).sum(axis=0).max()) if estimate else math.nan  # before dgbtrf overwrites ab
         lu, piv, info = lapack.dgbtrf(ab, self.lower, self.upper, overwrite_ab=1)
         if info != 0:  # an exactly zero pivot
             return None, 0.0

@@ -259,6 +259,7 @@ class DenseBarrier:
         self._by_column: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self._key: tuple[np.ndarray, np.ndarray] | None = None  # the derivative arrays _cached was sliced from
         self._cached: tuple[np.ndarray, ...] = ()
+        self._held: _Factored | None = None  # the last matrix factorised (see _factored)
 
     def _split(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Inequality rows whose gradient has a single structural nonzero (their positions in I, and their
@@ -311,10 +312,15 @@ class DenseBarrier:
         self._key = (dL, dc)
         return self._cached
 
-    def direction(self, parts, it: InteriorIterate, D: np.ndarray, rhs_I: np.ndarray):
+    def _factored(self, parts, D: np.ndarray) -> _Factored:
+        """The matrix at ``parts`` and ``D`` (its diagonal of S and its scale) with its factorisations per
+        regularisation: kept for the next direction with the same matrix (Mehrotra's predictor and corrector)."""
+        held = self._held
+        if held is not None and held.parts is parts and held.data is parts.dL_dz and np.array_equal(held.D, D):
+            return held
         ip = self.ip
-        n, I, E = ip.n, ip.I, ip.E
-        A, BI, B_general, C_general, B_single, c_single, BE, CE, CI = self._blocks(parts)
+        n, E = ip.n, ip.E
+        A, _, B_general, C_general, B_single, c_single, BE, CE, _ = self._blocks(parts)
         single, _, general = self._split()
         S = A.copy()
         if general.size:
@@ -326,8 +332,6 @@ class DenseBarrier:
             else:
                 S[:, targets] += np.add.reduceat(B_single * (c_single / D[single[order]]), starts, axis=1)
         convexify(S, ip.newton.game.agent_slices)
-        rhs_a = BI @ (rhs_I / D)
-        rhs_a -= it.L
         k = E.size
         M = np.empty((n + k, n + k))
         M[:n, :n] = S
@@ -335,17 +339,32 @@ class DenseBarrier:
             M[:n, n:] = BE
             M[n:, :n] = CE
             M[n:, n:] = 0.0
-            rhs = np.concatenate([rhs_a, -it.c[E]])
-        else:
-            rhs = rhs_a
         diag = np.diag(S).copy()
-        self.scale = max(1.0, float(np.abs(diag).max(initial=0.0)))
+        scale = max(1.0, float(np.abs(diag).max(initial=0.0)))
+        self._held = _Factored(parts, parts.dL_dz, D.copy(), diag, scale, {}, M)
+        return self._held
+
+    def direction(self, parts, it: InteriorIterate, D: np.ndarray, rhs_I: np.ndarray):
+        ip = self.ip
+        n, I, E = ip.n, ip.I, ip.E
+        blocks = self._blocks(parts)
+        BI, CI = blocks[1], blocks[8]
+        held = self._factored(parts, D)
+        M, diag = held.matrix, held.diagonal
+        rhs_a = BI @ (rhs_I / D)
+        rhs_a -= it.L
+        rhs = np.concatenate([rhs_a, -it.c[E]]) if E.size else rhs_a
+        self.scale = held.scale
         idx = np.arange(n)
 
         def solve(delta: float):
-            if delta:
-                M[idx, idx] = diag + delta
-            lu, piv, info, rcond = factor(M)
+            if held.delta != delta:
+                M[idx, idx] = diag + delta if delta else diag
+                held.delta = delta
+            entry = held.factors.get(delta)
+            if entry is None:
+                entry = held.factors[delta] = factor(M)
+            lu, piv, info, rcond = entry
             if info != 0 or not rcond > 0.0:
                 return None
             sol, _ = lapack.dgetrs(lu, piv, rhs)
@@ -387,11 +406,12 @@ class SparseBarrier:
         self.keep = np.flatnonzero(keep)
         # the diagonal entries added to K (in keep): the decisions' shifts, then -D on the inequality multipliers
         self.at = np.concatenate([np.arange(n), np.searchsorted(self.keep, self.lam0 + ip.I)])
-        self._templates: list[_AgentBlocks] | None = None
+        self._templates: _AgentBlocks | None = None
         self._diagonal: np.ndarray | None = None
+        self._held: _Factored | None = None  # the last matrix factorised (see _factored)
 
-    def _blocks(self) -> list[_AgentBlocks]:
-        """Per agent, the sub-blocks of K that its block of the complement is built from (sliced once)."""
+    def _blocks(self) -> _AgentBlocks:
+        """The sub-blocks of K that the players' blocks of the complement are built from (sliced once)."""
         if self._templates is None:
             import scipy.sparse as sp  # loaded by the sparse formulation only
 
@@ -403,11 +423,12 @@ class SparseBarrier:
             # the pattern with its nonzeros numbered from 1 (a slice of it says which nonzeros it holds)
             numbered = sp.csc_matrix((np.arange(1, pattern.nnz + 1, dtype=float), pattern.indices, pattern.indptr),
                                      shape=pattern.shape)
-            self._templates = []
+            agents = []
             for ai, pi, own in zip(ip.newton.game.agent_slices, system.costates, system.states, strict=True):
                 a_cols = np.arange(ai.start, ai.stop)
                 g_rows, p_cols = np.arange(n + pi.start, n + pi.stop), np.arange(n + S + pi.start, n + S + pi.stop)
-                self._templates.append(_AgentBlocks(numbered, n + P + own, n + own, a_cols, g_rows, p_cols, lam_I))
+                agents.append((n + P + own, n + own, a_cols, g_rows, p_cols))
+            self._templates = _AgentBlocks(numbered, agents, lam_I)
             # where K's diagonal entries of the decisions are among its nonzeros (-1: not in the pattern)
             diagonal = numbered.diagonal()[:n].astype(np.int64) - 1
             self._diagonal = diagonal
@@ -420,13 +441,30 @@ class SparseBarrier:
         ip = self.ip
         shift = np.zeros(ip.n)
         scale = 1.0
-        for ai, b in zip(ip.newton.game.agent_slices, self._blocks(), strict=True):
-            block = b.complement(data, D)
-            if block is None:
-                return None
+        blocks = self._blocks().complement(data, D)
+        if blocks is None:
+            return None
+        for ai, block in zip(ip.newton.game.agent_slices, blocks, strict=True):
             shift[ai] = convexifying_shift(block)
             scale = max(scale, float(np.max(np.abs(np.diag(block) + shift[ai]), initial=0.0)))
         return shift, scale
+
+    def _factored(self, parts, D: np.ndarray) -> _Factored:
+        """The shifts and the factorisations (per regularisation) of the matrix at ``parts`` and ``D``: kept for
+        the next direction with the same matrix (Mehrotra's predictor and corrector solve with one matrix)."""
+        held = self._held
+        if held is not None and held.parts is parts and held.data is parts.J and np.array_equal(held.D, D):
+            return held
+        convex = self._shifts(parts.J, D)
+        shifts = np.zeros(self.ip.n)
+        if convex is None:
+            at = self._diagonal
+            diagonal = np.where(at >= 0, parts.J[at], 0.0)
+            scale = max(1.0, float(np.max(np.abs(diagonal), initial=0.0)))
+        else:
+            shifts, scale = convex
+        self._held = _Factored(parts, parts.J, D.copy(), shifts, scale, {})
+        return self._held
 
     def direction(self, parts, it: InteriorIterate, D: np.ndarray, rhs_I: np.ndarray):
         ip, system = self.ip, self.system
@@ -435,22 +473,18 @@ class SparseBarrier:
         rhs[lam0 + I] = rhs_I
         rhs[lam0 + E] = -it.c[E]
         rhs = rhs[keep]
-        convex = self._shifts(parts.J, D)
-        shifts = np.zeros(n)
-        if convex is None:
-            at = self._diagonal
-            diagonal = np.where(at >= 0, parts.J[at], 0.0)
-            self.scale = max(1.0, float(np.max(np.abs(diagonal), initial=0.0)))
-        else:
-            shifts, self.scale = convex
-        add = np.concatenate([shifts, -D])
+        held = self._factored(parts, D)
+        self.scale = held.scale
 
         def solve(delta: float):
-            if delta:
-                add[:n] = shifts + delta
-            # no condition estimate (it was 18% of a merge iteration): the step needs the factors only; a singular
-            # matrix has no factors, and a solution that overflows is refused like one
-            lu, rcond = system.factor_kept("interior", parts.J, keep, self.at, add, estimate=False)
+            entry = held.factors.get(delta)
+            if entry is None:
+                add = np.concatenate([held.diagonal + delta if delta else held.diagonal, -held.D])
+                # no condition estimate (it was 18% of a merge iteration): the step needs the factors only; a
+                # singular matrix has no factors, and a solution that overflows is refused like one
+                entry = held.factors[delta] = system.factor_kept("interior", parts.J, keep, self.at, add,
+                                                                 estimate=False)
+            lu, rcond = entry
             if lu is None:
                 return None
             sol = np.zeros(system.size)
@@ -465,65 +499,138 @@ class SparseBarrier:
         return solve
 
 
+@dataclass(slots=True)
+class _Factored:
+    """A barrier matrix by the derivatives and D it was built from (``parts`` and its array ``data``: identity,
+    D: values), with what its factorisations are built from (the sparse form: the players' shifts; the dense form:
+    the diagonal of S and the matrix, whose diagonal holds ``delta`` more), its scale and its factorisations per
+    regularisation delta."""
+
+    parts: object
+    data: np.ndarray
+    D: np.ndarray
+    diagonal: np.ndarray
+    scale: float
+    factors: dict
+    matrix: np.ndarray | None = None
+    delta: float = 0.0
+
+
 class _AgentBlocks:
-    """One agent's sub-blocks of K, by its dynamics rows (d), states (x), decisions (a), costate rows (g), costates
-    (p) and the inequality multipliers (l) of the rows it touches: D_x (banded lower triangular), D_a, then
+    """The agents' sub-blocks of K, by each agent's dynamics rows (d), states (x), decisions (a), costate rows (g),
+    costates (p) and the inequality multipliers (l) of the rows it touches: D_x (banded lower triangular), D_a, then
     [C; G; A] x (x, a) and [G; A] x l stacked, and A x p, each gathered from K's nonzeros (``numbered``: the pattern
-    with its nonzeros numbered 1, 2, ...)."""
+    with its nonzeros numbered 1, 2, ...; ``agents``: per agent (d, x, a, g, p) as indices into K).
 
-    def __init__(self, numbered, d_rows, x_cols, a_cols, g_rows, p_cols, lam_I) -> None:
-        self.states, self.decisions = x_cols.size, a_cols.size
-        # the inequality rows that involve the agent's states or decisions, or whose multipliers enter its rows: the
-        # others' multipliers do not respond to its decisions
-        touched = numbered[lam_I][:, np.concatenate([x_cols, a_cols])].getnnz(axis=1) > 0
-        touched |= numbered[np.concatenate([g_rows, a_cols])][:, lam_I].getnnz(axis=0) > 0
-        self.touched = np.flatnonzero(touched)
-        lam_I = lam_I[self.touched]
-        self.counts = (lam_I.size, g_rows.size)  # the rows of C and G in the stacks
-        Dx = numbered[d_rows][:, x_cols].tocoo()
-        below = Dx.row - Dx.col
-        self.width = int(below.max(initial=0))
-        diagonal = np.zeros(self.states, dtype=bool)
-        diagonal[Dx.row[below == 0]] = True
-        # the defects f(xi(tau), u) - xi(tau + 1), stage-major: -I on the diagonal, the dynamics' Jacobian below it
-        if not (np.all(below >= 0) and diagonal.all()):
-            raise AssertionError("the dynamics' block of the sparse system is not lower triangular")
-        # its band for LAPACK's triangular solves (the transpose of the Fortran-ordered band, as for banded LU)
-        self._band = (Dx.col * (self.width + 1) + below, Dx.data.astype(np.int64) - 1)
-        self._Da = _Gather(numbered, d_rows, a_cols)
-        stacked = np.concatenate([lam_I, g_rows, a_cols])
-        self._Ka = _Gather(numbered, stacked, a_cols)
-        self._Kx = _Product(numbered, stacked, x_cols)
-        self._Kl = _Product(numbered, np.concatenate([g_rows, a_cols]), lam_I)
-        self._Ap = _Product(numbered, a_cols, p_cols)
+    All agents are stacked block-diagonally (agent after agent in every kind of row and column; the decisions'
+    columns of each agent from the first, as many as the agent with the most has), so that one triangular solve and
+    one product serve every agent: the per-agent calls cost more than their arithmetic. The blocks are zero between
+    agents, so each agent's entries are computed by the same operations as on its own."""
 
-    def complement(self, data: np.ndarray, D: np.ndarray) -> np.ndarray | None:
-        """The agent's block of the Schur complement, or None if D_x is singular."""
+    def __init__(self, numbered, agents: list[tuple[np.ndarray, ...]], lam_I: np.ndarray) -> None:
+        self.states = np.array([x.size for _, x, _, _, _ in agents])
+        self.decisions = np.array([a.size for _, _, a, _, _ in agents])
+        width = dmax = 0
+        touched_all, lams, bands = [], [], []
+        for d_rows, x_cols, a_cols, g_rows, p_cols in agents:
+            if not g_rows.size == p_cols.size == x_cols.size:  # an agent's costates are those of its states
+                raise AssertionError("an agent's costates do not match its states in the sparse system")
+            # the inequality rows that involve the agent's states or decisions, or whose multipliers enter its rows:
+            # the others' multipliers do not respond to its decisions
+            touched = numbered[lam_I][:, np.concatenate([x_cols, a_cols])].getnnz(axis=1) > 0
+            touched |= numbered[np.concatenate([g_rows, a_cols])][:, lam_I].getnnz(axis=0) > 0
+            touched_all.append(np.flatnonzero(touched))
+            lams.append(lam_I[touched])
+            Dx = numbered[d_rows][:, x_cols].tocoo()
+            below = Dx.row - Dx.col
+            diagonal = np.zeros(x_cols.size, dtype=bool)
+            diagonal[Dx.row[below == 0]] = True
+            # the defects f(xi(tau), u) - xi(tau + 1), stage-major: -I on the diagonal, the dynamics' Jacobian below
+            if not (np.all(below >= 0) and diagonal.all()):
+                raise AssertionError("the dynamics' block of the sparse system is not lower triangular")
+            bands.append((Dx.col, below, Dx.data))
+            width = max(width, int(below.max(initial=0)))
+            dmax = max(dmax, a_cols.size)
+        self.width, self.columns = width, dmax
+        self.touched = np.concatenate(touched_all)
+        self.counts = (self.touched.size, int(self.states.sum()))  # the rows of C and of G stacked
+        # the band of D_x for LAPACK's triangular solves (the transpose of the Fortran-ordered band, as for banded LU)
+        start = np.cumsum(self.states) - self.states
+        self._band = (np.concatenate([(col + at) * (width + 1) + below
+                                      for (col, below, _), at in zip(bands, start, strict=True)]),
+                      np.concatenate([data for _, _, data in bands]).astype(np.int64) - 1)
+        d, x, a, g, p = ([agent[k] for agent in agents] for k in range(5))
+        x_at = np.concatenate([[0], np.cumsum(self.states)])  # each agent's columns of states (and costates)
+        l_at = np.concatenate([[0], np.cumsum([lam.size for lam in lams])])  # and of multipliers
+        stacked = [*lams, *g, *a]
+        agent = [*range(len(agents))] * 3
+        self._Da = _Gather(numbered, [(d[i], a[i], 0) for i in range(len(agents))])
+        self._Ka = _Gather(numbered, [(r, a[i], 0) for r, i in zip(stacked, agent, strict=True)])
+        self._Kx = _Product(numbered, [(r, x[i], x_at[i]) for r, i in zip(stacked, agent, strict=True)])
+        self._Kl = _Product(numbered, [(r, lams[i], l_at[i]) for r, i in zip([*g, *a], agent[:2 * len(agents)],
+                                                                                strict=True)])
+        self._Ap = _Product(numbered, [(a[i], p[i], x_at[i]) for i in range(len(agents))])
+        self._rows = np.concatenate([[0], np.cumsum(self.decisions)])  # each agent's rows of the result
+
+    def complement(self, data: np.ndarray, D: np.ndarray) -> list[np.ndarray] | None:
+        """Each agent's block of the Schur complement, or None if some D_x is singular. (In place where it can: the
+        arrays are of the size of all agents' states times decisions, and allocating and adding them costs more than
+        the products; every entry is the same sum, in the same order, as without.) The triangular solves are
+        LAPACK's: a loop over all right-hand sides at once is 2-3 times faster, but its rounding (no fused
+        multiply-add) changed a best response the certificate finds on one of ten ALGAMES merges."""
         nI, ng = self.counts
-        band = np.zeros((self.states, self.width + 1))
-        if self.states:
+        if ng:
+            band = np.zeros((ng, self.width + 1))
             flat, positions = self._band
             band.reshape(-1)[flat] = data[positions]
-            Yx, info = lapack.dtbtrs(band.T, -self._Da.dense(data), uplo="L")
+            Yx, info = lapack.dtbtrs(band.T, self._Da.dense(data, -1.0), uplo="L")
             if info != 0:  # a zero on the diagonal
                 return None
         else:
-            Yx = np.zeros((0, self.decisions))
-        Ka = self._Ka.dense(data)
-        KY = self._Kx(data) @ Yx
-        Ylam = (KY[:nI] + Ka[:nI]) / D[self.touched, None]
+            Yx = np.zeros((0, self.columns))
+        K = self._Kx(data) @ Yx  # [C; G; A] Y_x, then plus [C; G; A]_a
+        self._Ka.add_to(K, data)
+        Ylam = K[:nI]
+        Ylam /= D[self.touched, None]
         LY = self._Kl(data) @ Ylam
-        rhs = -(Ka[nI:nI + ng] + KY[nI:nI + ng] + LY[:ng])
-        Yp = lapack.dtbtrs(band.T, rhs, uplo="L", trans="T")[0] if self.states else rhs
-        return Ka[nI + ng:] + KY[nI + ng:] + self._Ap(data) @ Yp + LY[ng:]
+        G = K[nI:nI + ng]
+        G += LY[:ng]
+        np.negative(G, out=G)  # the right-hand side of the costates' equations
+        Yp = lapack.dtbtrs(band.T, G, uplo="L", trans="T")[0] if ng else G
+        S = K[nI + ng:]
+        S += self._Ap(data) @ Yp
+        S += LY[ng:]
+        rows = self._rows
+        return [S[rows[i]:rows[i + 1], :k].copy() for i, k in enumerate(self.decisions)]  # not K's memory
+
+
+def _placed(numbered, blocks: list[tuple[np.ndarray, np.ndarray, int]]):
+    """Sub-blocks (rows, cols) of a fixed sparsity pattern (``numbered``: the pattern with its nonzeros numbered 1,
+    2, ...), one below the other, each from its column ``offset`` on: their nonzeros' (rows, cols, positions in the
+    pattern's data), and the shape of the whole."""
+    rows, cols, numbers = [], [], []
+    top = width = 0
+    for r, c, offset in blocks:
+        sub = numbered[r][:, c].tocoo()
+        rows.append(sub.row + top)
+        cols.append(sub.col + offset)
+        numbers.append(sub.data)
+        top += r.size
+        width = max(width, offset + c.size)
+    return (np.concatenate(rows).astype(np.int64), np.concatenate(cols).astype(np.int64),
+            np.concatenate(numbers).astype(np.int64) - 1), (top, width)
 
 
 class _Product:
-    """One sub-block (rows, cols) of a fixed sparsity pattern as a sparse matrix built once, its values refreshed
-    from the pattern's nonzeros at every call (building a sparse matrix costs more than the product it serves)."""
+    """Sub-blocks of a fixed sparsity pattern placed as :func:`_placed` says, as a sparse matrix built once, its
+    values refreshed from the pattern's nonzeros at every call (building a sparse matrix costs more than the product
+    it serves)."""
 
-    def __init__(self, numbered, rows: np.ndarray, cols: np.ndarray) -> None:
-        self.matrix = numbered[rows][:, cols].tocsr()
+    def __init__(self, numbered, blocks: list[tuple[np.ndarray, np.ndarray, int]]) -> None:
+        import scipy.sparse as sp  # loaded by the sparse formulation only
+
+        (rows, cols, positions), shape = _placed(numbered, blocks)
+        self.matrix = sp.csr_matrix((positions + 1.0, (rows, cols)), shape=shape)
         self.matrix.sort_indices()
         self.positions = self.matrix.data.astype(np.int64) - 1
 
@@ -533,22 +640,21 @@ class _Product:
 
 
 class _Gather:
-    """One sub-block (rows, cols) of a fixed sparsity pattern, rebuilt from the pattern's nonzeros by a gather
-    (sparse slicing at every call costs more than the arithmetic it serves). ``numbered``: the pattern with its
-    nonzeros numbered 1, 2, ..."""
+    """Sub-blocks of a fixed sparsity pattern placed as :func:`_placed` says, as a dense array rebuilt from the
+    pattern's nonzeros by a gather (sparse slicing at every call costs more than the arithmetic it serves)."""
 
-    def __init__(self, numbered, rows: np.ndarray, cols: np.ndarray) -> None:
-        sub = numbered[rows][:, cols].tocsc()
-        sub.sort_indices()
-        self.shape = sub.shape
-        self.indices, self.indptr = sub.indices, sub.indptr
-        self.positions = sub.data.astype(np.int64) - 1
-        self.col_of = np.repeat(np.arange(sub.shape[1]), np.diff(sub.indptr))
+    def __init__(self, numbered, blocks: list[tuple[np.ndarray, np.ndarray, int]]) -> None:
+        (self.rows, self.cols, self.positions), self.shape = _placed(numbered, blocks)
 
-    def dense(self, data: np.ndarray) -> np.ndarray:
+    def dense(self, data: np.ndarray, sign: float = 1.0) -> np.ndarray:
+        """The blocks (times ``sign``)."""
         out = np.zeros(self.shape)
-        out[self.indices, self.col_of] = data[self.positions]
+        out[self.rows, self.cols] = data[self.positions] if sign == 1.0 else sign * data[self.positions]
         return out
+
+    def add_to(self, out: np.ndarray, data: np.ndarray) -> None:
+        """``out`` += the blocks, in place (each entry once: the positions are distinct)."""
+        out[self.rows, self.cols] += data[self.positions]
 
 
 def convexify(S: np.ndarray, blocks: list[slice]) -> None:
