@@ -232,19 +232,13 @@ def test_the_predictor_corrector_step_ends_a_stalled_merge(monkeypatch: pytest.M
     phase cycles at eps = 8e-6 and is restarted twice (136 iterations); with Mehrotra's steps it converges without a
     restart. (With the slack reset it cycles at eps = 1.6e-6 either way: 157 iterations.)"""
     from benchmarks.problems import trajectory
-    from gnerun.solvers.driver import iterate
 
     problem = trajectory.merge_problems(5)[4]
     cfg = load_config(text=problem.config_yaml)
     game = compile_game(cfg)
     monkeypatch.setattr(hybrid, "RESET_ABOVE", np.inf)  # Mehrotra's step alone (with the slack reset it cycles)
-    iterations = []
-    for after in (interior_point.PREDICT_AFTER, np.inf):
-        monkeypatch.setattr(interior_point, "PREDICT_AFTER", after)
-        solver = make_solver(cfg, game)
-        state = iterate(solver, solver.init())
-        assert state.converged, state.message
-        iterations.append(state.k)
+    iterations = _iterations_with(monkeypatch, cfg, game, interior_point, "PREDICT_AFTER",
+                                  (interior_point.PREDICT_AFTER, np.inf))
     assert iterations[0] <= 40 < 100 <= iterations[1], iterations
 
 
@@ -275,16 +269,24 @@ def test_the_slack_reset_shortens_a_merge(monkeypatch: pytest.MonkeyPatch) -> No
     """ALGAMES's merge, draw 8: the collision rows' slacks lag behind their (concave) constraints, whose
     linearisation underestimates how far inside a step goes; with the slack reset 16 iterations, without 34."""
     from benchmarks.problems import trajectory
-    from gnerun.solvers.driver import iterate
 
     problem = trajectory.merge_problems(9)[8]
     cfg = load_config(text=problem.config_yaml)
     game = compile_game(cfg)
+    iterations = _iterations_with(monkeypatch, cfg, game, hybrid, "RESET_ABOVE", (hybrid.RESET_ABOVE, np.inf))
+    assert iterations[0] <= 20 < 30 <= iterations[1], iterations
+
+
+def _iterations_with(monkeypatch: pytest.MonkeyPatch, cfg, game, module, name: str, values) -> list[int]:
+    """The default solver's iterations from the config's start with ``module.name`` set to each of ``values`` (each
+    solve converged)."""
+    from gnerun.solvers.driver import iterate
+
     iterations = []
-    for above in (hybrid.RESET_ABOVE, np.inf):
-        monkeypatch.setattr(hybrid, "RESET_ABOVE", above)
+    for value in values:
+        monkeypatch.setattr(module, name, value)
         solver = make_solver(cfg, game)
         state = iterate(solver, solver.init())
         assert state.converged, state.message
         iterations.append(state.k)
-    assert iterations[0] <= 20 < 30 <= iterations[1], iterations
+    return iterations

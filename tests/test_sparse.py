@@ -307,10 +307,15 @@ def _merge_system():
     """ALGAMES's merge in the sparse formulation, a point of its solve (after the Newton phase and a few interior
     steps: multipliers of all sizes) and that point's parts."""
     cfg = load_config(CONFIGS / "algames_merge.yaml", {"solver.formulation": "sparse"})
+    return _stepped(cfg, 15)
+
+
+def _stepped(cfg, steps: int):
+    """The game of ``cfg``, its default solver and the state after ``steps`` steps from the config's start."""
     game = compile_game(cfg)
     solver = make_solver(cfg, game)
     state = solver.init()
-    for _ in range(15):
+    for _ in range(steps):
         state = solver.step(state)
     return game, solver, state
 
@@ -389,12 +394,7 @@ def _unequal_vehicles():
     text = text.replace('th2: "th2 + dt*w2"', 'th2: "th2"').replace(", w2: {lower: -1.5, upper: 1.5, start: 0}", "")
     text = text.replace("r*(w2**2 + (v2 - 1)**2)", "r*(v2 - 1)**2")
     cfg = load_config(text=text, overrides={"solver.formulation": "sparse", "solver.globalization": "auto"})
-    game = compile_game(cfg)
-    solver = make_solver(cfg, game)
-    state = solver.init()
-    for _ in range(3):
-        state = solver.step(state)
-    return game, solver, state
+    return _stepped(cfg, 3)
 
 
 @pytest.mark.parametrize("system", [_merge_system, _unequal_vehicles], ids=["merge", "unequal players"])

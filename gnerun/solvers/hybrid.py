@@ -21,8 +21,8 @@ first, judged by a nonmonotone watchdog; a more robust method when it fails; res
    step from z^0 must not raise ||Phi|| (more than ``FIRST_STEP``-fold): the linearisation at z^0 is then no
    guide, and the interior phase takes this iteration instead of the watchdog's climb (on an LQ game the min-map
    Newton steps are an exact active-set search whose climbs lead to the solution: FK A.7; a closed loop's warm
-   start keeps its Newton step too, see ``_climbs_first``). On the paper's games
-   this takes exactly the paper's steps.
+   start keeps its Newton step too, see ``_climbs_first``). On the paper's games this takes exactly the paper's
+   steps.
 2. **Interior phase** (:mod:`gnerun.solvers.interior_point`), from the start: interior-point steps, well defined
    at singular and degenerate points, that also reach a point of a non-isolated solution set (plain GNEs whose
    shared constraints several players carry). While ||Phi|| is above ``RESET_ABOVE`` times the hand-over threshold,

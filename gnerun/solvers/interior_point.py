@@ -316,7 +316,7 @@ class DenseBarrier:
         """The matrix at ``parts`` and ``D`` (its diagonal of S and its scale) with its factorisations per
         regularisation: kept for the next direction with the same matrix (Mehrotra's predictor and corrector)."""
         held = self._held
-        if held is not None and held.parts is parts and held.data is parts.dL_dz and np.array_equal(held.D, D):
+        if held is not None and held.holds(parts, parts.dL_dz, D):
             return held
         ip = self.ip
         n, E = ip.n, ip.E
@@ -453,7 +453,7 @@ class SparseBarrier:
         """The shifts and the factorisations (per regularisation) of the matrix at ``parts`` and ``D``: kept for
         the next direction with the same matrix (Mehrotra's predictor and corrector solve with one matrix)."""
         held = self._held
-        if held is not None and held.parts is parts and held.data is parts.J and np.array_equal(held.D, D):
+        if held is not None and held.holds(parts, parts.J, D):
             return held
         convex = self._shifts(parts.J, D)
         shifts = np.zeros(self.ip.n)
@@ -514,6 +514,10 @@ class _Factored:
     factors: dict
     matrix: np.ndarray | None = None
     delta: float = 0.0
+
+    def holds(self, parts, data: np.ndarray, D: np.ndarray) -> bool:
+        """Whether this is the matrix of ``parts`` (the same object and array) and ``D`` (the same values)."""
+        return self.parts is parts and self.data is data and np.array_equal(self.D, D)
 
 
 class _AgentBlocks:
