@@ -14,7 +14,7 @@ import casadi as ca
 import numpy as np
 
 from .building import stoppable
-from .evaluator import Evaluator
+from .evaluator import DenseOutputs, Evaluator
 from .tape import kink_function
 
 if TYPE_CHECKING:
@@ -65,6 +65,28 @@ class AgentFunctions:
             parts = ca.vertcat(sym.J[agent], sym.c[rows]) if rows else sym.J[agent]
             cache[agent] = kink_function(ca.Function("parts", [sym.a, sym.x], [parts]))
         return cache[agent]
+
+    def own_problem(self, agent: int, a: np.ndarray,
+                    x: np.ndarray | None = None) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
+        """Agent ``agent``'s own problem at a, in one evaluation: J_i, its gradient in the agent's own decisions, the
+        rows of its feasible set (``constraint_rows``, bounds included) and their Jacobian in its own decisions (what
+        a local solve of its best response asks for at every point; the game's functions compute every agent's
+        costs and every row's derivatives in all decisions, N times the work with N players). Built once per
+        agent."""
+        cache = self.game.derived.setdefault("own_problems", {})
+        if agent not in cache:
+            cache[agent] = self._own_problem(agent)
+        J, dJ, c, dc = cache[agent](a, self.game._x(x))
+        return float(J[0, 0]), dJ.reshape(-1), c.reshape(-1), dc
+
+    @stoppable
+    def _own_problem(self, agent: int) -> DenseOutputs:
+        sym = self.game._symbolic
+        ai = sym.a[self.game.agent_slices[agent]]
+        rows = self.constraint_rows(agent).tolist()
+        ci = sym.c[rows] if rows else ca.SX(0, 1)
+        return DenseOutputs(ca.Function("own_problem", [sym.a, sym.x],
+                                        [sym.J[agent], ca.gradient(sym.J[agent], ai), ci, ca.jacobian(ci, ai)]))
 
     def hessian(self, agent: int, a: np.ndarray, x: np.ndarray | None = None) -> np.ndarray:
         """The Hessian of J_i in the agent's own decisions at a (its block of the game Hessian H; the function is
@@ -139,3 +161,53 @@ class AgentFunctions:
                 one = ca.Function("values", [sym.a, sym.x], [ca.densify(sym.J), c])
             cache[(size, directional)] = Evaluator(one.map(f"values_{size}", "serial", size, [1], []))
         return cache[(size, directional)]
+
+
+class OwnProblem:
+    """Agent ``agent``'s own problem with the others fixed at ``a`` (and the state x), for a local solver that asks
+    for the cost and for the rows at the same point separately (SciPy's SLSQP): one evaluation of
+    :meth:`AgentFunctions.own_problem` per point, kept for the next call. The rows are the agent's
+    ``constraint_rows``, in that order; ``eq`` marks its equalities."""
+
+    def __init__(self, game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | None) -> None:
+        self.game, self.agent, self.x = game, agent, x
+        self.a = np.asarray(a, dtype=float)
+        self.sl = game.agent_slices[agent]
+        self.rows = game.agents.constraint_rows(agent)
+        self.eq = game.equality_mask[self.rows]
+        self._key: bytes | None = None
+        self._values: tuple = ()
+
+    def full(self, ai: np.ndarray) -> np.ndarray:
+        """The decisions of every agent with this agent's replaced by ``ai``."""
+        b = self.a.copy()
+        b[self.sl] = ai
+        return b
+
+    def at(self, ai: np.ndarray) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
+        """(J_i, its gradient, the rows, their Jacobian) at ``ai``."""
+        key = np.asarray(ai, dtype=float).tobytes()
+        if key != self._key:
+            self._values = self.game.agents.own_problem(self.agent, self.full(ai), self.x)
+            self._key = key
+        return self._values
+
+    def objective(self, ai: np.ndarray) -> tuple[float, np.ndarray]:
+        J, dJ, _, _ = self.at(ai)
+        return J, dJ
+
+    def constraints(self) -> list[dict]:
+        """SLSQP's constraints: c_i <= 0 as -c_i >= 0, and the equalities."""
+        ineq, eq = ~self.eq, self.eq
+        out = []
+        if ineq.any():
+            out.append({"type": "ineq", "fun": lambda ai: -self.at(ai)[2][ineq],
+                        "jac": lambda ai: -self.at(ai)[3][ineq]})
+        if eq.any():
+            out.append({"type": "eq", "fun": lambda ai: self.at(ai)[2][eq], "jac": lambda ai: self.at(ai)[3][eq]})
+        return out
+
+    def violation(self, ai: np.ndarray) -> float:
+        """The largest violation of the rows at ``ai`` (0 where every row holds)."""
+        c = self.at(ai)[2]
+        return max(float(np.max(c[~self.eq], initial=0.0)), float(np.max(np.abs(c[self.eq]), initial=0.0)))

@@ -51,6 +51,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import minimize
 
+from ..game.agents import OwnProblem
 from ..game.compile import CompiledGame
 from ..game.tape import Tape, UnsupportedTape
 from . import global_response, unbounded
@@ -346,37 +347,8 @@ def best_response(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray |
     multipliers of the agent's rows, in ``constraint_rows`` order) such a point is charged for its violations at
     those prices, so that violating a constraint by 1e-9 at a multiplier of 100 does not count as a gain of 1e-7."""
     a = np.asarray(a, dtype=float)
-    sl = game.agent_slices[agent]
-    rows = game.agents.constraint_rows(agent)
-    eq_rows = rows[game.equality_mask[rows]]
-    in_rows = rows[~game.equality_mask[rows]]
-    last: dict = {}
-
-    def full(ai: np.ndarray) -> np.ndarray:
-        b = a.copy()
-        b[sl] = ai
-        return b
-
-    def values(ai: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The constraint values and their Jacobian at a_i (kept for the next call at the same point: SLSQP asks
-        for the function and the Jacobian separately)."""
-        key = ai.tobytes()
-        if last.get("key") != key:
-            c, dc = game.constraint_values(full(ai), x)
-            last.update(key=key, c=c, dc=dc[:, sl])
-        return last["c"], last["dc"]
-
-    def objective(ai: np.ndarray) -> tuple[float, np.ndarray]:
-        b = full(ai)
-        return float(game.costs(b, x)[agent]), game.cost_gradients(b, x)[agent, sl]
-
-    constraints = []
-    if in_rows.size:
-        constraints.append({"type": "ineq", "fun": lambda ai: -values(ai)[0][in_rows],
-                            "jac": lambda ai: -values(ai)[1][in_rows]})
-    if eq_rows.size:
-        constraints.append({"type": "eq", "fun": lambda ai: values(ai)[0][eq_rows],
-                            "jac": lambda ai: values(ai)[1][eq_rows]})
+    problem = OwnProblem(game, agent, a, x)
+    objective, constraints = problem.objective, problem.constraints()
     candidates = response_starts(game, agent, a, x).local if starts is None else starts
     best_val, best_x, notes = None, None, []
     for s in candidates:
@@ -388,11 +360,11 @@ def best_response(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray |
         if not np.all(np.isfinite(ai)):
             notes.append("SLSQP from a start ended at a non-finite point")
             continue
-        c = values(ai)[0]
-        viol = max(float(np.max(c[in_rows], initial=0.0)), float(np.max(np.abs(c[eq_rows]), initial=0.0)))
+        viol = problem.violation(ai)
         val = objective(ai)[0]
         if prices is not None:
-            over = np.where(game.equality_mask[rows], np.abs(c[rows]), np.maximum(c[rows], 0.0))
+            c = problem.at(ai)[2]
+            over = np.where(problem.eq, np.abs(c), np.maximum(c, 0.0))
             val += float(np.abs(prices) @ over)
         if not math.isfinite(val) or viol > FEASIBILITY_TOL * max(1.0, float(np.max(np.abs(ai), initial=0.0))):
             notes.append(f"SLSQP from a start ended infeasible ({res.message})")

@@ -25,6 +25,7 @@ import warnings
 
 import numpy as np
 
+from ..game.agents import OwnProblem
 from ..game.compile import CompiledGame
 
 PERTURBATIONS = (0.1, 1.0)  # relative sizes of the seeded perturbed starts of a player's answer
@@ -37,35 +38,8 @@ def best_answer(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | N
     """Player ``agent``'s lowest cost, and its decisions, over the feasible end points of SLSQP on its own problem
     (its cost, its own rows and the shared ones; the others fixed at ``a``) from ``starts``; None if none is
     feasible."""
-    sl = game.agent_slices[agent]
-    rows = game.agents.constraint_rows(agent)
-    eq = game.equality_mask[rows]
-    in_rows, eq_rows = rows[~eq], rows[eq]
-    last: dict = {}
-
-    def full(ai: np.ndarray) -> np.ndarray:
-        b = a.copy()
-        b[sl] = ai
-        return b
-
-    def values(ai: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        key = ai.tobytes()  # SLSQP asks for the values and the Jacobian at the same point separately
-        if last.get("key") != key:
-            c, dc = game.constraint_values(full(ai), x)
-            last.update(key=key, c=c, dc=dc[:, sl])
-        return last["c"], last["dc"]
-
-    def objective(ai: np.ndarray) -> tuple[float, np.ndarray]:
-        b = full(ai)
-        return float(game.costs(b, x)[agent]), game.cost_gradients(b, x)[agent, sl]
-
-    constraints = []
-    if in_rows.size:
-        constraints.append({"type": "ineq", "fun": lambda ai: -values(ai)[0][in_rows],
-                            "jac": lambda ai: -values(ai)[1][in_rows]})
-    if eq_rows.size:
-        constraints.append({"type": "eq", "fun": lambda ai: values(ai)[0][eq_rows],
-                            "jac": lambda ai: values(ai)[1][eq_rows]})
+    problem = OwnProblem(game, agent, a, x)
+    objective, constraints = problem.objective, problem.constraints()
     from scipy.optimize import minimize  # (loaded when a round of best responses runs: a fallback, 0.2 s of import)
 
     best: tuple[float, np.ndarray] | None = None
@@ -80,8 +54,7 @@ def best_answer(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | N
         ai = np.asarray(res.x, dtype=float)
         if not np.all(np.isfinite(ai)):
             continue
-        c = values(ai)[0]
-        viol = max(float(np.max(c[in_rows], initial=0.0)), float(np.max(np.abs(c[eq_rows]), initial=0.0)))
+        viol = problem.violation(ai)
         value = objective(ai)[0]
         if not (math.isfinite(value) and viol <= FEASIBILITY_TOL * max(1.0, float(np.max(np.abs(ai), initial=0.0)))):
             continue
