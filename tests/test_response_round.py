@@ -1,12 +1,14 @@
 """A round of best responses (gnerun/solvers/response_round.py): each player's answer against closed forms, the round's
-Jacobi order, and its place in the globalized method (after every interior start from z^0 has failed, once)."""
+Jacobi order, and its place in the globalized method (once: after the first interior start from z^0 stalls, answering
+the plans where it stalled; else after every interior start from z^0 has failed, answering the start plans)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from benchmarks.problems.trajectory import overtaking_model, overtaking_problems
+import gnerun
+from benchmarks.problems.trajectory import merge_problems, overtaking_model, overtaking_problems
 from gnerun.game.compile import compile_game
 from gnerun.language.config import load_config
 from gnerun.runs.solving import iterate, make_solver
@@ -96,6 +98,37 @@ def test_no_feasible_answer_for_anyone_is_none() -> None:
     assert response_round.response_round(game, np.array([0.0, 0.9]), None) is None
 
 
+@pytest.mark.parametrize("config", ["algames_merge.yaml", "nonlinear_gne.yaml"])
+def test_a_players_own_problem_is_the_games_functions_restricted_to_it(config: str) -> None:
+    """One evaluation of agent i's own problem (what SLSQP reads at every point of a best response) gives the game's
+    J_i, its gradient in a_i, the rows of i's feasible set and their Jacobian in a_i (the game's functions, sliced),
+    and the gradient and Jacobian match central differences of the values."""
+    from gnerun.game.agents import OwnProblem
+
+    game = compile_game(load_config(CONFIGS / config))
+    rng = np.random.default_rng(5)
+    a = game.z_start()[: game.n] + 0.1 * rng.standard_normal(game.n)
+    c_all, dc_all = game.constraint_values(a)
+    for agent, sl in enumerate(game.agent_slices):
+        rows = game.agents.constraint_rows(agent)
+        J, dJ, c, dc = game.agents.own_problem(agent, a)
+        assert J == pytest.approx(game.costs(a)[agent], rel=1e-13, abs=1e-13)
+        np.testing.assert_allclose(dJ, game.cost_gradients(a)[agent, sl], rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(c, c_all[rows], rtol=1e-13, atol=1e-13)
+        np.testing.assert_allclose(dc, dc_all[rows][:, sl], rtol=1e-12, atol=1e-12)
+        problem = OwnProblem(game, agent, a, None)
+        h = 1e-6
+        for j in range(min(4, sl.stop - sl.start)):
+            e = np.zeros(sl.stop - sl.start)
+            e[j] = h
+            up, down = problem.at(a[sl] + e), problem.at(a[sl] - e)
+            assert (up[0] - down[0]) / (2 * h) == pytest.approx(dJ[j], rel=1e-5, abs=1e-7)
+            np.testing.assert_allclose((up[2] - down[2]) / (2 * h), dc[:, j], rtol=1e-5, atol=1e-7)
+        assert problem.violation(a[sl]) == pytest.approx(
+            max(float(np.max(c[~game.equality_mask[rows]], initial=0.0)),
+                float(np.max(np.abs(c[game.equality_mask[rows]]), initial=0.0))))
+
+
 def _overtaking(start: int = 0):
     # the condensed formulation: the one with the line-search phase (auto takes the sparse one for this game)
     cfg = load_config(text=overtaking_problems()[start].config_yaml, overrides={"solver.formulation": "condensed"})
@@ -111,12 +144,13 @@ def monotone_barrier(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(interior_point, "PREDICT_AFTER", np.inf)
 
 
-def test_the_round_comes_after_every_interior_start_from_the_cold_overtaking_start(
+def test_the_round_answers_the_plans_where_the_first_interior_start_stalled(
         monkeypatch: pytest.MonkeyPatch, monotone_barrier: None) -> None:
-    """From zero inputs the three interior starts stall (the cars coincide at a knot, where the collision row has no
-    gradient); after the round the warm interior start converges, to a point both cars' independent numpy best
-    responses confirm. (The line-search phase, which the default tries at iteration SLOW in the third start, is set
-    aside here: this is the round's test.)"""
+    """From zero inputs the first interior start stalls (the cars coincide at a knot, where the collision row has no
+    gradient); the first round answers the plans where it stalled (not the zero-input start). Here the three
+    interior starts from those answers stall too, and the second round, the answers to the zero-input plans, starts
+    the solve that converges, to a point both cars' independent numpy best responses confirm. (The line-search
+    phase, which the default tries at iteration SLOW, is set aside here: this is the rounds' test.)"""
     monkeypatch.setattr(hybrid, "SLOW", 10**6)
     game, solver = _overtaking()
     calls: list[np.ndarray] = []
@@ -128,34 +162,70 @@ def test_the_round_comes_after_every_interior_start_from_the_cold_overtaking_sta
         return real(g, a, x)
 
     monkeypatch.setattr(hybrid, "response_round", counted)
-    state = iterate(solver, solver.init())
-    assert len(calls) == 1 and not calls[0].any()  # once, answering the zero-input start
+    states: list = []
+    state = iterate(solver, solver.init(), on_iterate=states.append)
+    assert len(calls) == 2 and calls[0].any() and not calls[1].any()
+    first = [s for s in states if s.search.attempt == 0 and not s.search.answered]
+    assert len(first) > hybrid.STALL  # the first round came after the first start's stall (its last step's plans)
+    assert states[len(first)].search.answered and states[len(first)].search.attempt == 0
     assert state.status == "converged", state.message
-    assert state.search.answered and state.k > 3 * hybrid.STALL
+    assert state.search.answered_start and state.search.cold == 1
     gaps = overtaking_model().best_response_gaps(state.z[: game.n])
     assert max(gaps.values()) <= 1e-6
 
 
+def test_an_algames_merge_that_stalls_from_every_start_is_solved_from_the_answers_to_its_stalled_plans() -> None:
+    """ALGAMES's merge draw 48 (seed 0): every interior start from zero inputs stalls near ||Phi|| = 0.04 (car 3
+    between car 1 and the ramp), and cars 1 and 3 collide in the zero-input plans, so no car has a feasible answer to
+    them. The answers to the plans where the first start stalled start the solve that converges, certified (the
+    solve's own check), and each car's independent numpy best response (SLSQP from three starts) finds nothing
+    better."""
+    problem = merge_problems(49)[48]
+    calls: list[np.ndarray] = []
+    real = hybrid.response_round
+
+    def counted(g, a, x):
+        calls.append(a.copy())
+        return real(g, a, x)
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(hybrid, "response_round", counted)
+        res = gnerun.solve(load_config(text=problem.config_yaml), out=None)
+    assert res.status == "converged", res.message
+    assert calls and calls[0].any()  # the first round answers the stalled plans, not the zero inputs
+    assert response_round.response_round(compile_game(load_config(text=problem.config_yaml)),
+                                         np.zeros(calls[0].size), None) is None
+    assert max(res.certificate["best_response_gap"].values()) <= 1e-6
+    gaps = problem.best_response_gaps(res.z[: calls[0].size])
+    assert max(gaps.values()) <= 1e-6, gaps
+
+
 def test_without_answers_the_cold_overtaking_start_stalls_and_says_why(monkeypatch: pytest.MonkeyPatch,
                                                                        monotone_barrier: None) -> None:
-    monkeypatch.setattr(hybrid, "response_round", lambda game, a, x: None)
+    """No player ever has an answer: the round is asked twice (the plans where the first start stalled, then the
+    start plans after all three starts), and the message says the starts and why."""
+    asked: list[np.ndarray] = []
+    monkeypatch.setattr(hybrid, "response_round", lambda game, a, x: asked.append(a.copy()))
     monkeypatch.setattr(hybrid, "SLOW", 10**6)
     _, solver = _overtaking()
     state = iterate(solver, solver.init())
     assert state.status == "stalled"
-    assert "after 3 start(s): " in state.message and "no player has a feasible best answer" in state.message
+    assert len(asked) == 2 and asked[0].any() and not asked[1].any()
+    assert "after 3 start(s): " in state.message, state.message
+    assert "no player has a feasible best answer to the others' start plans" in state.message
 
 
 def test_a_stall_after_the_answers_says_how_many_starts_it_took(monkeypatch: pytest.MonkeyPatch,
                                                                 monotone_barrier: None) -> None:
-    """Answers that are the zero-input plan itself: the three interior starts from them stall as before (the
-    line-search phase set aside)."""
+    """Answers that are the plans answered (those where the first start stalled, then the zero-input start): the
+    three interior starts from each stall (the line-search phase set aside); the message counts one start from z^0
+    and six from the answers."""
     monkeypatch.setattr(hybrid, "response_round", lambda game, a, x: np.array(a, dtype=float))
     monkeypatch.setattr(hybrid, "SLOW", 10**6)
     _, solver = _overtaking()
     state = iterate(solver, solver.init())
     assert state.status == "stalled" and state.search.answered
-    assert "after 3 start(s) from z^0 and 3 from the players' best answers" in state.message, state.message
+    assert "after 1 start(s) from z^0 and 6 from the players' best answers" in state.message, state.message
 
 
 @pytest.mark.parametrize("config", ["paper_study1.yaml", "nonlinear_gne.yaml", "mcp_demo.yaml", "vehicles.yaml"])
@@ -187,10 +257,13 @@ def test_an_undefined_start_is_no_answer(static) -> None:
     assert best_answer(static, 0, a, None, [np.array([np.nan]), np.array([0.0])])[1] == pytest.approx([0.1], abs=1e-6)
 
 
-def test_a_failed_line_search_phase_hands_back_to_the_interior_phase() -> None:
-    """The default from zero inputs: the line-search phase is tried at iteration SLOW, does not converge within its
-    budget on this game, and the interior phase goes on from where it was, to a point both cars' independent numpy
-    best responses confirm."""
+def test_a_failed_line_search_phase_hands_back_to_the_interior_phase(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The default from zero inputs, without the round on the plans where the first start stalls (which converges
+    before the line-search phase's turn): the line-search phase is tried at iteration SLOW, does not converge within
+    its budget on this game, and the interior phase goes on from where it was, to a point both cars' independent
+    numpy best responses confirm."""
+    real = hybrid.response_round
+    monkeypatch.setattr(hybrid, "response_round", lambda g, a, x: real(g, a, x) if not a.any() else None)
     game, solver = _overtaking()
     state = iterate(solver, solver.init())
     assert state.status == "converged", state.message

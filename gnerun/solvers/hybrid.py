@@ -56,11 +56,16 @@ first, judged by a nonmonotone watchdog; a more robust method when it fails; res
    the interior phase goes on from the iterate it had reached. On games whose barrier path is long (formation games
    of several robots with pairwise clearance) the search converges in a fraction of the iterations, or at all;
    measured in benchmarks/results/solver-design.md.
-6. **A round of best responses** (nonlinear games of several players). When every interior start from z^0 has
-   failed, each player's best answer to the others' start plans (:mod:`gnerun.solvers.response_round`) is the new
-   start, and the interior phase begins again from it, with the small barrier of a warm start and then its other
-   starting points; once per solve. Cold-started trajectory games (the overtaking game of the robustness suite)
-   stall from z^0 and converge from there.
+6. **Rounds of best responses** (nonlinear games of several players; at most two per solve). When the first
+   interior start from z^0 stalls, each player's best answer to the others' plans where it stalled
+   (:mod:`gnerun.solvers.response_round`) is the new start, and the interior phase begins again from it, with the
+   small barrier of a warm start and then its other starting points. Where no player has a feasible answer to
+   those plans, the other starts from z^0 follow. When every start has failed, the answers to the others' plans
+   of the configured start are the new start, in the same way. The interior phase stalls where no equilibrium is
+   near (on ALGAMES's merges: a car pressed between another car and the ramp, the Newton direction driving one
+   row's slack and multiplier to zero by turns); the plans it reached there mostly avoid each other, so the
+   players have answers, and the answers are a start from which the joint problem converges. Cold-started
+   trajectory games (the overtaking game of the robustness suite) stall from z^0 and converge from there.
 
 One call of ``step`` is one iteration: one accepted step (a Newton step tried and refused costs an extra
 evaluation inside it). The iterate z = (a, lambda) and ||Phi|| are the semismooth Newton method's in every phase,
@@ -121,7 +126,11 @@ class Memory:
     handover0: float  # the first hand-over threshold (restarts begin with it)
     attempt: int = 0  # interior-phase starts so far
     crash: bool = False  # the first step is still to be the affine VI's solution (LQ games, gnerun.solvers.avi)
-    answered: bool = False  # z^0 is the players' best answers to the start (gnerun.solvers.response_round)
+    answered: bool = False  # z^0 is the players' best answers (gnerun.solvers.response_round) ...
+    cold: int = 0  # ... first taken after this many starts from the configured z^0 ...
+    before: int = 0  # ... and this z^0's starts came after this many others
+    answered_start: bool = False  # the answers to the configured start's plans have been taken
+    start: np.ndarray | None = None  # the configured z^0, once z^0 is the answers
     searched: bool = False  # the line-search phase has been tried
     inner: SSNState | None = None  # the line-search phase's own state (its Phi is the Fischer-Burmeister one)
     steps: int = 0  # iterations of the line-search phase so far
@@ -401,12 +410,21 @@ class HybridNewton:
         return self._interior_step(self.newton.advance(state, it.z, search=memory, k=state.k), memory)
 
     def _restart(self, state: SSNState, memory: Memory, status: Status, why: str) -> SSNState:
-        """The interior phase again from z^0 with its next starting point; for an LQ game, then the pivoting
-        method; or the end of the solve."""
+        """After the first start from z^0 stalls, the interior phase from the players' best answers to the plans
+        where it stalled (a nonlinear game of several players); else the interior phase again from z^0 with its next
+        starting point; after the last, from the answers to the configured start's plans (once); for an LQ game, the
+        pivoting method; or the end of the solve."""
+        n = self.game.n
+        answers = self.answers and not self._affine()
+        if answers and not memory.answered and memory.attempt == 0 and status == Status.STALLED:
+            answered = self._answer(state, memory, state.z[:n])
+            if answered is not None:
+                return answered
         if memory.attempt < RESTARTS:
             return self._start_interior(replace(state, search=memory), memory.attempt + 1)
-        if self.answers and not memory.answered and not self._affine():
-            answered = self._answer(state, memory)
+        if answers and not memory.answered_start:
+            start = memory.origin if memory.start is None else memory.start
+            answered = self._answer(state, memory, start[:n], start_plans=True)
             if answered is not None:
                 return answered
             why += "; no player has a feasible best answer to the others' start plans"
@@ -417,7 +435,8 @@ class HybridNewton:
             why += f"; Lemke's method ended on a ray from {PIVOTS} covering vectors"
         starts = f"{memory.attempt + 1} start(s)"
         if memory.answered:
-            starts = f"{RESTARTS + 1} start(s) from z^0 and {memory.attempt + 1} from the players' best answers"
+            from_answers = memory.before + memory.attempt + 1 - memory.cold
+            starts = f"{memory.cold} start(s) from z^0 and {from_answers} from the players' best answers"
         return replace(state, status=status,
                        message=f"interior-point phase at iteration {state.k}, after {starts}: "
                                f"{why} (||Phi|| = {state.residual_norm:.2e})")
@@ -427,15 +446,18 @@ class HybridNewton:
         for a sparse one)."""
         return self.game.affine if self.newton.condensed else self.newton.system.affine
 
-    def _answer(self, state: SSNState, memory: Memory) -> SSNState | None:
-        """The interior phase from the players' best answers to the start plans (one iteration: the round and the
-        warm interior start), its other starting points after it; None if no player has a feasible answer."""
-        n = self.game.n
-        a = response_round(self.game, memory.origin[:n], state.x)
+    def _answer(self, state: SSNState, memory: Memory, plans: np.ndarray, start_plans: bool = False) -> SSNState | None:
+        """The interior phase from the players' best answers to ``plans`` (``start_plans``: the configured start's;
+        one iteration: the round and the warm interior start), its other starting points after it; None if no player
+        has a feasible answer."""
+        a = response_round(self.game, plans, state.x)
         if a is None:
             return None
         origin = np.concatenate([a, np.zeros(self.game.m)])
-        memory = replace(memory, origin=origin, answered=True)
+        first = not memory.answered
+        memory = replace(memory, origin=origin, answered=True, answered_start=start_plans or memory.answered_start,
+                         cold=memory.attempt + 1 if first else memory.cold, before=memory.before + memory.attempt + 1,
+                         start=memory.origin if first else memory.start)
         return self._start_interior(replace(state, search=memory), 0, warm=True)
 
     def _pivot(self, state: SSNState, memory: Memory) -> SSNState | None:
