@@ -68,6 +68,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import lapack
 
+from . import banded
 from .linalg import factor
 
 BOUNDARY = 0.995  # a step goes at most this fraction of the way to the boundary lambda_I = 0 or w = 0
@@ -558,7 +559,7 @@ class _AgentBlocks:
         self.width, self.columns = width, dmax
         self.touched = np.concatenate(touched_all)
         self.counts = (self.touched.size, int(self.states.sum()))  # the rows of C and of G stacked
-        # the band of D_x for LAPACK's triangular solves (the transpose of the Fortran-ordered band, as for banded LU)
+        # the band of D_x for the triangular solves: row i holds column i of D_x from its diagonal down
         start = np.cumsum(self.states) - self.states
         self._band = (np.concatenate([(col + at) * (width + 1) + below
                                       for (col, below, _), at in zip(bands, start, strict=True)]),
@@ -580,18 +581,17 @@ class _AgentBlocks:
         """Each agent's block of the Schur complement, or None if some D_x is singular. (In place where it can: the
         arrays are of the size of all agents' states times decisions, and allocating and adding them costs more than
         the products; every entry is the same sum, in the same order, as without.) The triangular solves are
-        LAPACK's: a loop over all right-hand sides at once is 2-3 times faster, but its rounding (no fused
-        multiply-add) changed a best response the certificate finds on one of ten ALGAMES merges."""
+        :mod:`gnerun.solvers.banded`'s, LAPACK's arithmetic on all right-hand sides at once: the same bits (a loop
+        that rounds otherwise, without LAPACK's fused multiply-adds, changed a best response the certificate finds
+        on one of ten ALGAMES merges)."""
         nI, ng = self.counts
+        Yx = self._Da.dense(data, -1.0)
         if ng:
             band = np.zeros((ng, self.width + 1))
             flat, positions = self._band
             band.reshape(-1)[flat] = data[positions]
-            Yx, info = lapack.dtbtrs(band.T, self._Da.dense(data, -1.0), uplo="L")
-            if info != 0:  # a zero on the diagonal
+            if banded.solve(band, Yx) != 0:  # a zero on the diagonal
                 return None
-        else:
-            Yx = np.zeros((0, self.columns))
         K = self._Kx(data) @ Yx  # [C; G; A] Y_x, then plus [C; G; A]_a
         self._Ka.add_to(K, data)
         Ylam = K[:nI]
@@ -600,12 +600,13 @@ class _AgentBlocks:
         G = K[nI:nI + ng]
         G += LY[:ng]
         np.negative(G, out=G)  # the right-hand side of the costates' equations
-        Yp = lapack.dtbtrs(band.T, G, uplo="L", trans="T")[0] if ng else G
+        if ng:
+            banded.solve(band, G, transpose=True)  # in place: G becomes Y_p
         S = K[nI + ng:]
-        S += self._Ap(data) @ Yp
+        S += self._Ap(data) @ G
         S += LY[ng:]
         rows = self._rows
-        return [S[rows[i]:rows[i + 1], :k].copy() for i, k in enumerate(self.decisions)]  # not K's memory
+        return [S[rows[i]:rows[i + 1], :k] for i, k in enumerate(self.decisions)]  # views: K is new at every call
 
 
 def _placed(numbered, blocks: list[tuple[np.ndarray, np.ndarray, int]]):
@@ -648,17 +649,18 @@ class _Gather:
     pattern's nonzeros by a gather (sparse slicing at every call costs more than the arithmetic it serves)."""
 
     def __init__(self, numbered, blocks: list[tuple[np.ndarray, np.ndarray, int]]) -> None:
-        (self.rows, self.cols, self.positions), self.shape = _placed(numbered, blocks)
+        (rows, cols, self.positions), self.shape = _placed(numbered, blocks)
+        self.flat = rows * self.shape[1] + cols  # where in the C-ordered array (one index: half the cost of two)
 
     def dense(self, data: np.ndarray, sign: float = 1.0) -> np.ndarray:
         """The blocks (times ``sign``)."""
         out = np.zeros(self.shape)
-        out[self.rows, self.cols] = data[self.positions] if sign == 1.0 else sign * data[self.positions]
+        out.reshape(-1)[self.flat] = data[self.positions] if sign == 1.0 else sign * data[self.positions]
         return out
 
     def add_to(self, out: np.ndarray, data: np.ndarray) -> None:
-        """``out`` += the blocks, in place (each entry once: the positions are distinct)."""
-        out[self.rows, self.cols] += data[self.positions]
+        """``out`` (C-ordered) += the blocks, in place (each entry once: the positions are distinct)."""
+        np.reshape(out, -1, copy=False)[self.flat] += data[self.positions]
 
 
 def convexify(S: np.ndarray, blocks: list[slice]) -> None:
