@@ -83,6 +83,8 @@ REGULARIZATION = 1e-10  # the first multiple of the identity tried where the New
 PREDICT_AFTER = 0.9  # the first start, or a step of it that went at least this far, is followed by Mehrotra's
 PREDICTED = 0.05  # predictor-corrector step where the predictor goes at least this fraction of the way, and
 CENTERING = 0.1  # its centering parameter sigma is at least this
+# the sparse form factorises K with its inequality multipliers eliminated (a narrower band; False: K as it is)
+ELIMINATE = True
 
 
 @dataclass(slots=True)
@@ -406,6 +408,7 @@ class SparseBarrier:
         self.keep = np.flatnonzero(keep)
         # the diagonal entries added to K (in keep): the decisions' shifts, then -D on the inequality multipliers
         self.at = np.concatenate([np.arange(n), np.searchsorted(self.keep, self.lam0 + ip.I)])
+        self.multipliers = self.at[n:]  # the inequality multipliers (eliminated first where ELIMINATE)
         self._templates: _AgentBlocks | None = None
         self._diagonal: np.ndarray | None = None
         self._held: _Factored | None = None  # the last matrix factorised (see _factored)
@@ -480,10 +483,11 @@ class SparseBarrier:
             entry = held.factors.get(delta)
             if entry is None:
                 add = np.concatenate([held.diagonal + delta if delta else held.diagonal, -held.D])
+                eliminate = self.multipliers if ELIMINATE else None
                 # no condition estimate (it was 18% of a merge iteration): the step needs the factors only; a
                 # singular matrix has no factors, and a solution that overflows is refused like one
                 entry = held.factors[delta] = system.factor_kept("interior", parts.J, keep, self.at, add,
-                                                                 estimate=False)
+                                                                 estimate=False, eliminate=eliminate)
             lu, rcond = entry
             if lu is None:
                 return None
