@@ -464,3 +464,20 @@ def test_only_a_diagonal_block_is_eliminated() -> None:
     for eliminate in (np.arange(game.n), np.array([game.n])):
         with pytest.raises(ValueError, match="^the unknowns eliminated must have a diagonal block, added at `at`$"):
             system.layout(np.arange(system.size), at, eliminate)
+
+
+def test_the_eliminated_layout_outlives_the_active_sets_layouts() -> None:
+    """The kept layouts are bounded (64): the least recently used without an elimination goes first, so the interior
+    matrix's layout (its ordering searched anew) is not rebuilt after a long Newton phase of many active sets."""
+    game, solver, _ = _merge_system()
+    system = solver.newton.system
+    n, m, lam0 = game.n, game.m, system.size - game.m
+    everything = np.arange(system.size)
+    at = np.concatenate([np.arange(n), lam0 + np.arange(m)])
+    eliminated = system.layout(everything, at, lam0 + np.arange(m))
+    first = system.layout(system.kept(np.arange(1)))
+    for k in range(2, 80):
+        system.layout(system.kept(np.arange(k)))
+    assert len(system.stage_order.layouts) == 64
+    assert system.layout(everything, at, lam0 + np.arange(m)) is eliminated
+    assert system.layout(system.kept(np.arange(1))) is not first

@@ -129,8 +129,9 @@ class SparseKKT:
         layouts = self.stage_order.layouts
         layout = layouts.pop(key, None)
         if layout is None:
-            if len(layouts) >= 64:  # the least recently used goes: the interior matrix's stays among active sets'
-                del layouts[next(iter(layouts))]
+            if len(layouts) >= 64:  # the least recently used without an elimination goes (an elimination's ordering
+                # costs ~10 ms; the interior matrix's stays among the active sets' of a long Newton phase)
+                del layouts[next((k for k, v in layouts.items() if v.elimination is None), next(iter(layouts)))]
             layout = KeptLayout(self.stage_order, keep, at, self.stage_order.banded, eliminate)
         layouts[key] = layout  # the most recently used last
         return layout
