@@ -416,6 +416,39 @@ def factorization_rows(row, quick: bool) -> None:
         row(f"{label} ({game.size} unknowns, sparse): one iteration, banded LU vs SuperLU", t_band, "SuperLU", t_lu,
             note=f"median over {len(problems)} random initial states, iterations {its_band} (SuperLU {its_lu}); "
                  f"{t_band / limit:.0f}x the structure's limit ({us(limit)} per banded LU)")
+    elimination_rows(row, quick)
+
+
+def elimination_rows(row, quick: bool) -> None:
+    """The interior step's matrix factorised with its inequality multipliers eliminated (``interior_point.ELIMINATE``)
+    against K as it is: time per iteration on the merge and the intersection in the sparse formulation, one solver,
+    the two alternating per initial state (which goes first too), after a round that warms up both."""
+    from .problems import trajectory
+
+    before = interior_point.ELIMINATE
+    for label, problems in (("ALGAMES merge", trajectory.merge_problems(3 if quick else 10)),
+                            ("ALGAMES intersection", trajectory.intersection_problems(2 if quick else 5))):
+        cfg = load_config(text=problems[0].config_yaml)
+        cfg = cfg.model_copy(update={"solver": cfg.solver.model_copy(update={"formulation": "sparse"})})
+        game = compile_game(cfg)
+        solver = make_solver(cfg, game)
+        per: dict[bool, list[float]] = {True: [], False: []}
+        its: dict[bool, list[int]] = {True: [], False: []}
+        for rep in range(2):
+            for i, p in enumerate(problems):
+                x0 = np.asarray(load_config(text=p.config_yaml).game.x0)
+                for eliminate in (True, False) if i % 2 == 0 else (False, True):
+                    interior_point.ELIMINATE = eliminate
+                    t0 = time.perf_counter()
+                    state = iterate(solver, solver.init(None, x0))
+                    if rep:
+                        per[eliminate].append((time.perf_counter() - t0) / max(state.k, 1))
+                        its[eliminate].append(state.k)
+        interior_point.ELIMINATE = before
+        row(f"{label} ({game.size} unknowns, sparse): one iteration, inequality multipliers eliminated vs not",
+            statistics.median(per[True]), "not eliminated", statistics.median(per[False]),
+            note=f"median over {len(problems)} random initial states, iterations {its[True]} "
+                 f"(not eliminated {its[False]})")
 
 
 def merge_compile_rows(row, cars: tuple[int, ...]) -> None:

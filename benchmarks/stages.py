@@ -59,7 +59,8 @@ def cases(quick: bool) -> list[Case]:
 
 
 def record(case: Case, limit: int = 400) -> tuple[SparseKKT, list[tuple], int]:
-    """Solve the case in the sparse formulation; the system and what it factorised (kind, nonzeros, keep, at, add)."""
+    """Solve the case in the sparse formulation; the system and what it factorised (kind, nonzeros, keep, at, add,
+    eliminate)."""
     cfg = load_config(case.path, case.overrides) if case.path else load_config(text=case.config_yaml)
     cfg = cfg.model_copy(update={"solver": cfg.solver.model_copy(update={"formulation": "sparse"})})
     game = compile_game(cfg)
@@ -68,11 +69,11 @@ def record(case: Case, limit: int = 400) -> tuple[SparseKKT, list[tuple], int]:
     seen: list[tuple] = []
     factor = system.factor_kept
 
-    def recording(kind, data, keep, at=None, add=None, estimate=True):
+    def recording(kind, data, keep, at=None, add=None, estimate=True, eliminate=None):
         if len(seen) < limit:
             seen.append((kind, data.copy(), keep.copy(), None if at is None else at.copy(),
-                         None if add is None else add.copy()))
-        return factor(kind, data, keep, at, add, estimate)
+                         None if add is None else add.copy(), eliminate))
+        return factor(kind, data, keep, at, add, estimate, eliminate)
 
     system.factor_kept = recording
     iterations = 0
@@ -129,13 +130,14 @@ def compare(case: Case, repeats: int = 5, sample: int = 12) -> Comparison:
     picked = [seen[i] for i in np.unique(np.linspace(0, len(seen) - 1, min(sample, len(seen))).astype(int))]
     banded, superlu, lu_b, lu_s, diffs, rconds, sizes = [], [], [], [], [], [], []
     rng = np.random.default_rng(0)
-    for _, data, keep, at, add in picked:
-        band = KeptLayout(order, keep, at, banded=True)
-        csc = KeptLayout(order, keep, at, banded=False)
+    for _, data, keep, at, add, eliminate in picked:  # the matrices as factorised (the interior's: eliminated)
+        band = KeptLayout(order, keep, at, banded=True, eliminate=eliminate)
+        csc = KeptLayout(order, keep, at, banded=False, eliminate=eliminate)
         ordering = Ordering()
         ordering.factor(csc.csc(data, add))  # its column ordering, chosen by fill (once per game in a solve)
         lu1, r1 = band.factor(data, add)
         lu2, r2 = ordering.factor(csc.csc(data, add))
+        lu2 = csc.eliminated(lu2, data, add)
         if lu1 is None or lu2 is None:
             continue
         b = rng.standard_normal(keep.size)
@@ -147,7 +149,7 @@ def compare(case: Case, repeats: int = 5, sample: int = 12) -> Comparison:
         superlu.append(_time(lambda o, c, d, a: o.factor(c.csc(d, a)), repeats, ordering, csc, data, add))
         lu_b.append(_time(lapack.dgbtrf, repeats, ab, band.lower, band.upper))
         lu_s.append(_time(spla.splu, repeats, M, permc_spec=ordering.spec))
-        sizes.append((keep.size, band.lower, band.upper))
+        sizes.append((band.size, band.lower, band.upper))
     size, lower, upper = max(sizes)
     return Comparison(case.name, size, lower, upper, statistics.median(banded), statistics.median(superlu),
                       statistics.median(lu_b), statistics.median(lu_s), max(diffs), max(rconds), len(seen),

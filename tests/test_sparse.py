@@ -419,3 +419,65 @@ def test_the_players_blocks_of_the_interior_complement(system) -> None:
         dense = K[np.ix_(i, i)] - K[np.ix_(i, R)] @ np.linalg.solve(K[np.ix_(R, R)], K[np.ix_(R, i)])
         np.testing.assert_allclose(block, dense, rtol=0, atol=1e-8 * np.abs(dense).max())
 
+
+
+def test_the_interior_matrix_solved_with_its_inequality_multipliers_eliminated() -> None:
+    """The interior matrix with its inequality multipliers eliminated before the factorisation (the Schur complement
+    K_rr + K_rl D^-1 K_lr, banded or by SuperLU, then dlambda_I = D^-1 (K_lr x_r - b_l)) solves the unreduced system
+    as the unreduced banded LU does, with D from 1e-10 to 1e4 (1/D up to 1e10, as in the merges' last iterations), on
+    a narrower band: 600 unknowns and (kl, ku) = (18, 18) instead of 780 and (18, 27)."""
+    game, solver, state = _merge_system()
+    system = solver.newton.system
+    n, m, lam0 = game.n, game.m, system.size - game.m
+    rng = np.random.default_rng(5)
+    everything = np.arange(system.size)
+    at = np.concatenate([np.arange(n), lam0 + np.arange(m)])
+    D = 10.0 ** rng.uniform(-10, 4, m)
+    add = np.concatenate([rng.uniform(0, 1e-2, n), -D])
+    K = system.matrix(state.parts.J).toarray()
+    K[at, at] += add
+    b = rng.standard_normal(system.size)
+    reference = np.linalg.solve(K, b)
+    unreduced, _ = system.factor_kept("interior", state.parts.J, everything, at, add, estimate=False)
+    assert np.abs(unreduced.solve(b) - reference).max() <= 1e-10 * np.abs(reference).max()
+    for banded in (True, False):
+        system.stage_order.banded = banded
+        layout = system.layout(everything, at, lam0 + np.arange(m))
+        eliminated, _ = system.factor_kept("interior", state.parts.J, everything, at, add, estimate=False,
+                                           eliminate=lam0 + np.arange(m))
+        x = eliminated.solve(b)
+        np.testing.assert_allclose(x, reference, rtol=0, atol=1e-10 * np.abs(reference).max())
+        assert np.abs(K @ x - b).max() <= 1e-8 * np.abs(b).max()
+    system.stage_order.banded = None
+    assert (layout.size, system.layout(everything, at).size) == (system.size - m, system.size)
+    banded_layout = system.layout(everything, at, lam0 + np.arange(m))
+    assert (banded_layout.lower, banded_layout.upper) == (18, 18)
+    assert (system.layout(everything, at).lower, system.layout(everything, at).upper) == (18, 27)
+
+
+def test_only_a_diagonal_block_is_eliminated() -> None:
+    """Unknowns whose block has off-diagonal entries (the decisions': a player's Hessian) or no diagonal addition
+    are refused with the reason."""
+    game, solver, _ = _merge_system()
+    system = solver.newton.system
+    at = np.arange(game.n)
+    for eliminate in (np.arange(game.n), np.array([game.n])):
+        with pytest.raises(ValueError, match="^the unknowns eliminated must have a diagonal block, added at `at`$"):
+            system.layout(np.arange(system.size), at, eliminate)
+
+
+def test_the_eliminated_layout_outlives_the_active_sets_layouts() -> None:
+    """The kept layouts are bounded (64): the least recently used without an elimination goes first, so the interior
+    matrix's layout (its ordering searched anew) is not rebuilt after a long Newton phase of many active sets."""
+    game, solver, _ = _merge_system()
+    system = solver.newton.system
+    n, m, lam0 = game.n, game.m, system.size - game.m
+    everything = np.arange(system.size)
+    at = np.concatenate([np.arange(n), lam0 + np.arange(m)])
+    eliminated = system.layout(everything, at, lam0 + np.arange(m))
+    first = system.layout(system.kept(np.arange(1)))
+    for k in range(2, 80):
+        system.layout(system.kept(np.arange(k)))
+    assert len(system.stage_order.layouts) == 64
+    assert system.layout(everything, at, lam0 + np.arange(m)) is eliminated
+    assert system.layout(system.kept(np.arange(1))) is not first

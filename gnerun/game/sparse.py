@@ -121,29 +121,35 @@ class SparseKKT:
         """The rows and columns ordered stage by stage (computed from the pattern once per game)."""
         return StageOrder(self)
 
-    def layout(self, keep: np.ndarray, at: np.ndarray | None = None) -> KeptLayout:
+    def layout(self, keep: np.ndarray, at: np.ndarray | None = None, eliminate: np.ndarray | None = None) -> KeptLayout:
         """Where the nonzeros of the matrix with rows and columns ``keep`` (and entries added to its diagonal at
-        ``at``, positions in ``keep``) go in its factorisation's storage; kept per pair (at most 64)."""
-        key = (keep.tobytes(), None if at is None else at.tobytes())
+        ``at``, positions in ``keep``; ``eliminate``: the positions eliminated before the factorisation,
+        :class:`Elimination`) go in its factorisation's storage; the 64 used last are kept."""
+        key = tuple(None if v is None else v.tobytes() for v in (keep, at, eliminate))
         layouts = self.stage_order.layouts
-        layout = layouts.get(key)
+        layout = layouts.pop(key, None)
         if layout is None:
-            if len(layouts) >= 64:
-                layouts.clear()
-            layout = layouts[key] = KeptLayout(self.stage_order, keep, at, self.stage_order.banded)
+            if len(layouts) >= 64:  # the least recently used without an elimination goes (an elimination's ordering
+                # costs ~10 ms; the interior matrix's stays among the active sets' of a long Newton phase)
+                del layouts[next((k for k, v in layouts.items() if v.elimination is None), next(iter(layouts)))]
+            layout = KeptLayout(self.stage_order, keep, at, self.stage_order.banded, eliminate)
+        layouts[key] = layout  # the most recently used last
         return layout
 
     def factor_kept(self, kind: str, data: np.ndarray, keep: np.ndarray, at: np.ndarray | None = None,
-                    add: np.ndarray | None = None, estimate: bool = True) -> tuple[BandLU | spla.SuperLU | None, float]:
+                    add: np.ndarray | None = None, estimate: bool = True, eliminate: np.ndarray | None = None,
+                    ) -> tuple[BandLU | EliminatedLU | spla.SuperLU | None, float]:
         """Factors of dF/dw (nonzeros ``data``) restricted to the rows and columns ``keep``, with ``add`` added to
         its diagonal at the positions ``at`` (in ``keep``), and an estimate of the reciprocal 1-norm condition
         number (0 when singular; NaN without ``estimate``): banded LU on the stage order where the band is narrow
         (:class:`KeptLayout`), SuperLU otherwise (``kind``: which of ``orderings``). Either has ``solve(b)`` for a
-        right-hand side over ``keep``."""
-        layout = self.layout(keep, at)
+        right-hand side over ``keep``. ``eliminate``: positions in ``keep`` with a diagonal block (entries in ``add``
+        only) eliminated first (:class:`Elimination`; the estimate is then the factorised complement's)."""
+        layout = self.layout(keep, at, eliminate)
         if layout.banded:
             return layout.factor(data, add, estimate)
-        return self.orderings[kind].factor(layout.csc(data, add), estimate)
+        lu, rcond = self.orderings[kind].factor(layout.csc(data, add), estimate)
+        return layout.eliminated(lu, data, add), rcond
 
     @staticmethod
     def rhs(parts: SparseParts) -> np.ndarray:
@@ -668,49 +674,70 @@ class StageOrder:
     stage)."""
 
     def __init__(self, system: SparseKKT) -> None:
-        row_stage, row_kind, col_stage, col_kind = _stages(system)
+        self.stages = _stages(system)  # (row stage, row kind, column stage, column kind)
         c = system.pattern.tocoo()
         self.rows, self.cols = c.row.astype(np.int64), c.col.astype(np.int64)  # the nonzeros, in data order
         # the solvers add to the diagonal of the decisions' and the multipliers' blocks (same stage and kind)
         diagonal = np.r_[0:system.n, system.size - system.m:system.size]
         rows, cols = np.concatenate([self.rows, diagonal]), np.concatenate([self.cols, diagonal])
-        perms = [np.array(p) for p in itertools.permutations(range(KINDS))]
-        row_keys = [row_stage * KINDS + p[row_kind] for p in perms]
-        col_keys = [col_stage * KINDS + p[col_kind] for p in perms]
-        row_at = [_inverse(np.argsort(k, kind="stable"))[rows] for k in row_keys]
-        col_at = [_inverse(np.argsort(k, kind="stable"))[cols] for k in col_keys]
-        best = None
-        for i, ri in enumerate(row_at):
-            for j, cj in enumerate(col_at):
-                d = ri - cj
-                kl, ku = max(int(d.max(initial=0)), 0), max(-int(d.min(initial=0)), 0)
-                if best is None or (kl * (kl + ku), kl, ku) < best[0]:
-                    best = ((kl * (kl + ku), kl, ku), i, j)
-        (_, self.lower, self.upper), i, j = best
-        self.row_key, self.col_key = row_keys[i], col_keys[j]  # sort the kept rows (columns) by these, stably
+        self.row_key, self.col_key, self.lower, self.upper = _narrowest(*self.stages, rows, cols)
         self.size = system.size
         self.layouts: dict = {}
         self.banded: bool | None = None  # None: banded LU where banded_wins; True or False: always that (benchmarks)
 
 
+def _narrowest(row_stage: np.ndarray, row_kind: np.ndarray, col_stage: np.ndarray, col_kind: np.ndarray,
+               rows: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray, int, int]:
+    """The keys that order rows and columns stage by stage, and within a stage by kind, in the order of kinds (for
+    rows and for columns: 24 x 24 pairs) that gives the entries (``rows``, ``cols``) the narrowest band (least
+    kl (kl + ku), the flops of banded LU); and that band (kl, ku)."""
+    perms = [np.array(p) for p in itertools.permutations(range(KINDS))]
+    row_keys = [row_stage * KINDS + p[row_kind] for p in perms]
+    col_keys = [col_stage * KINDS + p[col_kind] for p in perms]
+    row_at = [_inverse(np.argsort(k, kind="stable"))[rows] for k in row_keys]
+    col_at = [_inverse(np.argsort(k, kind="stable"))[cols] for k in col_keys]
+    best = None
+    for i, ri in enumerate(row_at):
+        for j, cj in enumerate(col_at):
+            d = ri - cj
+            kl, ku = max(int(d.max(initial=0)), 0), max(-int(d.min(initial=0)), 0)
+            if best is None or (kl * (kl + ku), kl, ku) < best[0]:
+                best = ((kl * (kl + ku), kl, ku), i, j)
+    (_, lower, upper), i, j = best
+    return row_keys[i], col_keys[j], lower, upper  # sort the kept rows (columns) by the keys, stably
+
+
 class KeptLayout:
     """Where the pattern's nonzeros (and additions to the diagonal at ``at``) of the matrix restricted to the rows and
     columns ``keep`` go: in LAPACK's band storage of the stage-ordered matrix (rows and columns permuted by the
-    stage order), or in a CSC matrix for SuperLU, whichever factorises faster (``banded``)."""
+    stage order), or in a CSC matrix for SuperLU, whichever factorises faster (``banded``). With ``eliminate``
+    (positions in ``keep`` whose block is diagonal, :class:`Elimination`), the matrix stored is the one those unknowns
+    are eliminated from, in its own stage order (the kinds ordered anew for its pattern)."""
 
-    def __init__(self, order: StageOrder, keep: np.ndarray, at: np.ndarray | None, banded: bool | None = None) -> None:
-        size = keep.size
+    def __init__(self, order: StageOrder, keep: np.ndarray, at: np.ndarray | None, banded: bool | None = None,
+                 eliminate: np.ndarray | None = None) -> None:
         where = np.full(order.size, -1)
-        where[keep] = np.arange(size)
+        where[keep] = np.arange(keep.size)
         inside = (where[order.rows] >= 0) & (where[order.cols] >= 0)
-        self.nonzeros = np.flatnonzero(inside)  # which of the data are in the kept matrix
+        nonzeros = np.flatnonzero(inside)  # which of the data are in the kept matrix
         r, c = where[order.rows[inside]], where[order.cols[inside]]  # their rows and columns in the kept matrix
-        self.at = np.zeros(0, dtype=np.int64) if at is None else at.astype(np.int64)
-        self.size = size
-        self.row_order = np.argsort(order.row_key[keep], kind="stable")  # band row i is kept row row_order[i]
-        self.col_order = np.argsort(order.col_key[keep], kind="stable")
+        at = np.zeros(0, dtype=np.int64) if at is None else at.astype(np.int64)
+        row_key, col_key = order.row_key[keep], order.col_key[keep]
+        self.elimination: Elimination | None = None
+        fill_r = fill_c = np.zeros(0, dtype=np.int64)  # the entries the elimination adds
+        if eliminate is not None:
+            e = self.elimination = Elimination(keep.size, nonzeros, r, c, at, eliminate)
+            nonzeros, r, c, at, fill_r, fill_c = e.nonzeros, e.r, e.c, e.at, e.fill_r, e.fill_c
+            rest = keep[e.rest]
+            row_key, col_key, _, _ = _narrowest(*(stage[rest] for stage in order.stages),
+                                                np.concatenate([r, at, fill_r]), np.concatenate([c, at, fill_c]))
+        self.nonzeros, self.at = nonzeros, at
+        self.size = size = row_key.size
+        self.row_order = np.argsort(row_key, kind="stable")  # band row i is kept row row_order[i]
+        self.col_order = np.argsort(col_key, kind="stable")
         ir, ic = _inverse(self.row_order), _inverse(self.col_order)
-        i, j = ir[np.concatenate([r, self.at])], ic[np.concatenate([c, self.at])]
+        rows, cols = np.concatenate([r, at, fill_r]), np.concatenate([c, at, fill_c])
+        i, j = ir[rows], ic[cols]
         d = i - j
         self.lower, self.upper = max(int(d.max(initial=0)), 0), max(-int(d.min(initial=0)), 0)
         self.banded = banded_wins(size, self.lower, self.upper) if banded is None else banded
@@ -719,39 +746,44 @@ class KeptLayout:
             self.ld = 2 * kl + ku + 1
             # entry (i, j) of the permuted matrix is ab[kl + ku + i - j, j]; ab is Fortran-ordered (ld, size), held
             # as its C-ordered transpose
-            self.flat = (j * self.ld + kl + ku + d)[: r.size]
-            self.flat_at = ic[self.at] * self.ld + kl + ku + ir[self.at] - ic[self.at]
+            positions = j * self.ld + kl + ku + d
         else:
-            rows, cols = np.concatenate([r, self.at]), np.concatenate([c, self.at])
             keys = cols * size + rows
             unique = np.unique(keys)
             self.indices = (unique % size).astype(np.int32)
             self.indptr = np.searchsorted(unique // size, np.arange(size + 1)).astype(np.int32)
             positions = np.searchsorted(unique, keys)
-            self.flat, self.flat_at = positions[: r.size], positions[r.size:]
             self.nnz = unique.size
+        self.flat, self.flat_at, self.flat_fill = np.split(positions, [r.size, r.size + at.size])
+
+    def _fill(self, out: np.ndarray, data: np.ndarray, add: np.ndarray | None) -> None:
+        """The matrix's entries into the flat storage ``out`` (zeros)."""
+        out[self.flat] = data[self.nonzeros]
+        e = self.elimination
+        if e is not None:
+            out[self.flat_fill] += e.fill(data, add)
+            add = add[e.add_kept]
+        if add is not None:
+            out[self.flat_at] += add
 
     def csc(self, data: np.ndarray, add: np.ndarray | None) -> sp.csc_matrix:
         values = np.zeros(self.nnz)
-        values[self.flat] = data[self.nonzeros]
-        if add is not None:
-            values[self.flat_at] += add
+        self._fill(values, data, add)
         return sp.csc_matrix((values, self.indices, self.indptr), shape=(self.size, self.size))
 
     def band(self, data: np.ndarray, add: np.ndarray | None) -> np.ndarray:
         """The stage-ordered matrix in LAPACK's band storage with room for the fill of partial pivoting."""
         ab = np.zeros((self.size, self.ld))  # the transpose of the Fortran-ordered band
-        flat = ab.reshape(-1)
-        flat[self.flat] = data[self.nonzeros]
-        if add is not None:
-            flat[self.flat_at] += add
+        self._fill(ab.reshape(-1), data, add)
         return ab.T
 
-    def factor(self, data: np.ndarray, add: np.ndarray | None, estimate: bool = True) -> tuple[BandLU | None, float]:
+    def factor(self, data: np.ndarray, add: np.ndarray | None,
+               estimate: bool = True) -> tuple[BandLU | EliminatedLU | None, float]:
         """Banded LU with partial pivoting (LAPACK dgbtrf) and its reciprocal 1-norm condition estimate (dgbcon's;
-        NaN without ``estimate``)."""
+        NaN without ``estimate``; with an elimination, of the matrix factorised)."""
         if not self.size:
-            return BandLU(self, np.zeros((self.ld, 0), order="F"), np.zeros(0, dtype=np.int32)), 1.0
+            factors = BandLU(self, np.zeros((self.ld, 0), order="F"), np.zeros(0, dtype=np.int32))
+            return self.eliminated(factors, data, add), 1.0
         ab = self.band(data, add)
         norm = float(np.abs(ab).sum(axis=0).max()) if estimate else math.nan  # before dgbtrf overwrites ab
         lu, piv, info = lapack.dgbtrf(ab, self.lower, self.upper, overwrite_ab=1)
@@ -759,10 +791,114 @@ class KeptLayout:
             return None, 0.0
         factors = BandLU(self, lu, piv)
         if not estimate:
-            return factors, math.nan
+            return self.eliminated(factors, data, add), math.nan
         inverse = inverse_norm(factors.solve_band, lambda b: factors.solve_band(b, 1), self.size)
         rcond = 1.0 / (norm * inverse) if np.isfinite(inverse) and inverse > 0 else 0.0
-        return factors, rcond
+        return self.eliminated(factors, data, add), rcond
+
+    def eliminated(self, factors, data: np.ndarray, add: np.ndarray | None):
+        """``factors`` of the matrix stored, as factors of the kept matrix (the same without an elimination)."""
+        if self.elimination is None or factors is None:
+            return factors
+        return EliminatedLU(self.elimination, factors, data, add)
+
+
+class Elimination:
+    """Unknowns eliminated from a kept matrix before its factorisation: ``eliminate`` (positions in the kept matrix)
+    whose block is diagonal, its entries added at ``at`` (none in the pattern). With K = [K_rr K_re; K_er E] (r: the
+    rest), E diagonal, the matrix factorised is the Schur complement K_rr - K_re E^-1 K_er, and x_e = E^-1 (b_e - K_er
+    x_r): the interior-point matrix with its inequality multipliers eliminated, 600 unknowns instead of 780 and a band
+    of (18, 18) instead of (18, 27) on ALGAMES's merge. The pattern is fixed: every product K_ie E_ee^-1 K_ej is a
+    pair of the pattern's nonzeros, listed once, summed per entry (i, j) of the complement.
+
+    ``nonzeros``, ``r``, ``c``: which of the pattern's data are in the kept matrix, and their rows and columns there.
+    Afterwards the same, and ``at``, are over the rest (numbered 0, 1, ... in the order of ``rest``), and ``fill_r``,
+    ``fill_c`` are the entries the products add (``fill``: their values)."""
+
+    def __init__(self, size: int, nonzeros: np.ndarray, r: np.ndarray, c: np.ndarray, at: np.ndarray,
+                 eliminate: np.ndarray) -> None:
+        out = np.zeros(size, dtype=bool)
+        out[eliminate] = True
+        self.rest, self.out = np.flatnonzero(~out), np.sort(eliminate)
+        number = np.full(size, -1)
+        number[self.rest] = np.arange(self.rest.size)
+        number[self.out] = np.arange(self.out.size)
+        where_at = np.full(size, -1)
+        where_at[at] = np.arange(at.size)
+        self.diagonal_at = where_at[self.out]  # the eliminated block's diagonal: these entries of add
+        if np.any(self.diagonal_at < 0) or np.any(out[r] & out[c]):
+            raise ValueError("the unknowns eliminated must have a diagonal block, added at `at`")
+        self.add_kept = np.flatnonzero(~out[at])
+        self.whole = (nonzeros, r, c, at)  # the kept matrix, for the residual of a refinement
+        kept = ~out[r] & ~out[c]
+        self.nonzeros, self.r, self.c = nonzeros[kept], number[r[kept]], number[c[kept]]
+        self.at = number[at[self.add_kept]]
+        # K_re (rows of the rest, columns eliminated) and K_er, by eliminated unknown
+        re, er = ~out[r] & out[c], out[r] & ~out[c]
+        re_order = np.argsort(number[c[re]], kind="stable")
+        er_order = np.argsort(number[r[er]], kind="stable")
+        self.re = (nonzeros[re][re_order], number[r[re]][re_order], number[c[re]][re_order])  # (data, row, column)
+        self.er = (nonzeros[er][er_order], number[r[er]][er_order], number[c[er]][er_order])
+        k = self.out.size
+        re_count, er_count = np.bincount(self.re[2], minlength=k), np.bincount(self.er[1], minlength=k)
+        re_start, er_start = np.cumsum(re_count) - re_count, np.cumsum(er_count) - er_count
+        # every pair (i, e), (e, j): its entry of K_re, of K_er, and e
+        first = np.concatenate([np.repeat(np.arange(re_start[e], re_start[e] + re_count[e]), er_count[e])
+                                for e in range(k)] or [np.zeros(0, dtype=np.int64)]).astype(np.int64)
+        second = np.concatenate([np.tile(np.arange(er_start[e], er_start[e] + er_count[e]), re_count[e])
+                                 for e in range(k)] or [np.zeros(0, dtype=np.int64)]).astype(np.int64)
+        self.pair_re, self.pair_er = self.re[0][first], self.er[0][second]
+        self.pair_out = self.re[2][first]
+        rows, cols = self.re[1][first], self.er[2][second]
+        keys, self.pair_entry = np.unique(rows * size + cols, return_inverse=True)
+        self.fill_r, self.fill_c = keys // size, keys % size
+        self.pair_entry = self.pair_entry.reshape(-1)
+
+    def fill(self, data: np.ndarray, add: np.ndarray) -> np.ndarray:
+        """The entries of -K_re E^-1 K_er (at ``fill_r``, ``fill_c``) for the pattern's nonzeros ``data`` and the
+        diagonal additions ``add``."""
+        inverse = -1.0 / add[self.diagonal_at]
+        products = data[self.pair_re] * data[self.pair_er] * inverse[self.pair_out]
+        return np.bincount(self.pair_entry, products, minlength=self.fill_r.size)
+
+
+# one step of iterative refinement on the kept system where an eliminated diagonal entry is this small (|E_ee| <=
+# 1/REFINE_FROM): the complement's entries grow as 1/E, and with them the kept system's residual (measured on the
+# interior matrices of 10 merges: ||r|| / ||b|| up to 1e-8 at 1/D = 1e12, 1e-11 with the unreduced LU or refined)
+REFINE_FROM = 1e6
+
+
+class EliminatedLU:
+    """Factors of a kept matrix with unknowns eliminated (:class:`Elimination`): those of the Schur complement
+    (``factors``), and what the solve needs of K_re, K_er and E (``data``, ``add``)."""
+
+    def __init__(self, elimination: Elimination, factors, data: np.ndarray, add: np.ndarray) -> None:
+        e = self.elimination = elimination
+        self.factors, self.data, self.add = factors, data, add
+        self.diagonal = add[e.diagonal_at]
+        self.re, self.er = data[e.re[0]], data[e.er[0]]
+        self.refine = bool(np.any(np.abs(self.diagonal) * REFINE_FROM <= 1.0))
+
+    def solve(self, b: np.ndarray) -> np.ndarray:
+        """The solution of the kept system (refined once where ``refine``)."""
+        x = self._solve(b)
+        if self.refine:
+            nonzeros, r, c, at = self.elimination.whole
+            residual = b - np.bincount(r, self.data[nonzeros] * x[c], minlength=b.size)
+            residual[at] -= self.add * x[at]
+            x += self._solve(residual)
+        return x
+
+    def _solve(self, b: np.ndarray) -> np.ndarray:
+        """x_r from the complement's factors, then x_e = E^-1 (b_e - K_er x_r)."""
+        e = self.elimination
+        x = np.empty_like(b)
+        b_out = b[e.out] / self.diagonal
+        x_rest = self.factors.solve(b[e.rest] - np.bincount(e.re[1], self.re * b_out[e.re[2]],
+                                                             minlength=e.rest.size))
+        x[e.rest] = x_rest
+        x[e.out] = b_out - np.bincount(e.er[1], self.er * x_rest[e.er[2]], minlength=e.out.size) / self.diagonal
+        return x
 
 
 class BandLU:
