@@ -430,5 +430,7 @@ def test_a_long_barrier_path_is_left_for_the_line_search_phase_and_ends_at_an_eq
 
 def test_without_the_line_search_phase_that_start_is_not_solved(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(hybrid, "SLOW", 10**6)
+    monkeypatch.setattr(hybrid, "response_round", lambda game, a, x: None)  # (the robots' answers reach a KKT point)
     res = solve(_formation(**{"run.certificate": False}))
-    assert res.status == "max_iter", res.message
+    assert res.status == "stalled", res.message  # every interior start stalls
+    assert "after 3 start(s)" in res.message

@@ -144,30 +144,53 @@ def monotone_barrier(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(interior_point, "PREDICT_AFTER", np.inf)
 
 
-def test_the_round_answers_the_plans_where_the_first_interior_start_stalled(
-        monkeypatch: pytest.MonkeyPatch, monotone_barrier: None) -> None:
-    """From zero inputs the first interior start stalls (the cars coincide at a knot, where the collision row has no
-    gradient); the first round answers the plans where it stalled (not the zero-input start). Here the three
-    interior starts from those answers stall too, and the second round, the answers to the zero-input plans, starts
-    the solve that converges, to a point both cars' independent numpy best responses confirm. (The line-search
-    phase, which the default tries at iteration SLOW, is set aside here: this is the rounds' test.)"""
-    monkeypatch.setattr(hybrid, "SLOW", 10**6)
-    game, solver = _overtaking()
+def _counted(monkeypatch: pytest.MonkeyPatch, game, answer=None) -> list[np.ndarray]:
+    """The plans each round of best responses is asked to answer (``answer``: the round, default the real one)."""
     calls: list[np.ndarray] = []
-    real = hybrid.response_round
+    answer = answer or hybrid.response_round
 
     def counted(g, a, x):
         assert g is game
         calls.append(a.copy())
-        return real(g, a, x)
+        return answer(g, a, x)
 
     monkeypatch.setattr(hybrid, "response_round", counted)
+    return calls
+
+
+def test_the_round_answers_the_plans_where_the_first_interior_start_stalled(
+        monkeypatch: pytest.MonkeyPatch, monotone_barrier: None) -> None:
+    """From zero inputs the first interior start stalls (the cars coincide at a knot, where the collision row has no
+    gradient); the round answers the plans where it stalled (not the zero-input start), and the warm interior start
+    from the answers converges, to a point both cars' independent numpy best responses confirm, without the other
+    starts from z^0. (The line-search phase, which the default tries at iteration SLOW, is set aside here: this is
+    the rounds' test.)"""
+    monkeypatch.setattr(hybrid, "SLOW", 10**6)
+    game, solver = _overtaking()
+    calls = _counted(monkeypatch, game)
     states: list = []
     state = iterate(solver, solver.init(), on_iterate=states.append)
-    assert len(calls) == 2 and calls[0].any() and not calls[1].any()
+    assert len(calls) == 1 and calls[0].any()  # once, answering plans that are not the zero-input start ...
     first = [s for s in states if s.search.attempt == 0 and not s.search.answered]
-    assert len(first) > hybrid.STALL  # the first round came after the first start's stall (its last step's plans)
+    assert len(first) > hybrid.STALL  # ... but the first start's after its stall (its last step's plans)
     assert states[len(first)].search.answered and states[len(first)].search.attempt == 0
+    assert state.status == "converged", state.message
+    assert state.search.answered and state.search.cold == 1 and not state.search.answered_start
+    gaps = overtaking_model().best_response_gaps(state.z[: game.n])
+    assert max(gaps.values()) <= 1e-6
+
+
+def test_when_the_answers_to_the_stalled_plans_stall_the_start_plans_are_answered(
+        monkeypatch: pytest.MonkeyPatch, monotone_barrier: None) -> None:
+    """Answers to the stalled plans that are those plans themselves: the three interior starts from them stall, and
+    the second round, the answers to the zero-input plans, starts the solve that converges, to a point both cars'
+    independent numpy best responses confirm."""
+    monkeypatch.setattr(hybrid, "SLOW", 10**6)
+    game, solver = _overtaking()
+    real = hybrid.response_round
+    calls = _counted(monkeypatch, game, lambda g, a, x: real(g, a, x) if not a.any() else np.array(a, dtype=float))
+    state = iterate(solver, solver.init())
+    assert len(calls) == 2 and calls[0].any() and not calls[1].any()
     assert state.status == "converged", state.message
     assert state.search.answered_start and state.search.cold == 1
     gaps = overtaking_model().best_response_gaps(state.z[: game.n])

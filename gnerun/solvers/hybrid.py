@@ -97,7 +97,7 @@ HANDOVER_AT = 1e-2  # try the Newton step from an interior iterate once ||Phi|| 
 HANDOVER_DECREASE = 0.5  # ... and take it when it reduces ||Phi|| at least by this factor
 HANDOVER_RETRY = 0.5  # after a refused hand-over, the next try once ||Phi|| is below this fraction of where it was
 HANDOVER_ROUNDS = 3  # a refused hand-over step is tried again this many times with its active set corrected
-STALL = 25  # interior steps without a new best ||Phi|| (by 10%) before a restart
+STALL = 15  # interior steps without a new best ||Phi|| (by 10%) before a restart (or a round of best responses)
 RESTARTS = len(STARTS) - 1
 LM_FAR = 1e-4  # far from a solution, a singular JPhi gets the Levenberg-Marquardt step with mu = LM_FAR ||Phi||
 FLAT = 1e-2  # a Levenberg-Marquardt step that changes ||Phi|| by less than this fraction ends the Newton phase
