@@ -75,3 +75,20 @@ def test_the_best_responses_are_those_of_the_players_own_problem():
             assert cs and cd
             assert np.max(np.abs(es - a[sl])) <= 1e-6  # an equilibrium: nobody moves
             assert np.max(np.abs(es - ed)) <= 1e-7 * max(1.0, np.max(np.abs(ed)))
+
+
+def test_a_players_part_is_banded_in_the_games_stages_and_its_solver_is_kept_per_game():
+    """The agent's problem is compiled as a static game (one stage), but its part of the game's system keeps the
+    game's stages: ordered by them, its matrix is banded (an intersection car: a band of a few dozen, not the width
+    of the matrix), so its solves take banded LU. A second certificate on the same game (another candidate, as in a
+    Monte Carlo or a closed loop) reuses each player's problem, system and solver."""
+    cfg, game = _sparse("algames_intersection")
+    first = NewtonResponses(cfg, game)
+    second = NewtonResponses(cfg, game)
+    for agent in range(len(game.agent_names)):
+        problem, solver, _ = first._solver(agent)
+        system = solver.newton.system
+        assert system.stages == game.derived["sparse"].stages == game.horizon + 1
+        order = system.stage_order
+        assert order.lower + order.upper + 1 <= 0.25 * system.size, (order.lower, order.upper, system.size)
+        assert second._solver(agent)[1] is solver and second._solver(agent)[0] is problem

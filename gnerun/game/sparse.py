@@ -84,6 +84,7 @@ class SparseKKT:
         self.costates = costates  # agent i's costates p_i: these positions of p (and rows of G_xi)
         self.states = states  # the positions in xi of the states agent i reaches (stage-major)
         self.size = self.n + S + (costates[-1].stop if costates else 0) + self.m
+        self.stages = (game.horizon or 0) + 1  # the stages tau = 0..T of the states and the decisions
         self._eval = Evaluator(function, dense=False)
         colind, row = pattern.colind(), pattern.row()
         self.pattern = sp.csc_matrix((np.zeros(len(row)), np.asarray(row), np.asarray(colind)),
@@ -199,6 +200,9 @@ class AgentSparseKKT(SparseKKT):
         super().__init__(problem, full._eval.function, full._residual.function, pattern, False, S,
                          [slice(0, own_p.stop - own_p.start)], [full.states[agent]])
         self.kernels = full.kernels
+        # the game's stages (the agent's problem is compiled as a static one): its matrix is banded in their order
+        # (the merge's car: 440 unknowns, band (18, 20); one stage, (52, 401), left SuperLU a third of a certificate)
+        self.stages = full.stages
 
     def _point(self, z: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The game's (a, lambda, x) of the agent problem's (z, parameters)."""
@@ -636,7 +640,7 @@ def _stages(system: SparseKKT) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.n
     game = system.game
     n, S, m, size = system.n, system.S, system.m, system.size
     P = size - n - S - m
-    stages = (game.horizon or 0) + 1
+    stages = system.stages
     nx = S // stages
     row_stage, col_stage = np.zeros(size, dtype=int), np.zeros(size, dtype=int)
     row_kind, col_kind = np.zeros(size, dtype=int), np.zeros(size, dtype=int)

@@ -222,39 +222,52 @@ class NewtonResponses:
 
     def _solver(self, agent: int):
         if agent not in self._solvers:
-            from ..game.compile import compile_agent_problem
             from ..language.config import SolverConfig
-            from .globalization import globalized
-            from .ssn import SemismoothNewton
 
-            built = self.game.derived.setdefault("agent_problems", {})  # once per game (a sweep's points share it)
-            if agent not in built:
-                built[agent] = compile_agent_problem(self.cfg, agent, 0.0)
-            problem = built[agent]
             opts = SolverConfig(**{**self.cfg.solver.model_dump(), "kind": "ssn", "globalization": "interior_point",
                                    "formulation": "condensed", "max_iter": self.MAX_ITER,
                                    "tol": min(self.cfg.solver.tol, 1e-10)})
-            # the candidate's multipliers in the agent problem's row order (matched by label: the game lists an
-            # agent's own rows, then the common shared rows; the agent's problem, stage by stage)
-            rows = self.game.agents.constraint_rows(agent)
-            free: dict[str, list[int]] = {}
-            for k, r in enumerate(rows):
-                free.setdefault(self.game.constraints[r].label, []).append(k)
-            order = np.array([free[c.label].pop(0) if free.get(c.label) else -1 for c in problem.constraints],
-                             dtype=int)
-            full = self.game.derived.get("sparse")  # the game was solved in the sparse formulation
-            if full is not None and (order >= 0).all():
-                # the agent's problem as a part of the game's sparse system: no dense derivatives of its own
-                from ..game.sparse import AgentSparseKKT
-                from .sparse_ssn import SparseSemismoothNewton
-
-                system = AgentSparseKKT(full, problem, agent, rows[order])
-                newton = SparseSemismoothNewton(problem, opts.model_copy(update={"formulation": "sparse"}), None,
-                                                system)
-            else:
-                newton = SemismoothNewton(problem, opts)
-            self._solvers[agent] = (problem, globalized(newton), order)
+            # once per game and options: the solves of a sweep's points, a Monte Carlo's draws and a closed loop's
+            # sampling times share the agent's problem, its system and what the solver keeps (its stage order and
+            # factorisation layouts, ~10 ms per agent to build)
+            solvers = self.game.derived.setdefault("response_solvers", {})
+            full = self.game.derived.get("sparse")
+            key = (agent, opts.model_dump_json(), None if full is None else id(full))  # (held by the entry)
+            if key not in solvers:
+                solvers[key] = self._build(agent, opts)
+            self._solvers[agent] = solvers[key]
         return self._solvers[agent]
+
+    def _build(self, agent: int, opts):
+        """(the agent's problem, its globalized solver, the game's rows in the problem's order)."""
+        from ..game.compile import compile_agent_problem
+        from .globalization import globalized
+        from .ssn import SemismoothNewton
+
+        built = self.game.derived.setdefault("agent_problems", {})  # once per game (a sweep's points share it)
+        if agent not in built:
+            built[agent] = compile_agent_problem(self.cfg, agent, 0.0)
+        problem = built[agent]
+        # the candidate's multipliers in the agent problem's row order (matched by label: the game lists an
+        # agent's own rows, then the common shared rows; the agent's problem, stage by stage)
+        rows = self.game.agents.constraint_rows(agent)
+        free: dict[str, list[int]] = {}
+        for k, r in enumerate(rows):
+            free.setdefault(self.game.constraints[r].label, []).append(k)
+        order = np.array([free[c.label].pop(0) if free.get(c.label) else -1 for c in problem.constraints],
+                         dtype=int)
+        full = self.game.derived.get("sparse")  # the game was solved in the sparse formulation
+        if full is not None and (order >= 0).all():
+            # the agent's problem as a part of the game's sparse system: no dense derivatives of its own
+            from ..game.sparse import AgentSparseKKT
+            from .sparse_ssn import SparseSemismoothNewton
+
+            system = AgentSparseKKT(full, problem, agent, rows[order])
+            newton = SparseSemismoothNewton(problem, opts.model_copy(update={"formulation": "sparse"}), None,
+                                            system)
+        else:
+            newton = SemismoothNewton(problem, opts)
+        return problem, globalized(newton), order
 
     def solve_from(self, agent: int, a: np.ndarray, x: np.ndarray | None, starts: list[np.ndarray],
                    multipliers: np.ndarray | None = None) -> list[tuple[np.ndarray, bool]]:

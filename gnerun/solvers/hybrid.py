@@ -428,7 +428,7 @@ class HybridNewton:
             if answered is not None:
                 return answered
             why += "; no player has a feasible best answer to the others' start plans"
-        if memory.attempt < RESTARTS + PIVOTS and self.game.affine and self.newton.condensed:
+        if memory.attempt < RESTARTS + PIVOTS and self.newton.condensed and self.game.affine:
             pivoted = self._pivot(state, memory)
             if pivoted is not None:
                 return pivoted
