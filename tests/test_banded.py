@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 from scipy.linalg import lapack
 
+from gnerun.game import banded
 from gnerun.game.kernels import compiler
-from gnerun.solvers import banded
 
 
 def _lapack(band: np.ndarray, b: np.ndarray, transpose: bool) -> tuple[np.ndarray, int]:

@@ -41,6 +41,7 @@ from scipy.sparse import linalg as spla
 
 from ..errors import one_line
 from ..language.config import Config, DynamicGame
+from . import banded
 from .building import stoppable
 from .compile import CompiledGame, Evaluator, _expressions, _layout, compile_key, shared_rows_carried
 from .kernels import (
@@ -754,7 +755,11 @@ class KeptLayout:
             return BandLU(self, np.zeros((self.ld, 0), order="F"), np.zeros(0, dtype=np.int32)), 1.0
         ab = self.band(data, add)
         norm = float(np.abs(ab).sum(axis=0).max()) if estimate else math.nan  # before dgbtrf overwrites ab
-        lu, piv, info = lapack.dgbtrf(ab, self.lower, self.upper, overwrite_ab=1)
+        factored = banded.lu_factor(ab, self.lower, self.upper)  # dgbtrf's bits, compiled
+        if factored is None:
+            lu, piv, info = lapack.dgbtrf(self.band(data, add), self.lower, self.upper, overwrite_ab=1)
+        else:
+            lu, (piv, info) = ab, factored
         if info != 0:  # an exactly zero pivot
             return None, 0.0
         factors = BandLU(self, lu, piv)
@@ -781,7 +786,7 @@ class BandLU:
 
     def solve_band(self, b: np.ndarray, trans: int = 0) -> np.ndarray:
         """The solution of the stage-ordered system (``trans`` = 1: of its transpose)."""
-        return lapack.dgbtrs(self.lu, self.layout.lower, self.layout.upper, b, self.piv, trans=trans)[0]
+        return banded.lu_solve(self.lu, self.layout.lower, self.layout.upper, self.piv, b, trans)  # dgbtrs's bits
 
 
 def inverse_norm(solve: Callable[[np.ndarray], np.ndarray], solve_T: Callable[[np.ndarray], np.ndarray],
