@@ -310,6 +310,89 @@ int band_lu_solve(int n, int kl, int ku, const double *ab, int ld, const int *ip
     return 0;
 }
 
+/* numpy's sum of |x| (DOUBLE_pairwise_sum: blocks of at most 128 in 8 accumulators, halves above) */
+static double abs_sum(const double *x, long n) {
+    if (n < 8) {
+        double res = 0.0;
+        for (long i = 0; i < n; i++) res += __builtin_fabs(x[i]);
+        return res;
+    }
+    if (n <= 128) {
+        double r[8];
+        long i;
+        for (int k = 0; k < 8; k++) r[k] = __builtin_fabs(x[k]);
+        for (i = 8; i < n - (n % 8); i += 8)
+            for (int k = 0; k < 8; k++) r[k] += __builtin_fabs(x[i + k]);
+        double res = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]));
+        for (; i < n; i++) res += __builtin_fabs(x[i]);
+        return res;
+    }
+    long n2 = n / 2;
+    n2 -= n2 % 8;
+    return abs_sum(x, n2) + abs_sum(x + n2, n - n2);
+}
+
+/* numpy's argmax of |x|: the first NaN, or the first largest */
+static int abs_argmax(const double *x, int n) {
+    int j = 0;
+    double best = __builtin_fabs(x[0]);
+    if (best != best) return 0;
+    for (int i = 1; i < n; i++) {
+        double v = __builtin_fabs(x[i]);
+        if (v != v) return i;
+        if (v > best) { best = v; j = i; }
+    }
+    return j;
+}
+
+/* 1 where the signs of x (x >= 0: 1, else -1; NaN: -1) are those in s */
+static int same_signs(const double *x, double *s, int n) {
+    for (int i = 0; i < n; i++)
+        if ((x[i] >= 0 ? 1.0 : -1.0) != s[i]) return 0;
+    return 1;
+}
+
+static void signs_of(const double *x, double *s, int n) {
+    for (int i = 0; i < n; i++) s[i] = x[i] >= 0 ? 1.0 : -1.0;
+}
+
+static void lu_solve1(int n, int kl, int ku, const double *ab, int ld, const int *ipiv, double *x, int transpose) {
+    band_lu_solve(n, kl, ku, ab, ld, ipiv, 1, x, transpose);
+}
+
+/* gnerun.game.sparse.inverse_norm with the solves above: the same operations in the same order (numpy's sums and
+   argmax included), so the same estimate of ||A^-1||_1 to the bit; work: 2 n doubles */
+double band_lu_inverse_norm(int n, int kl, int ku, const double *ab, int ld, const int *ipiv, double *work) {
+    double *x = work, *signs = work + n;
+    for (int i = 0; i < n; i++) x[i] = 1.0 / n;
+    lu_solve1(n, kl, ku, ab, ld, ipiv, x, 0);
+    if (n == 1) return __builtin_fabs(x[0]);
+    double est = abs_sum(x, n);
+    if (!(est - est == 0.0)) return est;  /* not finite */
+    signs_of(x, signs, n);
+    for (int i = 0; i < n; i++) x[i] = signs[i];
+    lu_solve1(n, kl, ku, ab, ld, ipiv, x, 1);
+    int j = abs_argmax(x, n);
+    for (int iteration = 2; iteration < 6; iteration++) {
+        for (int i = 0; i < n; i++) x[i] = 0.0;
+        x[j] = 1.0;
+        lu_solve1(n, kl, ku, ab, ld, ipiv, x, 0);
+        double previous = est;
+        est = abs_sum(x, n);
+        if (same_signs(x, signs, n) || est <= previous) break;
+        signs_of(x, signs, n);
+        for (int i = 0; i < n; i++) x[i] = signs[i];
+        lu_solve1(n, kl, ku, ab, ld, ipiv, x, 1);
+        int last = j;
+        j = abs_argmax(x, n);
+        if (x[last] == __builtin_fabs(x[j]) || iteration == 5) break;
+    }
+    for (int i = 0; i < n; i++) x[i] = (i % 2 == 0 ? 1.0 : -1.0) * (1.0 + (double)i / (double)(n - 1));
+    lu_solve1(n, kl, ku, ab, ld, ipiv, x, 0);
+    double alternating = 2.0 * abs_sum(x, n) / (3.0 * n);
+    return alternating > est ? alternating : est;
+}
+
 int banded_supported(void) {
     __builtin_cpu_init();
     return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
@@ -380,6 +463,20 @@ def lu_solve(lu: np.ndarray, kl: int, ku: int, piv: np.ndarray, b: np.ndarray, t
     return x
 
 
+def lu_inverse_norm(lu: np.ndarray, kl: int, ku: int, piv: np.ndarray) -> float | None:
+    """:func:`gnerun.game.sparse.inverse_norm` of the matrix whose factors are ``lu`` and ``piv`` (:func:`lu_factor`),
+    with :func:`lu_solve`'s solves, the whole estimate in C: the same operations in the same order, numpy's sums
+    and argmax included, so the same number to the bit. None where the solves are LAPACK's."""
+    kernels = _lu_kernels()
+    n = lu.shape[1]
+    if kernels is None or n == 0:
+        return None
+    if not (lu.flags.f_contiguous and lu.dtype == np.float64 and piv.dtype == np.int32 and piv.flags.c_contiguous):
+        raise ValueError("the factors must be a Fortran-ordered array of float64 and the pivots of int32")
+    work = np.empty(2 * n)
+    return kernels[2](n, kl, ku, lu.ctypes.data, lu.shape[0], piv.ctypes.data, work.ctypes.data)
+
+
 def status() -> str:
     """Which solves and factorisations this module makes: "compiled", or "lapack (why)"."""
     _kernel()
@@ -431,14 +528,16 @@ def _load():
     kernel = lib.banded_solve
     kernel.restype = ctypes.c_int
     kernel.argtypes = [ctypes.c_int, ctypes.c_int, ctypes.c_void_p, ctypes.c_int, ctypes.c_void_p, ctypes.c_int]
-    factor, solve_lu = lib.band_lu, lib.band_lu_solve
+    factor, solve_lu, inverse_norm = lib.band_lu, lib.band_lu_solve, lib.band_lu_inverse_norm
     factor.restype = solve_lu.restype = ctypes.c_int
+    inverse_norm.restype = ctypes.c_double
+    inverse_norm.argtypes = [ctypes.c_int] * 3 + [ctypes.c_void_p, ctypes.c_int, ctypes.c_void_p, ctypes.c_void_p]
     factor.argtypes = [ctypes.c_int] * 3 + [ctypes.c_void_p, ctypes.c_int, ctypes.c_void_p]
     solve_lu.argtypes = [ctypes.c_int] * 3 + [ctypes.c_void_p, ctypes.c_int, ctypes.c_void_p, ctypes.c_int,
                                               ctypes.c_void_p, ctypes.c_int]
     if not (_agrees(kernel) and _lu_agrees(factor, solve_lu)):
         return None, None, "lapack (the compiled solves round differently from this LAPACK's)"
-    return kernel, (factor, solve_lu), "compiled"
+    return kernel, (factor, solve_lu, inverse_norm), "compiled"
 
 
 def _agrees(kernel) -> bool:

@@ -765,7 +765,9 @@ class KeptLayout:
         factors = BandLU(self, lu, piv)
         if not estimate:
             return factors, math.nan
-        inverse = inverse_norm(factors.solve_band, lambda b: factors.solve_band(b, 1), self.size)
+        inverse = banded.lu_inverse_norm(lu, self.lower, self.upper, piv)  # the same estimate, all in C
+        if inverse is None:
+            inverse = inverse_norm(factors.solve_band, lambda b: factors.solve_band(b, 1), self.size)
         rcond = 1.0 / (norm * inverse) if np.isfinite(inverse) and inverse > 0 else 0.0
         return factors, rcond
 
