@@ -248,8 +248,17 @@ def test_the_compiled_condition_estimate_is_inverse_norms_to_the_bit(compiled) -
             assert _same_bits(np.array(banded.lu_inverse_norm(lu, kl, ku, piv)), np.array(ref))
 
 
+def test_the_compiled_norm_is_numpys_to_the_bit(compiled) -> None:
+    rng = np.random.default_rng(11)
+    for n, kl, ku in ((780, 18, 27), (50, 2, 1), (30, 60, 70), (3, 0, 0)):  # columns of 64, 6, 191 and 1 entries
+        ab = _kkt_band(rng, n, kl, ku)
+        assert _same_bits(np.array(banded.one_norm(ab)), np.array(float(np.abs(ab).sum(axis=0).max())))
+    ab[0, 1] = np.nan
+    assert np.isnan(banded.one_norm(ab))
+
+
 def test_the_check_at_loading_refuses_a_factorisation_or_a_solve_one_bit_off(compiled) -> None:
-    factor, solve_lu, _ = banded._STATE["lu"]
+    factor, solve_lu, *_ = banded._STATE["lu"]
     assert banded._lu_agrees(factor, solve_lu)
 
     def factor_off(n, kl, ku, ab, ld, ipiv):
@@ -277,7 +286,7 @@ def test_without_a_compiler_the_lu_is_lapacks(monkeypatch: pytest.MonkeyPatch) -
     ab = _kkt_band(rng, 80, 5, 6)
     assert banded.lu_factor(ab, 5, 6) is None
     lu, piv, info = _lapack_lu(ab, 5, 6)
-    assert banded.lu_inverse_norm(lu, 5, 6, piv) is None
+    assert banded.lu_inverse_norm(lu, 5, 6, piv) is None and banded.one_norm(ab) is None
     b = rng.standard_normal(80)
     for trans in (0, 1):
         assert _same_bits(banded.lu_solve(lu, 5, 6, piv, b, trans), lapack.dgbtrs(lu, 5, 6, b, piv, trans=trans)[0])

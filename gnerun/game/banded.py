@@ -356,6 +356,17 @@ static void signs_of(const double *x, double *s, int n) {
     for (int i = 0; i < n; i++) s[i] = x[i] >= 0 ? 1.0 : -1.0;
 }
 
+/* numpy's np.abs(ab).sum(axis=0).max() of a Fortran-ordered (ld, n) array: the 1-norm of the band's matrix */
+double band_one_norm(int n, const double *ab, int ld) {
+    double norm = 0.0;
+    for (int j = 0; j < n; j++) {
+        double s = abs_sum(ab + (size_t)j * ld, ld);
+        if (s != s) return s;
+        if (j == 0 || s > norm) norm = s;
+    }
+    return norm;
+}
+
 static void lu_solve1(int n, int kl, int ku, const double *ab, int ld, const int *ipiv, double *x, int transpose) {
     band_lu_solve(n, kl, ku, ab, ld, ipiv, 1, x, transpose);
 }
@@ -477,6 +488,17 @@ def lu_inverse_norm(lu: np.ndarray, kl: int, ku: int, piv: np.ndarray) -> float 
     return kernels[2](n, kl, ku, lu.ctypes.data, lu.shape[0], piv.ctypes.data, work.ctypes.data)
 
 
+def one_norm(ab: np.ndarray) -> float | None:
+    """``float(np.abs(ab).sum(axis=0).max())`` of a Fortran-ordered band (numpy's pairwise sums, the same number),
+    without its temporary arrays; None where nothing is compiled."""
+    kernels = _lu_kernels()
+    if kernels is None or ab.shape[1] == 0:
+        return None
+    if not (ab.flags.f_contiguous and ab.dtype == np.float64):
+        raise ValueError("the band must be a Fortran-ordered array of float64")
+    return kernels[3](ab.shape[1], ab.ctypes.data, ab.shape[0])
+
+
 def status() -> str:
     """Which solves and factorisations this module makes: "compiled", or "lapack (why)"."""
     _kernel()
@@ -529,15 +551,17 @@ def _load():
     kernel.restype = ctypes.c_int
     kernel.argtypes = [ctypes.c_int, ctypes.c_int, ctypes.c_void_p, ctypes.c_int, ctypes.c_void_p, ctypes.c_int]
     factor, solve_lu, inverse_norm = lib.band_lu, lib.band_lu_solve, lib.band_lu_inverse_norm
+    norm = lib.band_one_norm
     factor.restype = solve_lu.restype = ctypes.c_int
-    inverse_norm.restype = ctypes.c_double
+    inverse_norm.restype = norm.restype = ctypes.c_double
+    norm.argtypes = [ctypes.c_int, ctypes.c_void_p, ctypes.c_int]
     inverse_norm.argtypes = [ctypes.c_int] * 3 + [ctypes.c_void_p, ctypes.c_int, ctypes.c_void_p, ctypes.c_void_p]
     factor.argtypes = [ctypes.c_int] * 3 + [ctypes.c_void_p, ctypes.c_int, ctypes.c_void_p]
     solve_lu.argtypes = [ctypes.c_int] * 3 + [ctypes.c_void_p, ctypes.c_int, ctypes.c_void_p, ctypes.c_int,
                                               ctypes.c_void_p, ctypes.c_int]
     if not (_agrees(kernel) and _lu_agrees(factor, solve_lu)):
         return None, None, "lapack (the compiled solves round differently from this LAPACK's)"
-    return kernel, (factor, solve_lu, inverse_norm), "compiled"
+    return kernel, (factor, solve_lu, inverse_norm, norm), "compiled"
 
 
 def _agrees(kernel) -> bool:

@@ -754,7 +754,11 @@ class KeptLayout:
         if not self.size:
             return BandLU(self, np.zeros((self.ld, 0), order="F"), np.zeros(0, dtype=np.int32)), 1.0
         ab = self.band(data, add)
-        norm = float(np.abs(ab).sum(axis=0).max()) if estimate else math.nan  # before dgbtrf overwrites ab
+        norm = math.nan
+        if estimate:  # before dgbtrf overwrites ab
+            norm = banded.one_norm(ab)
+            if norm is None:
+                norm = float(np.abs(ab).sum(axis=0).max())
         factored = banded.lu_factor(ab, self.lower, self.upper)  # dgbtrf's bits, compiled
         if factored is None:
             lu, piv, info = lapack.dgbtrf(self.band(data, add), self.lower, self.upper, overwrite_ab=1)
