@@ -126,37 +126,24 @@ static void axpy(int n, double da, const double *restrict x, double *restrict y)
    multiply-add per entry as daxpy's, the rows taken 16 at a time (in registers) across all columns */
 __attribute__((target("avx2,fma")))
 static void rank_one(int m, int cols, const double *restrict x, double *restrict a, size_t step) {
-    double alpha[cols];
-    for (int c = 0; c < cols; c++) alpha[c] = -1.0 * a[(c + 1) * step];
-    int r = 0;
-    for (; r + 16 <= m; r += 16) {
-        __m256d x0 = _mm256_loadu_pd(x + r), x1 = _mm256_loadu_pd(x + r + 4);
-        __m256d x2 = _mm256_loadu_pd(x + r + 8), x3 = _mm256_loadu_pd(x + r + 12);
-        for (int c = 0; c < cols; c++) {
-            double *u = a + (c + 1) * step + 1 + r;
-            __m256d al = _mm256_set1_pd(alpha[c]);
-            _mm256_storeu_pd(u, _mm256_fmadd_pd(al, x0, _mm256_loadu_pd(u)));
-            _mm256_storeu_pd(u + 4, _mm256_fmadd_pd(al, x1, _mm256_loadu_pd(u + 4)));
-            _mm256_storeu_pd(u + 8, _mm256_fmadd_pd(al, x2, _mm256_loadu_pd(u + 8)));
-            _mm256_storeu_pd(u + 12, _mm256_fmadd_pd(al, x3, _mm256_loadu_pd(u + 12)));
+    for (int r = 0; r < m; r += 32) {  /* rows in blocks of up to 32 (in registers), all columns for each block */
+        int rows = m - r < 32 ? m - r : 32, quads = rows >> 2, two = rows & 2, one = rows & 1;
+        __m256d xv[8];
+        for (int k = 0; k < quads; k++) xv[k] = _mm256_loadu_pd(x + r + 4 * k);
+        __m128d x2 = two ? _mm_loadu_pd(x + r + 4 * quads) : _mm_setzero_pd();
+        double x1 = one ? x[r + rows - 1] : 0.0;
+        for (int c = 1; c <= cols; c++) {
+            double alpha = -1.0 * a[c * step];
+            double *u = a + c * step + 1 + r;
+            __m256d al = _mm256_set1_pd(alpha);
+            for (int k = 0; k < quads; k++)
+                _mm256_storeu_pd(u + 4 * k, _mm256_fmadd_pd(al, xv[k], _mm256_loadu_pd(u + 4 * k)));
+            if (two) {
+                double *v = u + 4 * quads;
+                _mm_storeu_pd(v, _mm_fmadd_pd(_mm256_castpd256_pd128(al), x2, _mm_loadu_pd(v)));
+            }
+            if (one) u[rows - 1] = __builtin_fma(alpha, x1, u[rows - 1]);
         }
-    }
-    if (r == m) return;
-    int rows = m - r, quads = rows >> 2, two = rows & 2, one = rows & 1;  /* the last rows: one pass */
-    __m256d xv[3];
-    for (int k = 0; k < quads; k++) xv[k] = _mm256_loadu_pd(x + r + 4 * k);
-    __m128d x2 = two ? _mm_loadu_pd(x + r + 4 * quads) : _mm_setzero_pd();
-    double x1 = one ? x[m - 1] : 0.0;
-    for (int c = 0; c < cols; c++) {
-        double *u = a + (c + 1) * step + 1 + r;
-        __m256d al = _mm256_set1_pd(alpha[c]);
-        for (int k = 0; k < quads; k++)
-            _mm256_storeu_pd(u + 4 * k, _mm256_fmadd_pd(al, xv[k], _mm256_loadu_pd(u + 4 * k)));
-        if (two) {
-            double *v = u + 4 * quads;
-            _mm_storeu_pd(v, _mm_fmadd_pd(_mm256_castpd256_pd128(al), x2, _mm_loadu_pd(v)));
-        }
-        if (one) u[rows - 1] = __builtin_fma(alpha[c], x1, u[rows - 1]);
     }
 }
 
