@@ -156,23 +156,33 @@ static double dot(int n, const double *x, const double *y) {
     int n1 = n & -16, n32 = n1 & -32, i = 0;
     double d = 0.0;
     if (n1) {
-        double acc[4][4];
-        if (n32) {
-            double wide[4][8];
-            for (int k = 0; k < 4; k++) for (int l = 0; l < 8; l++) wide[k][l] = 0.0;
-            for (; i < n32; i += 32)
-                for (int k = 0; k < 4; k++) for (int l = 0; l < 8; l++)
-                    wide[k][l] = __builtin_fma(x[i + 8 * k + l], y[i + 8 * k + l], wide[k][l]);
-            for (int k = 0; k < 4; k++) for (int l = 0; l < 4; l++) acc[k][l] = wide[k][l] + wide[k][l + 4];
-        } else {
-            for (int k = 0; k < 4; k++) for (int l = 0; l < 4; l++) acc[k][l] = 0.0;
+        __m256d a0 = _mm256_setzero_pd(), a1 = a0, a2 = a0, a3 = a0;
+        if (n32) {  /* 4 x 8 lanes: the low and high halves of each */
+            __m256d w0 = a0, w1 = a0, w2 = a0, w3 = a0, w4 = a0, w5 = a0, w6 = a0, w7 = a0;
+            for (; i < n32; i += 32) {
+                w0 = _mm256_fmadd_pd(_mm256_loadu_pd(x + i), _mm256_loadu_pd(y + i), w0);
+                w1 = _mm256_fmadd_pd(_mm256_loadu_pd(x + i + 4), _mm256_loadu_pd(y + i + 4), w1);
+                w2 = _mm256_fmadd_pd(_mm256_loadu_pd(x + i + 8), _mm256_loadu_pd(y + i + 8), w2);
+                w3 = _mm256_fmadd_pd(_mm256_loadu_pd(x + i + 12), _mm256_loadu_pd(y + i + 12), w3);
+                w4 = _mm256_fmadd_pd(_mm256_loadu_pd(x + i + 16), _mm256_loadu_pd(y + i + 16), w4);
+                w5 = _mm256_fmadd_pd(_mm256_loadu_pd(x + i + 20), _mm256_loadu_pd(y + i + 20), w5);
+                w6 = _mm256_fmadd_pd(_mm256_loadu_pd(x + i + 24), _mm256_loadu_pd(y + i + 24), w6);
+                w7 = _mm256_fmadd_pd(_mm256_loadu_pd(x + i + 28), _mm256_loadu_pd(y + i + 28), w7);
+            }
+            a0 = _mm256_add_pd(w0, w1);
+            a1 = _mm256_add_pd(w2, w3);
+            a2 = _mm256_add_pd(w4, w5);
+            a3 = _mm256_add_pd(w6, w7);
         }
-        for (; i < n1; i += 16)
-            for (int k = 0; k < 4; k++) for (int l = 0; l < 4; l++)
-                acc[k][l] = __builtin_fma(x[i + 4 * k + l], y[i + 4 * k + l], acc[k][l]);
-        double s[4];
-        for (int l = 0; l < 4; l++) s[l] = ((acc[0][l] + acc[1][l]) + acc[2][l]) + acc[3][l];
-        d = (s[0] + s[2]) + (s[1] + s[3]);
+        for (; i < n1; i += 16) {
+            a0 = _mm256_fmadd_pd(_mm256_loadu_pd(x + i), _mm256_loadu_pd(y + i), a0);
+            a1 = _mm256_fmadd_pd(_mm256_loadu_pd(x + i + 4), _mm256_loadu_pd(y + i + 4), a1);
+            a2 = _mm256_fmadd_pd(_mm256_loadu_pd(x + i + 8), _mm256_loadu_pd(y + i + 8), a2);
+            a3 = _mm256_fmadd_pd(_mm256_loadu_pd(x + i + 12), _mm256_loadu_pd(y + i + 12), a3);
+        }
+        __m256d sum = _mm256_add_pd(_mm256_add_pd(_mm256_add_pd(a0, a1), a2), a3);
+        __m128d half = _mm_add_pd(_mm256_castpd256_pd128(sum), _mm256_extractf128_pd(sum, 1));
+        d = _mm_cvtsd_f64(half) + _mm_cvtsd_f64(_mm_unpackhi_pd(half, half));
     }
     for (; i < n; i++) d = __builtin_fma(y[i], x[i], d);
     return d;
@@ -182,17 +192,16 @@ static double dot(int n, const double *x, const double *y) {
    m & -4 rows by dgemv_kernel_4x1 (SSE2: products rounded, then added into 2 x 2 lanes), y -= their sum; the last
    m & 3 rows as the compiled C, x negated: y += ((a1 x1 fused a0 x0) fused a2 x2), or y += fma(a0, x0, y) */
 __attribute__((target("avx2,fma")))
-static double gemv_t1(int m, const double *a, const double *x, double y) {
+static inline double gemv_t1(int m, const double *a, const double *x, double y) {
     int m3 = m & 3, m4 = m - m3;
     if (m4) {
-        double p0 = 0.0, p1 = 0.0, q0 = 0.0, q1 = 0.0;
+        __m128d p = _mm_setzero_pd(), q = p;
         for (int i = 0; i < m4; i += 4) {
-            p0 = p0 + a[i] * x[i];
-            p1 = p1 + a[i + 1] * x[i + 1];
-            q0 = q0 + a[i + 2] * x[i + 2];
-            q1 = q1 + a[i + 3] * x[i + 3];
+            p = _mm_add_pd(p, _mm_mul_pd(_mm_loadu_pd(a + i), _mm_loadu_pd(x + i)));
+            q = _mm_add_pd(q, _mm_mul_pd(_mm_loadu_pd(a + i + 2), _mm_loadu_pd(x + i + 2)));
         }
-        double t = (p0 + q0) + (p1 + q1);
+        __m128d v = _mm_add_pd(p, q);
+        double t = _mm_cvtsd_f64(v) + _mm_cvtsd_f64(_mm_unpackhi_pd(v, v));
         y = __builtin_fma(t, -1.0, y);
     }
     a += m4;
