@@ -324,3 +324,49 @@ def test_the_sparse_formulation_takes_the_same_iterates_with_either_lu(compiled,
     assert runs[0][0] == runs[1][0] and len(runs[0][1]) == len(runs[1][1]) > 1 and len(runs[0][2]) > 1
     assert all(_same_bits(a, b) for a, b in zip(runs[0][1], runs[1][1], strict=True))
     assert _same_bits(np.array(runs[0][2]), np.array(runs[1][2]))
+
+
+def test_a_factorisation_the_compiled_lu_declines_is_lapacks(compiled, monkeypatch: pytest.MonkeyPatch) -> None:
+    """KeptLayout.factor on a merge's Newton matrix: the same factors, pivots, condition estimate and solution with
+    the compiled LU, with LAPACK's, and where the compiled LU gives up half-way (a value that is not finite): the band
+    is assembled again for LAPACK."""
+    from benchmarks.problems import trajectory
+    from gnerun.game import sparse
+    from gnerun.game.compile import compile_game
+    from gnerun.language.config import load_config
+    from gnerun.runs.solving import make_solver
+
+    cfg = load_config(text=trajectory.merge_problems(1)[0].config_yaml)
+    game = compile_game(cfg)
+    seen = []
+    factor = sparse.KeptLayout.factor
+
+    def first(self, data, add, estimate=True):
+        if self.banded and not seen:
+            seen.append((self, data.copy(), None if add is None else add.copy()))
+        return factor(self, data, add, estimate)
+
+    monkeypatch.setattr(sparse.KeptLayout, "factor", first)
+    solver = make_solver(cfg, game)
+    solver.step(solver.init())
+    monkeypatch.setattr(sparse.KeptLayout, "factor", factor)
+    layout, data, add = seen[0]
+    b = np.random.default_rng(12).standard_normal(layout.size)
+    lu_factor = banded.lu_factor
+
+    def gives_up(ab, kl, ku):
+        lu_factor(ab, kl, ku)  # ab overwritten by half a factorisation
+        ab[:, ab.shape[1] // 2:] = np.nan
+        return None
+
+    outcomes = []
+    for state, lu in (({"kernel": None, "lu": None, "status": "lapack"}, lu_factor), (dict(banded._STATE), lu_factor),
+                      (dict(banded._STATE), gives_up)):
+        monkeypatch.setattr(banded, "_STATE", state)
+        monkeypatch.setattr(banded, "lu_factor", lu)
+        factors, rcond = layout.factor(data, add)
+        outcomes.append((factors.lu, np.array(rcond), factors.solve(b), factors.piv))
+    assert 0 < outcomes[0][1] < 1
+    for other in outcomes[1:]:
+        assert all(_same_bits(a, o) for a, o in zip(outcomes[0][:3], other[:3], strict=True))
+        assert np.array_equal(other[3], outcomes[0][3])

@@ -750,7 +750,8 @@ class KeptLayout:
 
     def factor(self, data: np.ndarray, add: np.ndarray | None, estimate: bool = True) -> tuple[BandLU | None, float]:
         """Banded LU with partial pivoting (LAPACK dgbtrf) and its reciprocal 1-norm condition estimate (dgbcon's;
-        NaN without ``estimate``)."""
+        NaN without ``estimate``). The factorisation, the norm and the estimate are compiled (:mod:`gnerun.game.banded`:
+        the same bits as LAPACK's and numpy's), or LAPACK's and numpy's where the compiled code is not used."""
         if not self.size:
             return BandLU(self, np.zeros((self.ld, 0), order="F"), np.zeros(0, dtype=np.int32)), 1.0
         ab = self.band(data, add)
@@ -791,7 +792,8 @@ class BandLU:
         return x
 
     def solve_band(self, b: np.ndarray, trans: int = 0) -> np.ndarray:
-        """The solution of the stage-ordered system (``trans`` = 1: of its transpose)."""
+        """The solution of the stage-ordered system (``trans`` = 1: of its transpose), dgbtrs's (compiled, the same
+        bits: :func:`gnerun.game.banded.lu_solve`)."""
         return banded.lu_solve(self.lu, self.layout.lower, self.layout.upper, self.piv, b, trans)  # dgbtrs's bits
 
 
@@ -799,7 +801,8 @@ def inverse_norm(solve: Callable[[np.ndarray], np.ndarray], solve_T: Callable[[n
                  n: int) -> float:
     """An estimate of ||A^-1||_1 from solves with A and A^T: Hager's method as Higham refined it, the algorithm of
     LAPACK's condition estimators (dlacn2, at most 5 iterations); dgbcon's estimate, with dgbtrs's solves in place
-    of its scaled triangular ones (three times slower on these bands)."""
+    of its scaled triangular ones (three times slower on these bands). :func:`gnerun.game.banded.lu_inverse_norm` makes
+    the same operations in C, with the same result."""
     x = solve(np.full(n, 1.0 / n))
     if n == 1:
         return float(abs(x[0]))
