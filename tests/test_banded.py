@@ -169,8 +169,8 @@ def _lapack_lu(ab: np.ndarray, kl: int, ku: int) -> tuple[np.ndarray, np.ndarray
 def _compiled_lu(ab: np.ndarray, kl: int, ku: int) -> tuple[np.ndarray, np.ndarray, int]:
     lu = ab.copy(order="F")
     out = banded.lu_factor(lu, kl, ku)
-    assert out is not None
-    return lu, out[0], out[1]
+    assert out is not None and out[0] is lu
+    return out
 
 
 @pytest.mark.parametrize("n, kl, ku", [(780, 18, 27), (1200, 18, 18), (1640, 18, 29), (325, 13, 13), (1051, 6, 7),
@@ -220,8 +220,9 @@ def test_a_zero_pivot_is_reported_as_lapack_does(compiled) -> None:
 def test_what_the_compiled_lu_leaves_to_lapack(compiled) -> None:
     rng = np.random.default_rng(8)
     ab = _kkt_band(rng, 300, 40, 70)  # dgbtrf's blocked path (kl >= 32, ku > 64)
-    before = ab.copy(order="F")
-    assert banded.lu_factor(ab, 40, 70) is None and _same_bits(ab, before)
+    ref, piv, info = _lapack_lu(ab, 40, 70)
+    lu, gpiv, ginfo = banded.lu_factor(ab, 40, 70)
+    assert lu is ab and _same_bits(lu, ref) and np.array_equal(gpiv, piv) and ginfo == info
     ab = _kkt_band(rng, 50, 3, 4)
     ab[3 + 4 + 1, 10] = np.nan
     assert banded.lu_factor(ab, 3, 4) is None  # a value that is not finite, met before LAPACK's idamax would be
@@ -284,8 +285,9 @@ def test_without_a_compiler_the_lu_is_lapacks(monkeypatch: pytest.MonkeyPatch) -
     assert banded.status() == "lapack (no C compiler found: gcc, cc or $CC)"
     rng = np.random.default_rng(10)
     ab = _kkt_band(rng, 80, 5, 6)
-    assert banded.lu_factor(ab, 5, 6) is None
     lu, piv, info = _lapack_lu(ab, 5, 6)
+    got = banded.lu_factor(ab.copy(order="F"), 5, 6)
+    assert _same_bits(got[0], lu) and np.array_equal(got[1], piv) and got[2] == info
     assert banded.lu_inverse_norm(lu, 5, 6, piv) is None and banded.one_norm(ab) is None
     b = rng.standard_normal(80)
     for trans in (0, 1):

@@ -434,22 +434,23 @@ def solve(band: np.ndarray, b: np.ndarray, transpose: bool = False) -> int:
     return kernel(n, width - 1, band.ctypes.data, b.shape[1] if b.ndim == 2 else 1, b.ctypes.data, int(transpose))
 
 
-def lu_factor(ab: np.ndarray, kl: int, ku: int) -> tuple[np.ndarray, int] | None:
-    """LU factors with partial pivoting of the band matrix ``ab`` (LAPACK's band storage with room for the fill:
-    Fortran-ordered, 2 ``kl`` + ``ku`` + 1 rows, one column per column of the matrix), in place, as LAPACK's dgbtrf
-    computes them: returns the pivots (from 0, as scipy's ``lapack.dgbtrf``) and info (0, or the first zero pivot,
-    from 1). None where the compiled factorisation does not make them: none is compiled, dgbtrf would take its
-    blocked path (``kl`` >= 32 and ``ku`` > 64: LAPACK's block size), or a column to pivot on holds a value that is
-    not finite (``ab`` is then partly overwritten: factorise the matrix again with LAPACK)."""
+def lu_factor(ab: np.ndarray, kl: int, ku: int) -> tuple[np.ndarray, np.ndarray, int] | None:
+    """LAPACK's dgbtrf of the band matrix ``ab`` (LAPACK's band storage with room for the fill: Fortran-ordered,
+    2 ``kl`` + ``ku`` + 1 rows, one column per column of the matrix) in place, as scipy's
+    ``lapack.dgbtrf(ab, kl, ku, overwrite_ab=1)`` returns it: the factors (``ab``), the pivots (from 0) and info (0,
+    or the first zero pivot, from 1). Compiled, or LAPACK's where nothing is compiled or dgbtrf takes its blocked path
+    (``kl`` >= 32 and ``ku`` > 64: LAPACK's block size). None where the compiled factorisation met a value that is
+    not finite in a column to pivot on: ``ab`` is then half factorised; factorise the matrix again with LAPACK."""
     kernels = _lu_kernels()
     if kernels is None or (kl >= 32 and ku > 64):
-        return None
+        lu, piv, info = lapack.dgbtrf(ab, kl, ku, overwrite_ab=1)
+        return lu, piv, int(info)
     n = ab.shape[1]
     if not (ab.flags.f_contiguous and ab.dtype == np.float64 and ab.shape[0] == 2 * kl + ku + 1):
         raise ValueError("the band must be a Fortran-ordered array of float64 with 2 kl + ku + 1 rows")
     piv = np.empty(n, dtype=np.int32)
     info = kernels[0](n, kl, ku, ab.ctypes.data, ab.shape[0], piv.ctypes.data)
-    return None if info < 0 else (piv, info)
+    return None if info < 0 else (ab, piv, info)
 
 
 def lu_solve(lu: np.ndarray, kl: int, ku: int, piv: np.ndarray, b: np.ndarray, trans: int = 0) -> np.ndarray:

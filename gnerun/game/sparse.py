@@ -760,11 +760,10 @@ class KeptLayout:
             norm = banded.one_norm(ab)
             if norm is None:
                 norm = float(np.abs(ab).sum(axis=0).max())
-        factored = banded.lu_factor(ab, self.lower, self.upper)  # dgbtrf's bits, compiled
-        if factored is None:
-            lu, piv, info = lapack.dgbtrf(self.band(data, add), self.lower, self.upper, overwrite_ab=1)
-        else:
-            lu, (piv, info) = ab, factored
+        factored = banded.lu_factor(ab, self.lower, self.upper)  # dgbtrf's bits, compiled where it can
+        if factored is None:  # the compiled factorisation met a value that is not finite: LAPACK's, on a new band
+            factored = lapack.dgbtrf(self.band(data, add), self.lower, self.upper, overwrite_ab=1)
+        lu, piv, info = factored
         if info != 0:  # an exactly zero pivot
             return None, 0.0
         factors = BandLU(self, lu, piv)
