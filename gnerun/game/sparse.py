@@ -41,6 +41,7 @@ from scipy.sparse import linalg as spla
 
 from ..errors import one_line
 from ..language.config import Config, DynamicGame
+from . import banded
 from .building import stoppable
 from .compile import CompiledGame, Evaluator, _expressions, _layout, compile_key, shared_rows_carried
 from .kernels import (
@@ -784,19 +785,30 @@ class KeptLayout:
     def factor(self, data: np.ndarray, add: np.ndarray | None,
                estimate: bool = True) -> tuple[BandLU | EliminatedLU | None, float]:
         """Banded LU with partial pivoting (LAPACK dgbtrf) and its reciprocal 1-norm condition estimate (dgbcon's;
-        NaN without ``estimate``; with an elimination, of the matrix factorised)."""
+        NaN without ``estimate``; with an elimination, of the matrix factorised). The factorisation, the norm and the
+        estimate are compiled (:mod:`gnerun.game.banded`: the same bits as LAPACK's and numpy's), or LAPACK's and
+        numpy's where the compiled code is not used."""
         if not self.size:
             factors = BandLU(self, np.zeros((self.ld, 0), order="F"), np.zeros(0, dtype=np.int32))
             return self.eliminated(factors, data, add), 1.0
         ab = self.band(data, add)
-        norm = float(np.abs(ab).sum(axis=0).max()) if estimate else math.nan  # before dgbtrf overwrites ab
-        lu, piv, info = lapack.dgbtrf(ab, self.lower, self.upper, overwrite_ab=1)
+        norm = math.nan
+        if estimate:  # before dgbtrf overwrites ab
+            norm = banded.one_norm(ab)
+            if norm is None:
+                norm = float(np.abs(ab).sum(axis=0).max())
+        factored = banded.lu_factor(ab, self.lower, self.upper)  # dgbtrf's bits, compiled where it can
+        if factored is None:  # the compiled factorisation met a value that is not finite: LAPACK's, on a new band
+            factored = lapack.dgbtrf(self.band(data, add), self.lower, self.upper, overwrite_ab=1)
+        lu, piv, info = factored
         if info != 0:  # an exactly zero pivot
             return None, 0.0
         factors = BandLU(self, lu, piv)
         if not estimate:
             return self.eliminated(factors, data, add), math.nan
-        inverse = inverse_norm(factors.solve_band, lambda b: factors.solve_band(b, 1), self.size)
+        inverse = banded.lu_inverse_norm(lu, self.lower, self.upper, piv)  # the same estimate, all in C
+        if inverse is None:
+            inverse = inverse_norm(factors.solve_band, lambda b: factors.solve_band(b, 1), self.size)
         rcond = 1.0 / (norm * inverse) if np.isfinite(inverse) and inverse > 0 else 0.0
         return self.eliminated(factors, data, add), rcond
 
@@ -920,15 +932,17 @@ class BandLU:
         return x
 
     def solve_band(self, b: np.ndarray, trans: int = 0) -> np.ndarray:
-        """The solution of the stage-ordered system (``trans`` = 1: of its transpose)."""
-        return lapack.dgbtrs(self.lu, self.layout.lower, self.layout.upper, b, self.piv, trans=trans)[0]
+        """The solution of the stage-ordered system (``trans`` = 1: of its transpose), dgbtrs's (compiled, the same
+        bits: :func:`gnerun.game.banded.lu_solve`)."""
+        return banded.lu_solve(self.lu, self.layout.lower, self.layout.upper, self.piv, b, trans)  # dgbtrs's bits
 
 
 def inverse_norm(solve: Callable[[np.ndarray], np.ndarray], solve_T: Callable[[np.ndarray], np.ndarray],
                  n: int) -> float:
     """An estimate of ||A^-1||_1 from solves with A and A^T: Hager's method as Higham refined it, the algorithm of
     LAPACK's condition estimators (dlacn2, at most 5 iterations); dgbcon's estimate, with dgbtrs's solves in place
-    of its scaled triangular ones (three times slower on these bands)."""
+    of its scaled triangular ones (three times slower on these bands). :func:`gnerun.game.banded.lu_inverse_norm` makes
+    the same operations in C, with the same result."""
     x = solve(np.full(n, 1.0 / n))
     if n == 1:
         return float(abs(x[0]))

@@ -69,7 +69,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import lapack
 
-from . import banded
+from ..game import banded
 from .linalg import factor
 
 BOUNDARY = 0.995  # a step goes at most this fraction of the way to the boundary lambda_I = 0 or w = 0
@@ -588,7 +588,7 @@ class _AgentBlocks:
         """Each agent's block of the Schur complement, or None if some D_x is singular. (In place where it can: the
         arrays are of the size of all agents' states times decisions, and allocating and adding them costs more than
         the products; every entry is the same sum, in the same order, as without.) The triangular solves are
-        :mod:`gnerun.solvers.banded`'s, LAPACK's arithmetic on all right-hand sides at once: the same bits (a loop
+        :mod:`gnerun.game.banded`'s, LAPACK's arithmetic on all right-hand sides at once: the same bits (a loop
         that rounds otherwise, without LAPACK's fused multiply-adds, changed a best response the certificate finds
         on one of ten ALGAMES merges)."""
         nI, ng = self.counts

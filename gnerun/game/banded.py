@@ -1,0 +1,611 @@
+"""Banded linear algebra in compiled C that does the arithmetic of LAPACK's routines (the OpenBLAS that scipy ships)
+in the same order, so that its results are the same to the bit, without their calls per column into small kernels:
+triangular solves with a banded lower-triangular matrix and many right-hand sides (dtbtrs), and banded LU with
+partial pivoting (dgbtrf) with its solves (dgbtrs).
+
+dtbtrs solves one right-hand side after the other (dtbsv), and OpenBLAS's dtbsv calls a level-1 kernel per row: an
+axpy (no transpose: row i is divided by its diagonal entry, then -y_i times the column below the diagonal is added to
+the rows below, one fused multiply-add each) or a dot product (transpose: the dot product of the entries below the
+diagonal with the rows below, accumulated by fused multiply-adds from 0 in the order of the rows, is subtracted from
+row i, which is then divided by its diagonal entry). On the players' blocks of the interior step (band width 5, 240
+to 480 rows, 40 to 80 right-hand sides) those calls cost more than the arithmetic. The C code below makes the same
+operations on each right-hand side, row after row, with the right-hand sides side by side in a row (a C-ordered
+array), where the compiler vectorises them; a vector operation rounds each of its lanes as the scalar one does.
+
+dgbtrf is reference LAPACK (Fortran) calling OpenBLAS's BLAS; with LAPACK's block size (32, and 1 where ku <= 64) it
+is unblocked (dgbtf2) wherever kl < 32 or ku <= 64, as on every band the solvers factorise (kl = 6..18): per column
+idamax, a row swap, the multipliers scaled by the reciprocal of the pivot (dscal: one division, then products), and
+dger, which OpenBLAS makes as one daxpy per column (y += (-1 * u) x, fused multiply-adds). dgbtrs applies the
+swaps and multipliers (dger, or dgemv_t for the transpose: its SSE2 kernel for the rows in fours, products rounded
+and added in 2 x 2 lanes, then the last rows in fused multiply-adds) and solves with U by dtbsv (axpy, or a dot
+product: ddot's 16 lanes of fused multiply-adds for the first n & -16 terms, then one at a time). The C code makes
+the same operations on each entry in the same order; only where they are independent does it order them otherwise
+(dger's columns in one pass over the rows held in registers).
+
+It is compiled once per machine by the system's C compiler into the kernels' cache (gnerun.game.kernels) and used
+when three things hold: the library builds and loads, the processor has fused multiply-add (the library's code for
+it is compiled for AVX2 and FMA and checks the processor before it runs), and its results on test bands equal
+LAPACK's bit for bit (another BLAS, or OpenBLAS's kernels for a processor without FMA, round differently). Otherwise
+all of it is LAPACK's. Only the payload of a NaN can differ (which of two NaN operands an instruction passes on
+depends on the instruction's form): where LAPACK's result is NaN, so is this one's. A column to pivot on that holds
+a value that is not finite (idamax and dscal treat those their own way) goes back to LAPACK, as does dgbtrf's
+blocked path and a transposed solve of several right-hand sides (dgemv_t sums two and four columns otherwise).
+"""
+
+from __future__ import annotations
+
+import ctypes
+import hashlib
+import os
+import subprocess
+import tempfile
+from pathlib import Path
+
+import numpy as np
+from scipy.linalg import lapack
+
+from .kernels import cache_dir, compiler
+
+FLAGS = ("-O3", "-fPIC", "-shared", "-ffp-contract=off")  # no contraction: the fused multiply-adds are LAPACK's only
+
+_SOURCE = r"""
+#include <immintrin.h>
+#include <stddef.h>
+
+#define CHUNK 64 /* right-hand sides per pass of the transposed solve's dot products */
+
+/* band: n rows of k + 1, band[i][0] the diagonal entry L[i][i], band[i][r] = L[i + r][i];
+   b: n rows of m right-hand sides (C order), overwritten by the solution */
+
+static int first_zero(int n, int k, const double *band) {
+    for (int i = 0; i < n; i++)
+        if (band[(size_t)i * (k + 1)] == 0.0) return i + 1;
+    return 0;
+}
+
+/* L y = b (OpenBLAS's dtbsv_NLN, driver/level2/tbsv_L.c, with daxpy's scalar loop: y[i] += alpha * x[i] as one
+   fused multiply-add, alpha = -y_i) */
+__attribute__((target("avx2,fma")))
+static void lower(int n, int k, const double *restrict band, int m, double *restrict b) {
+    for (int i = 0; i < n; i++) {
+        double *restrict bi = b + (size_t)i * m;
+        const double *a = band + (size_t)i * (k + 1);
+        double d = a[0];
+        for (int j = 0; j < m; j++) bi[j] = bi[j] / d;
+        int len = n - i - 1 < k ? n - i - 1 : k;
+        for (int j0 = 0; j0 < m && len > 0; j0 += CHUNK) {
+            int j1 = m - j0 < CHUNK ? m : j0 + CHUNK;
+            double alpha[CHUNK];
+            for (int j = j0; j < j1; j++) alpha[j - j0] = -bi[j];
+            for (int r = 1; r <= len; r++) {
+                double *restrict br = bi + (size_t)r * m;
+                double ar = a[r];
+                for (int j = j0; j < j1; j++) br[j] = __builtin_fma(ar, alpha[j - j0], br[j]);
+            }
+        }
+    }
+}
+
+/* L^T y = b (OpenBLAS's dtbsv_TLN, driver/level2/tbsv_U.c with TRANSA, with ddot's scalar loop: dot = 0, then
+   dot += y[i] * x[i] as one fused multiply-add each) */
+__attribute__((target("avx2,fma")))
+static void upper(int n, int k, const double *restrict band, int m, double *restrict b) {
+    for (int i = n - 1; i >= 0; i--) {
+        double *restrict bi = b + (size_t)i * m;
+        const double *a = band + (size_t)i * (k + 1);
+        int len = n - i - 1 < k ? n - i - 1 : k;
+        for (int j0 = 0; j0 < m && len > 0; j0 += CHUNK) {
+            int j1 = m - j0 < CHUNK ? m : j0 + CHUNK;
+            double dot[CHUNK];
+            for (int j = j0; j < j1; j++) dot[j - j0] = 0.0;
+            for (int r = 1; r <= len; r++) {
+                const double *br = bi + (size_t)r * m;
+                double ar = a[r];
+                for (int j = j0; j < j1; j++) dot[j - j0] = __builtin_fma(ar, br[j], dot[j - j0]);
+            }
+            for (int j = j0; j < j1; j++) bi[j] = bi[j] - dot[j - j0];
+        }
+        double d = a[0];
+        for (int j = 0; j < m; j++) bi[j] = bi[j] / d;
+    }
+}
+
+/* ---- banded LU with partial pivoting (dgbtf2) and its solves (dgbtrs) ---- */
+
+/* ab: LAPACK's band storage, column-major, column j at ab + j * ld, entry (i, j) at ab[j * ld + kl + ku + i - j];
+   ld = 2 kl + ku + 1; ipiv: from 0, as scipy returns them */
+
+/* OpenBLAS's daxpy (kernel/x86_64/daxpy.c): y[i] += da * x[i], one fused multiply-add each (the vector loops too) */
+__attribute__((target("avx2,fma")))
+static void axpy(int n, double da, const double *restrict x, double *restrict y) {
+    for (int i = 0; i < n; i++) y[i] = __builtin_fma(da, x[i], y[i]);
+}
+
+/* dger as OpenBLAS makes it (kernel/generic/ger.c: one daxpy per column, alpha_c = -1 * y_c): column c = 1 .. cols
+   of a (at a step of `step` from a; its entry 0 is y_c, entries 1 .. m are updated) += alpha_c x, one fused
+   multiply-add per entry as daxpy's, the rows taken 16 at a time (in registers) across all columns */
+__attribute__((target("avx2,fma")))
+static void rank_one(int m, int cols, const double *restrict x, double *restrict a, size_t step) {
+    for (int r = 0; r < m; r += 32) {  /* rows in blocks of up to 32 (in registers), all columns for each block */
+        int rows = m - r < 32 ? m - r : 32, quads = rows >> 2, two = rows & 2, one = rows & 1;
+        __m256d xv[8];
+        for (int k = 0; k < quads; k++) xv[k] = _mm256_loadu_pd(x + r + 4 * k);
+        __m128d x2 = two ? _mm_loadu_pd(x + r + 4 * quads) : _mm_setzero_pd();
+        double x1 = one ? x[r + rows - 1] : 0.0;
+        for (int c = 1; c <= cols; c++) {
+            double alpha = -1.0 * a[c * step];
+            double *u = a + c * step + 1 + r;
+            __m256d al = _mm256_set1_pd(alpha);
+            for (int k = 0; k < quads; k++)
+                _mm256_storeu_pd(u + 4 * k, _mm256_fmadd_pd(al, xv[k], _mm256_loadu_pd(u + 4 * k)));
+            if (two) {
+                double *v = u + 4 * quads;
+                _mm_storeu_pd(v, _mm_fmadd_pd(_mm256_castpd256_pd128(al), x2, _mm_loadu_pd(v)));
+            }
+            if (one) u[rows - 1] = __builtin_fma(alpha, x1, u[rows - 1]);
+        }
+    }
+}
+
+/* OpenBLAS's ddot (kernel/x86_64/ddot.c, ddot_microk_skylakex-2.c as compiled for SkylakeX): the first n & -16
+   terms in 16 lanes of fused multiply-adds (4 x 8 lanes over blocks of 32, folded to 4 x 4, then 4 x 4 over a block
+   of 16), the lanes summed (((a0 + a1) + a2) + a3, then the halves, then the pair), then the rest one fused
+   multiply-add at a time */
+__attribute__((target("avx2,fma")))
+static double dot(int n, const double *x, const double *y) {
+    int n1 = n & -16, n32 = n1 & -32, i = 0;
+    double d = 0.0;
+    if (n1) {
+        __m256d a0 = _mm256_setzero_pd(), a1 = a0, a2 = a0, a3 = a0;
+        if (n32) {  /* 4 x 8 lanes: the low and high halves of each */
+            __m256d w0 = a0, w1 = a0, w2 = a0, w3 = a0, w4 = a0, w5 = a0, w6 = a0, w7 = a0;
+            for (; i < n32; i += 32) {
+                w0 = _mm256_fmadd_pd(_mm256_loadu_pd(x + i), _mm256_loadu_pd(y + i), w0);
+                w1 = _mm256_fmadd_pd(_mm256_loadu_pd(x + i + 4), _mm256_loadu_pd(y + i + 4), w1);
+                w2 = _mm256_fmadd_pd(_mm256_loadu_pd(x + i + 8), _mm256_loadu_pd(y + i + 8), w2);
+                w3 = _mm256_fmadd_pd(_mm256_loadu_pd(x + i + 12), _mm256_loadu_pd(y + i + 12), w3);
+                w4 = _mm256_fmadd_pd(_mm256_loadu_pd(x + i + 16), _mm256_loadu_pd(y + i + 16), w4);
+                w5 = _mm256_fmadd_pd(_mm256_loadu_pd(x + i + 20), _mm256_loadu_pd(y + i + 20), w5);
+                w6 = _mm256_fmadd_pd(_mm256_loadu_pd(x + i + 24), _mm256_loadu_pd(y + i + 24), w6);
+                w7 = _mm256_fmadd_pd(_mm256_loadu_pd(x + i + 28), _mm256_loadu_pd(y + i + 28), w7);
+            }
+            a0 = _mm256_add_pd(w0, w1);
+            a1 = _mm256_add_pd(w2, w3);
+            a2 = _mm256_add_pd(w4, w5);
+            a3 = _mm256_add_pd(w6, w7);
+        }
+        for (; i < n1; i += 16) {
+            a0 = _mm256_fmadd_pd(_mm256_loadu_pd(x + i), _mm256_loadu_pd(y + i), a0);
+            a1 = _mm256_fmadd_pd(_mm256_loadu_pd(x + i + 4), _mm256_loadu_pd(y + i + 4), a1);
+            a2 = _mm256_fmadd_pd(_mm256_loadu_pd(x + i + 8), _mm256_loadu_pd(y + i + 8), a2);
+            a3 = _mm256_fmadd_pd(_mm256_loadu_pd(x + i + 12), _mm256_loadu_pd(y + i + 12), a3);
+        }
+        __m256d sum = _mm256_add_pd(_mm256_add_pd(_mm256_add_pd(a0, a1), a2), a3);
+        __m128d half = _mm_add_pd(_mm256_castpd256_pd128(sum), _mm256_extractf128_pd(sum, 1));
+        d = _mm_cvtsd_f64(half) + _mm_cvtsd_f64(_mm_unpackhi_pd(half, half));
+    }
+    for (; i < n; i++) d = __builtin_fma(y[i], x[i], d);
+    return d;
+}
+
+/* y - (a^T x) for one column as OpenBLAS's dgemv_t (kernel/x86_64/dgemv_t_4.c, alpha = -1, one column): the first
+   m & -4 rows by dgemv_kernel_4x1 (SSE2: products rounded, then added into 2 x 2 lanes), y -= their sum; the last
+   m & 3 rows as the compiled C, x negated: y += ((a1 x1 fused a0 x0) fused a2 x2), or y += fma(a0, x0, y) */
+__attribute__((target("avx2,fma")))
+static inline double gemv_t1(int m, const double *a, const double *x, double y) {
+    int m3 = m & 3, m4 = m - m3;
+    if (m4) {
+        __m128d p = _mm_setzero_pd(), q = p;
+        for (int i = 0; i < m4; i += 4) {
+            p = _mm_add_pd(p, _mm_mul_pd(_mm_loadu_pd(a + i), _mm_loadu_pd(x + i)));
+            q = _mm_add_pd(q, _mm_mul_pd(_mm_loadu_pd(a + i + 2), _mm_loadu_pd(x + i + 2)));
+        }
+        __m128d v = _mm_add_pd(p, q);
+        double t = _mm_cvtsd_f64(v) + _mm_cvtsd_f64(_mm_unpackhi_pd(v, v));
+        y = __builtin_fma(t, -1.0, y);
+    }
+    a += m4;
+    x += m4;
+    if (m3 == 3) {
+        double x0 = x[0] * -1.0, x1 = x[1] * -1.0, x2 = x[2] * -1.0;
+        double t = a[1] * x1;
+        t = __builtin_fma(a[0], x0, t);
+        t = __builtin_fma(a[2], x2, t);
+        y = y + t;
+    } else if (m3 == 2) {
+        double x0 = x[0] * -1.0, x1 = x[1] * -1.0;
+        double t = a[1] * x1;
+        t = __builtin_fma(a[0], x0, t);
+        y = y + t;
+    } else if (m3 == 1) {
+        y = __builtin_fma(a[0], x[0] * -1.0, y);
+    }
+    return y;
+}
+
+/* dgbtf2: 0, LAPACK's info (the first zero pivot, from 1; the factorisation goes on as LAPACK's does), or -1 where
+   a column to pivot on holds a value that is not finite (OpenBLAS's idamax and dscal treat those their own way: the
+   caller factorises with LAPACK) */
+__attribute__((target("avx2,fma")))
+int band_lu(int n, int kl, int ku, double *ab, int ld, int *ipiv) {
+    int kv = ku + kl, info = 0, ju = 0;
+    for (int j = ku + 1; j < (kv < n ? kv : n); j++)  /* the fill of columns ku + 2 .. kv (from 1) */
+        for (int i = kv - j; i < kl; i++) ab[(size_t)j * ld + i] = 0.0;
+    for (int j = 0; j < n; j++) {
+        if (j + kv < n)
+            for (int i = 0; i < kl; i++) ab[(size_t)(j + kv) * ld + i] = 0.0;
+        int km = kl < n - 1 - j ? kl : n - 1 - j;
+        double *col = ab + (size_t)j * ld + kv;  /* the diagonal entry (j, j); (j + r, j) at col[r] */
+        int jp = 0;
+        double best = __builtin_fabs(col[0]);
+        if (!(best <= __DBL_MAX__)) return -1;
+        for (int r = 1; r <= km; r++) {
+            double v = __builtin_fabs(col[r]);
+            if (!(v <= __DBL_MAX__)) return -1;
+            if (v > best) { best = v; jp = r; }
+        }
+        ipiv[j] = jp + j;
+        if (col[jp] != 0.0) {
+            int last = j + ku + jp < n - 1 ? j + ku + jp : n - 1;
+            if (last > ju) ju = last;
+            if (jp != 0)  /* rows j and j + jp in columns j .. ju: a step of ld - 1 along a row */
+                for (int c = 0; c <= ju - j; c++) {
+                    double *u = col + (size_t)c * (ld - 1), t = u[0];
+                    u[0] = u[jp];
+                    u[jp] = t;
+                }
+            if (km > 0) {
+                double r = 1.0 / col[0];
+                for (int i = 1; i <= km; i++) col[i] *= r;
+                if (ju > j) rank_one(km, ju - j, col + 1, col, (size_t)ld - 1);
+            }
+        } else if (!info) {
+            info = j + 1;
+        }
+    }
+    return info;
+}
+
+/* dgbtrs, for the m right-hand sides in the columns of b (n rows, column-major): no transpose, or the transpose of
+   one right-hand side (with more, dgemv_t's kernels for 2 and 4 columns sum otherwise: the caller asks LAPACK) */
+__attribute__((target("avx2,fma")))
+int band_lu_solve(int n, int kl, int ku, const double *ab, int ld, const int *ipiv, int m, double *b,
+                  int transpose) {
+    int kv = kl + ku;
+    if (transpose && m != 1) return -1;
+    for (int c = 0; c < m; c++) {
+        double *x = b + (size_t)c * n;
+        if (!transpose) {
+            if (kl > 0)
+                for (int j = 0; j < n - 1; j++) {
+                    int lm = kl < n - 1 - j ? kl : n - 1 - j, l = ipiv[j];
+                    if (l != j) { double t = x[l]; x[l] = x[j]; x[j] = t; }
+                    axpy(lm, -1.0 * x[j], ab + (size_t)j * ld + kv + 1, x + j + 1);
+                }
+            for (int i = n - 1; i >= 0; i--) {  /* dtbsv, upper, no transpose (driver/level2/tbsv_U.c) */
+                const double *a = ab + (size_t)i * ld;
+                x[i] /= a[kv];
+                int len = i < kv ? i : kv;
+                if (len > 0) axpy(len, -x[i], a + kv - len, x + i - len);
+            }
+        } else {
+            for (int i = 0; i < n; i++) {  /* dtbsv, upper, transpose (driver/level2/tbsv_L.c with TRANSA) */
+                const double *a = ab + (size_t)i * ld;
+                int len = i < kv ? i : kv;
+                if (len > 0) x[i] -= dot(len, a + kv - len, x + i - len);
+                x[i] /= a[kv];
+            }
+            if (kl > 0)
+                for (int j = n - 2; j >= 0; j--) {
+                    int lm = kl < n - 1 - j ? kl : n - 1 - j, l = ipiv[j];
+                    x[j] = gemv_t1(lm, x + j + 1, ab + (size_t)j * ld + kv + 1, x[j]);
+                    if (l != j) { double t = x[l]; x[l] = x[j]; x[j] = t; }
+                }
+        }
+    }
+    return 0;
+}
+
+/* numpy's sum of |x| (DOUBLE_pairwise_sum: blocks of at most 128 in 8 accumulators, halves above) */
+static double abs_sum(const double *x, long n) {
+    if (n < 8) {
+        double res = 0.0;
+        for (long i = 0; i < n; i++) res += __builtin_fabs(x[i]);
+        return res;
+    }
+    if (n <= 128) {
+        double r[8];
+        long i;
+        for (int k = 0; k < 8; k++) r[k] = __builtin_fabs(x[k]);
+        for (i = 8; i < n - (n % 8); i += 8)
+            for (int k = 0; k < 8; k++) r[k] += __builtin_fabs(x[i + k]);
+        double res = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]));
+        for (; i < n; i++) res += __builtin_fabs(x[i]);
+        return res;
+    }
+    long n2 = n / 2;
+    n2 -= n2 % 8;
+    return abs_sum(x, n2) + abs_sum(x + n2, n - n2);
+}
+
+/* numpy's argmax of |x|: the first NaN, or the first largest */
+static int abs_argmax(const double *x, int n) {
+    int j = 0;
+    double best = __builtin_fabs(x[0]);
+    if (best != best) return 0;
+    for (int i = 1; i < n; i++) {
+        double v = __builtin_fabs(x[i]);
+        if (v != v) return i;
+        if (v > best) { best = v; j = i; }
+    }
+    return j;
+}
+
+/* 1 where the signs of x (x >= 0: 1, else -1; NaN: -1) are those in s */
+static int same_signs(const double *x, double *s, int n) {
+    for (int i = 0; i < n; i++)
+        if ((x[i] >= 0 ? 1.0 : -1.0) != s[i]) return 0;
+    return 1;
+}
+
+static void signs_of(const double *x, double *s, int n) {
+    for (int i = 0; i < n; i++) s[i] = x[i] >= 0 ? 1.0 : -1.0;
+}
+
+/* numpy's np.abs(ab).sum(axis=0).max() of a Fortran-ordered (ld, n) array: the 1-norm of the band's matrix */
+double band_one_norm(int n, const double *ab, int ld) {
+    double norm = 0.0;
+    for (int j = 0; j < n; j++) {
+        double s = abs_sum(ab + (size_t)j * ld, ld);
+        if (s != s) return s;
+        if (j == 0 || s > norm) norm = s;
+    }
+    return norm;
+}
+
+static void lu_solve1(int n, int kl, int ku, const double *ab, int ld, const int *ipiv, double *x, int transpose) {
+    band_lu_solve(n, kl, ku, ab, ld, ipiv, 1, x, transpose);
+}
+
+/* gnerun.game.sparse.inverse_norm with the solves above: the same operations in the same order (numpy's sums and
+   argmax included), so the same estimate of ||A^-1||_1 to the bit; work: 2 n doubles */
+double band_lu_inverse_norm(int n, int kl, int ku, const double *ab, int ld, const int *ipiv, double *work) {
+    double *x = work, *signs = work + n;
+    for (int i = 0; i < n; i++) x[i] = 1.0 / n;
+    lu_solve1(n, kl, ku, ab, ld, ipiv, x, 0);
+    if (n == 1) return __builtin_fabs(x[0]);
+    double est = abs_sum(x, n);
+    if (!(est - est == 0.0)) return est;  /* not finite */
+    signs_of(x, signs, n);
+    for (int i = 0; i < n; i++) x[i] = signs[i];
+    lu_solve1(n, kl, ku, ab, ld, ipiv, x, 1);
+    int j = abs_argmax(x, n);
+    for (int iteration = 2; iteration < 6; iteration++) {
+        for (int i = 0; i < n; i++) x[i] = 0.0;
+        x[j] = 1.0;
+        lu_solve1(n, kl, ku, ab, ld, ipiv, x, 0);
+        double previous = est;
+        est = abs_sum(x, n);
+        if (same_signs(x, signs, n) || est <= previous) break;
+        signs_of(x, signs, n);
+        for (int i = 0; i < n; i++) x[i] = signs[i];
+        lu_solve1(n, kl, ku, ab, ld, ipiv, x, 1);
+        int last = j;
+        j = abs_argmax(x, n);
+        if (x[last] == __builtin_fabs(x[j]) || iteration == 5) break;
+    }
+    for (int i = 0; i < n; i++) x[i] = (i % 2 == 0 ? 1.0 : -1.0) * (1.0 + (double)i / (double)(n - 1));
+    lu_solve1(n, kl, ku, ab, ld, ipiv, x, 0);
+    double alternating = 2.0 * abs_sum(x, n) / (3.0 * n);
+    return alternating > est ? alternating : est;
+}
+
+int banded_supported(void) {
+    __builtin_cpu_init();
+    return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
+}
+
+/* 0, or (as dtbtrs's info) the first row whose diagonal entry is zero, b untouched */
+int banded_solve(int n, int k, const double *band, int m, double *b, int transpose) {
+    int info = first_zero(n, k, band);
+    if (info) return info;
+    if (transpose) upper(n, k, band, m, b); else lower(n, k, band, m, b);
+    return 0;
+}
+"""
+
+
+def solve(band: np.ndarray, b: np.ndarray, transpose: bool = False) -> int:
+    """Solve L Y = B (or L^T Y = B) in place of ``b`` (n x m, C-ordered, float64), L lower triangular with ``k`` =
+    ``band.shape[1] - 1`` diagonals below its own, given as ``band`` (n x (k + 1), C-ordered): ``band[i, 0]`` =
+    L[i, i], ``band[i, r]`` = L[i + r, i] (entries beyond the last row: any value, never read). Returns 0, or
+    LAPACK's info: the first row (from 1) whose diagonal entry is zero, with ``b`` left as it was."""
+    kernel = _kernel()
+    if kernel is None:
+        y, info = lapack.dtbtrs(band.T, b, uplo="L", trans="T" if transpose else "N")
+        if info == 0:
+            b[...] = y
+        return int(info)
+    if not (band.flags.c_contiguous and b.flags.c_contiguous and band.dtype == b.dtype == np.float64):
+        raise ValueError("the band and the right-hand sides must be C-ordered arrays of float64")
+    n, width = band.shape
+    if b.shape[0] != n:
+        raise ValueError(f"{b.shape[0]} rows of right-hand sides for a band of {n} rows")
+    return kernel(n, width - 1, band.ctypes.data, b.shape[1] if b.ndim == 2 else 1, b.ctypes.data, int(transpose))
+
+
+def lu_factor(ab: np.ndarray, kl: int, ku: int) -> tuple[np.ndarray, np.ndarray, int] | None:
+    """LAPACK's dgbtrf of the band matrix ``ab`` (LAPACK's band storage with room for the fill: Fortran-ordered,
+    2 ``kl`` + ``ku`` + 1 rows, one column per column of the matrix) in place, as scipy's
+    ``lapack.dgbtrf(ab, kl, ku, overwrite_ab=1)`` returns it: the factors (``ab``), the pivots (from 0) and info (0,
+    or the first zero pivot, from 1). Compiled, or LAPACK's where nothing is compiled or dgbtrf takes its blocked path
+    (``kl`` >= 32 and ``ku`` > 64: LAPACK's block size). None where the compiled factorisation met a value that is
+    not finite in a column to pivot on: ``ab`` is then half factorised; factorise the matrix again with LAPACK."""
+    kernels = _lu_kernels()
+    if kernels is None or (kl >= 32 and ku > 64):
+        lu, piv, info = lapack.dgbtrf(ab, kl, ku, overwrite_ab=1)
+        return lu, piv, int(info)
+    n = ab.shape[1]
+    if not (ab.flags.f_contiguous and ab.dtype == np.float64 and ab.shape[0] == 2 * kl + ku + 1):
+        raise ValueError("the band must be a Fortran-ordered array of float64 with 2 kl + ku + 1 rows")
+    piv = np.empty(n, dtype=np.int32)
+    info = kernels[0](n, kl, ku, ab.ctypes.data, ab.shape[0], piv.ctypes.data)
+    return None if info < 0 else (ab, piv, info)
+
+
+def lu_solve(lu: np.ndarray, kl: int, ku: int, piv: np.ndarray, b: np.ndarray, trans: int = 0) -> np.ndarray:
+    """The solution of A X = B (``trans`` = 1: A^T X = B) from A's factors (:func:`lu_factor`, or scipy's
+    ``lapack.dgbtrf``), as LAPACK's dgbtrs computes it; ``b`` is left as it was. A transposed solve with more than
+    one right-hand side is LAPACK's (dgemv's kernels sum two and four columns in other orders)."""
+    kernels = _lu_kernels()
+    m = 1 if b.ndim == 1 else b.shape[1]
+    if kernels is None or (trans and m != 1) or lu.shape[1] == 0:
+        return lapack.dgbtrs(lu, kl, ku, b, piv, trans=trans)[0]
+    if not (lu.flags.f_contiguous and lu.dtype == np.float64 and piv.dtype == np.int32 and piv.flags.c_contiguous):
+        raise ValueError("the factors must be a Fortran-ordered array of float64 and the pivots of int32")
+    n = lu.shape[1]
+    if b.shape[0] != n:
+        raise ValueError(f"{b.shape[0]} rows of right-hand sides for a matrix of {n} rows")
+    x = np.array(b, dtype=np.float64, order="F")
+    kernels[1](n, kl, ku, lu.ctypes.data, lu.shape[0], piv.ctypes.data, m, x.ctypes.data, int(bool(trans)))
+    return x
+
+
+def lu_inverse_norm(lu: np.ndarray, kl: int, ku: int, piv: np.ndarray) -> float | None:
+    """:func:`gnerun.game.sparse.inverse_norm` of the matrix whose factors are ``lu`` and ``piv`` (:func:`lu_factor`),
+    with :func:`lu_solve`'s solves, the whole estimate in C: the same operations in the same order, numpy's sums
+    and argmax included, so the same number to the bit. None where the solves are LAPACK's."""
+    kernels = _lu_kernels()
+    n = lu.shape[1]
+    if kernels is None or n == 0:
+        return None
+    if not (lu.flags.f_contiguous and lu.dtype == np.float64 and piv.dtype == np.int32 and piv.flags.c_contiguous):
+        raise ValueError("the factors must be a Fortran-ordered array of float64 and the pivots of int32")
+    work = np.empty(2 * n)
+    return kernels[2](n, kl, ku, lu.ctypes.data, lu.shape[0], piv.ctypes.data, work.ctypes.data)
+
+
+def one_norm(ab: np.ndarray) -> float | None:
+    """``float(np.abs(ab).sum(axis=0).max())`` of a Fortran-ordered band (numpy's pairwise sums, the same number),
+    without its temporary arrays; None where nothing is compiled."""
+    kernels = _lu_kernels()
+    if kernels is None or ab.shape[1] == 0:
+        return None
+    if not (ab.flags.f_contiguous and ab.dtype == np.float64):
+        raise ValueError("the band must be a Fortran-ordered array of float64")
+    return kernels[3](ab.shape[1], ab.ctypes.data, ab.shape[0])
+
+
+def status() -> str:
+    """Which solves and factorisations this module makes: "compiled", or "lapack (why)"."""
+    _kernel()
+    return _STATE["status"]
+
+
+_STATE: dict = {}  # the loaded kernels (None: LAPACK's) and their status, once per process
+
+
+def _kernel():
+    if "kernel" not in _STATE:
+        _STATE["kernel"], _STATE["lu"], _STATE["status"] = _load()
+    return _STATE["kernel"]
+
+
+def _lu_kernels():
+    _kernel()
+    return _STATE.get("lu")
+
+
+def _load():
+    """The compiled triangular solve, the banded LU's factorisation and solve (built if the cache has none) and
+    "compiled", or None, None and why not."""
+    cc = compiler()
+    if cc is None:
+        return None, None, "lapack (no C compiler found: gcc, cc or $CC)"
+    key = hashlib.sha256("\n".join([_SOURCE, cc, *FLAGS]).encode()).hexdigest()[:24]
+    folder = cache_dir()
+    path = folder / f"banded-{key}.so"
+    if not path.exists():
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+            with tempfile.TemporaryDirectory(dir=folder) as tmp:
+                src = Path(tmp) / "banded.c"
+                src.write_text(_SOURCE)
+                out = Path(tmp) / path.name
+                run = subprocess.run([cc, *FLAGS, str(src), "-o", str(out)], capture_output=True, text=True)
+                if run.returncode != 0:
+                    return None, None, f"lapack ({Path(cc).name} failed: {run.stderr.strip()[:200]})"
+                os.replace(out, path)  # atomic: a concurrent process sees the whole library or none
+        except OSError as e:
+            return None, None, f"lapack (cannot build in {folder}: {e})"
+    try:
+        lib = ctypes.CDLL(str(path))
+    except OSError as e:
+        return None, None, f"lapack (cannot load {path}: {e})"
+    if not lib.banded_supported():
+        return None, None, "lapack (the processor has no AVX2 and FMA)"
+    kernel = lib.banded_solve
+    kernel.restype = ctypes.c_int
+    kernel.argtypes = [ctypes.c_int, ctypes.c_int, ctypes.c_void_p, ctypes.c_int, ctypes.c_void_p, ctypes.c_int]
+    factor, solve_lu, inverse_norm = lib.band_lu, lib.band_lu_solve, lib.band_lu_inverse_norm
+    norm = lib.band_one_norm
+    factor.restype = solve_lu.restype = ctypes.c_int
+    inverse_norm.restype = norm.restype = ctypes.c_double
+    norm.argtypes = [ctypes.c_int, ctypes.c_void_p, ctypes.c_int]
+    inverse_norm.argtypes = [ctypes.c_int] * 3 + [ctypes.c_void_p, ctypes.c_int, ctypes.c_void_p, ctypes.c_void_p]
+    factor.argtypes = [ctypes.c_int] * 3 + [ctypes.c_void_p, ctypes.c_int, ctypes.c_void_p]
+    solve_lu.argtypes = [ctypes.c_int] * 3 + [ctypes.c_void_p, ctypes.c_int, ctypes.c_void_p, ctypes.c_int,
+                                              ctypes.c_void_p, ctypes.c_int]
+    if not (_agrees(kernel) and _lu_agrees(factor, solve_lu)):
+        return None, None, "lapack (the compiled solves round differently from this LAPACK's)"
+    return kernel, (factor, solve_lu, inverse_norm, norm), "compiled"
+
+
+def _agrees(kernel) -> bool:
+    """Whether ``kernel`` gives LAPACK's results bit for bit on a test band (both directions, right-hand sides of
+    several lengths, a short band and one wider than the rows)."""
+    rng = np.random.default_rng(0)
+    for n, k, m in ((37, 4, 71), (3, 5, 2), (25, 1, 1)):
+        band = np.ascontiguousarray(rng.standard_normal((n, k + 1)))
+        b = rng.standard_normal((n, m))
+        for transpose in (False, True):
+            ref, info = lapack.dtbtrs(band.T, b, uplo="L", trans="T" if transpose else "N")
+            got = b.copy()
+            if info != 0 or kernel(n, k, band.ctypes.data, m, got.ctypes.data, int(transpose)) != 0:
+                return False
+            if not np.array_equal(ref.view(np.int64), got.view(np.int64)):
+                return False
+    return True
+
+
+def _lu_agrees(factor, solve_lu) -> bool:
+    """Whether the compiled banded LU gives LAPACK's factors, pivots and solutions bit for bit on test bands: with
+    pivoting and without, solves of both kinds (dot products and dgemv's sums of every length the band holds:
+    ``kl`` + ``ku`` beyond 32, ``kl`` of every residue mod 4), a band with a zero pivot, several right-hand sides."""
+    rng = np.random.default_rng(1)
+    for n, kl, ku, m in ((60, 19, 27, 1), (41, 6, 40, 3), (9, 3, 1, 2), (30, 2, 0, 1), (25, 0, 3, 1)):
+        ld = 2 * kl + ku + 1
+        ab = np.zeros((ld, n), order="F")
+        ab[kl:] = rng.standard_normal((kl + ku + 1, n)) * 10.0 ** rng.integers(-2, 3, (kl + ku + 1, n))
+        ab[kl:][rng.random((kl + ku + 1, n)) < 0.3] = 0.0
+        ab[kl + ku][ab[kl + ku] == 0.0] = 1.0  # no zero pivot without pivoting (kl = 0) ...
+        if n == 30:  # ... but one here
+            ab[kl + ku, 7] = ab[kl + ku + 1, 7] = ab[kl + ku + 2, 7] = 0.0  # column 8: its pivot is zero
+        ref, piv, info = lapack.dgbtrf(ab.copy(order="F"), kl, ku)
+        got, gpiv = ab.copy(order="F"), np.zeros(n, dtype=np.int32)
+        if factor(n, kl, ku, got.ctypes.data, ld, gpiv.ctypes.data) != info or not (
+                _same(ref, got) and np.array_equal(piv, gpiv)):
+            return False
+        if info:
+            continue
+        b = np.asfortranarray(rng.standard_normal((n, m)))
+        for trans in (0, 1) if m == 1 else (0,):
+            x = b.copy(order="F")
+            solve_lu(n, kl, ku, got.ctypes.data, ld, gpiv.ctypes.data, m, x.ctypes.data, trans)
+            if not _same(lapack.dgbtrs(ref, kl, ku, b, piv, trans=trans)[0], x):
+                return False
+    return True
+
+
+def _same(a: np.ndarray, b: np.ndarray) -> bool:
+    return a.shape == b.shape and np.array_equal(a.view(np.int64), b.view(np.int64))
