@@ -45,7 +45,9 @@ def _right_hand_sides(rng: np.random.Generator, n: int, m: int) -> np.ndarray:
 def compiled() -> None:
     if compiler() is None:
         pytest.skip("no C compiler")
-    if banded.status().startswith("lapack (the processor"):
+    if banded.status().startswith(("lapack (the processor", "lapack (the compiled solves round differently")):
+        # another processor's OpenBLAS kernels (or another BLAS) sum otherwise: LAPACK's routines are used, as they
+        # should be, and there is nothing compiled to compare
         pytest.skip(banded.status())
     assert banded.status() == "compiled"
 
