@@ -35,16 +35,11 @@ blocked path and a transposed solve of several right-hand sides (dgemv_t sums tw
 from __future__ import annotations
 
 import ctypes
-import hashlib
-import os
-import subprocess
-import tempfile
-from pathlib import Path
 
 import numpy as np
 from scipy.linalg import lapack
 
-from .kernels import cache_dir, compiler
+from .kernels import build_source, cache_dir, compiler
 
 FLAGS = ("-O3", "-fPIC", "-shared", "-ffp-contract=off")  # no contraction: the fused multiply-adds are LAPACK's only
 
@@ -519,25 +514,14 @@ def _lu_kernels():
 def _load():
     """The compiled triangular solve, the banded LU's factorisation and solve (built if the cache has none) and
     "compiled", or None, None and why not."""
-    cc = compiler()
-    if cc is None:
+    if compiler() is None:
         return None, None, "lapack (no C compiler found: gcc, cc or $CC)"
-    key = hashlib.sha256("\n".join([_SOURCE, cc, *FLAGS]).encode()).hexdigest()[:24]
-    folder = cache_dir()
-    path = folder / f"banded-{key}.so"
-    if not path.exists():
-        try:
-            folder.mkdir(parents=True, exist_ok=True)
-            with tempfile.TemporaryDirectory(dir=folder) as tmp:
-                src = Path(tmp) / "banded.c"
-                src.write_text(_SOURCE)
-                out = Path(tmp) / path.name
-                run = subprocess.run([cc, *FLAGS, str(src), "-o", str(out)], capture_output=True, text=True)
-                if run.returncode != 0:
-                    return None, None, f"lapack ({Path(cc).name} failed: {run.stderr.strip()[:200]})"
-                os.replace(out, path)  # atomic: a concurrent process sees the whole library or none
-        except OSError as e:
-            return None, None, f"lapack (cannot build in {folder}: {e})"
+    try:
+        path, _, _ = build_source(_SOURCE, "banded", FLAGS)
+    except RuntimeError as e:
+        return None, None, f"lapack ({e})"
+    except OSError as e:
+        return None, None, f"lapack (cannot build in {cache_dir()}: {e})"
     try:
         lib = ctypes.CDLL(str(path))
     except OSError as e:

@@ -160,16 +160,25 @@ def build_library(functions: list[ca.Function], name: str, flags: tuple[str, ...
     so the check of an output's pointer before each entry written is left out of the C code: thousands of branches
     in one function, half of gcc's time on the condensed KKT functions of the FK library (A.9b: 7.3 s of gcc -O1 CPU
     time with them, 3.9 s without). Functions called by the MX graph of another (the stage kernels) must keep them."""
-    cc = compiler()
-    if cc is None:
-        raise RuntimeError("no C compiler found (gcc, cc or $CC)")
     gen = ca.CodeGenerator(f"{name}.c", {"with_header": False})
     for f in functions:
         gen.add(f)
     source = gen.dump()
     if all_outputs:
         source = _GUARD.sub("", source)
-    key = hashlib.sha256("\n".join([source, ca.__version__, cc, *flags]).encode()).hexdigest()[:24]
+    return build_source(source, name, flags, (ca.__version__,))
+
+
+def build_source(source: str, name: str, flags: tuple[str, ...], versions: tuple[str, ...] = ()) -> tuple[Path, bool,
+                                                                                                        float]:
+    """C ``source`` compiled with ``flags`` into the shared library ``name-<hash>.so`` in the cache, unless one built
+    from the same source, ``versions`` (of what generated it), compiler and flags is there. Returns its path, whether
+    it was a cache hit, and the compile time in seconds. Raises RuntimeError when there is no compiler or it fails
+    (OSError where the cache cannot be written)."""
+    cc = compiler()
+    if cc is None:
+        raise RuntimeError("no C compiler found (gcc, cc or $CC)")
+    key = hashlib.sha256("\n".join([source, *versions, cc, *flags]).encode()).hexdigest()[:24]
     folder = cache_dir()
     lib = folder / f"{name}-{key}.so"
     if lib.exists():

@@ -234,12 +234,13 @@ class NewtonResponses:
             full = self.game.derived.get("sparse")
             key = (agent, opts.model_dump_json(), None if full is None else id(full))  # (held by the entry)
             if key not in solvers:
-                solvers[key] = self._build(agent, opts)
+                solvers[key] = self._build(agent, opts, full)
             self._solvers[agent] = solvers[key]
         return self._solvers[agent]
 
-    def _build(self, agent: int, opts):
-        """(the agent's problem, its globalized solver, the game's rows in the problem's order)."""
+    def _build(self, agent: int, opts, full):
+        """(the agent's problem, its globalized solver, the game's rows in the problem's order); ``full``: the game's
+        sparse system, where the game was solved in the sparse formulation."""
         from ..game.compile import compile_agent_problem
         from .globalization import globalized
         from .ssn import SemismoothNewton
@@ -256,7 +257,6 @@ class NewtonResponses:
             free.setdefault(self.game.constraints[r].label, []).append(k)
         order = np.array([free[c.label].pop(0) if free.get(c.label) else -1 for c in problem.constraints],
                          dtype=int)
-        full = self.game.derived.get("sparse")  # the game was solved in the sparse formulation
         if full is not None and (order >= 0).all():
             # the agent's problem as a part of the game's sparse system: no dense derivatives of its own
             from ..game.sparse import AgentSparseKKT
