@@ -418,6 +418,12 @@ def test_the_players_blocks_of_the_interior_complement(system) -> None:
         i = np.arange(sl.start, sl.stop)
         dense = K[np.ix_(i, i)] - K[np.ix_(i, R)] @ np.linalg.solve(K[np.ix_(R, R)], K[np.ix_(R, i)])
         np.testing.assert_allclose(block, dense, rtol=0, atol=1e-8 * np.abs(dense).max())
+    # another interior phase on the same system (the next draw of a Monte Carlo, a restart) reuses the templates
+    again = InteriorPoint(solver.newton)
+    assert again.linear._blocks() is ip.linear._blocks()
+    assert len(system.agent_blocks) == 1
+    for b, b2 in zip(blocks, again.linear._blocks().complement(state.parts.J, D), strict=True):
+        np.testing.assert_array_equal(b, b2)
 
 
 

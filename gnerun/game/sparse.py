@@ -96,6 +96,7 @@ class SparseKKT:
         # SuperLU orderings per kind of matrix: the reduced Newton system, the regularised one, the interior one
         self.orderings = {"newton": Ordering(), "regularized": Ordering(), "interior": Ordering()}
         self.kernels = KernelReport("interpreted")  # how the function is evaluated (set by compile_sparse)
+        self.agent_blocks: dict = {}  # the interior step's players' block templates per inequality rows (SparseBarrier)
 
     def residual(self, z: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The condensed L(z) and c(a) alone (states rolled out, costates solved; no Jacobian)."""
