@@ -155,7 +155,7 @@ class SparseReduced:
         first[:n] = True
         first[lam0:] = True
         K = sp.bmat([[sp.diags(mu * first.astype(float)), M.T], [M, sp.diags(-first.astype(float))]], format="csc")
-        lu, _ = system.orderings["regularized"].factor(K)
+        lu, _ = system.orderings["regularized"].factor(K, estimate=False)  # the step needs the factors only
         if lu is None:
             return None
         dy = lu.solve(np.concatenate([np.zeros(size), r[keep]]))[:size]
