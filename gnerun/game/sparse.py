@@ -724,9 +724,10 @@ class KeptLayout:
                  eliminate: np.ndarray | None = None) -> None:
         where = np.full(order.size, -1)
         where[keep] = np.arange(keep.size)
-        inside = (where[order.rows] >= 0) & (where[order.cols] >= 0)
+        r, c = where[order.rows], where[order.cols]
+        inside = (r >= 0) & (c >= 0)
         nonzeros = np.flatnonzero(inside)  # which of the data are in the kept matrix
-        r, c = where[order.rows[inside]], where[order.cols[inside]]  # their rows and columns in the kept matrix
+        r, c = r[nonzeros], c[nonzeros]  # their rows and columns in the kept matrix
         at = np.zeros(0, dtype=np.int64) if at is None else at.astype(np.int64)
         row_key, col_key = order.row_key[keep], order.col_key[keep]
         self.elimination: Elimination | None = None
@@ -760,7 +761,8 @@ class KeptLayout:
             self.indptr = np.searchsorted(unique // size, np.arange(size + 1)).astype(np.int32)
             positions = np.searchsorted(unique, keys)
             self.nnz = unique.size
-        self.flat, self.flat_at, self.flat_fill = np.split(positions, [r.size, r.size + at.size])
+        self.flat, self.flat_at, self.flat_fill = (positions[:r.size], positions[r.size:r.size + at.size],
+                                                   positions[r.size + at.size:])
 
     def _fill(self, out: np.ndarray, data: np.ndarray, add: np.ndarray | None) -> None:
         """The matrix's entries into the flat storage ``out`` (zeros)."""
