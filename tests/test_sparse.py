@@ -8,6 +8,7 @@ import pytest
 
 from benchmarks.family import family_config, family_yaml
 from gnerun import simulate, solve
+from gnerun.game import banded as banded_code
 from gnerun.game.compile import compile_game
 from gnerun.language.config import ConfigError, load_config
 from gnerun.runs.solving import SPARSE_FROM, SPARSE_WORK, formulation, make_solver
@@ -418,6 +419,14 @@ def test_the_players_blocks_of_the_interior_complement(system) -> None:
         i = np.arange(sl.start, sl.stop)
         dense = K[np.ix_(i, i)] - K[np.ix_(i, R)] @ np.linalg.solve(K[np.ix_(R, R)], K[np.ix_(R, i)])
         np.testing.assert_allclose(block, dense, rtol=0, atol=1e-8 * np.abs(dense).max())
+    # the compiled complement (gnerun.game.banded.PlayersComplement, where the banded code is compiled) gives numpy's
+    # and scipy.sparse's bits
+    templates = ip.linear._blocks()
+    assert templates.compiled == (banded_code.status() == "compiled")
+    for scale in (1e-8, 1.0, 1e3):
+        D2 = scale * np.random.default_rng(5).uniform(0.01, 100, ip.I.size)
+        ours, reference = templates._stacked(state.parts.J, D2), templates._numpy(state.parts.J, D2)
+        np.testing.assert_array_equal(ours.view(np.int64), reference.view(np.int64))
     # another interior phase on the same system (the next draw of a Monte Carlo, a restart) reuses the templates
     again = InteriorPoint(solver.newton)
     assert again.linear._blocks() is ip.linear._blocks()

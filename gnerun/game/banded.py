@@ -407,6 +407,62 @@ int banded_solve(int n, int k, const double *band, int m, double *b, int transpo
     if (transpose) upper(n, k, band, m, b); else lower(n, k, band, m, b);
     return 0;
 }
+
+/* ---- the players' blocks of the interior step's Schur complement (gnerun.solvers.interior_point._AgentBlocks) ---- */
+
+/* y (zeros, rows x m, C order) = A x for A in CSR form with values data[pos]: scipy's csr_matvecs (y_i += a_ij x_j,
+   row by row, entry by entry, a product then a sum: no fused multiply-add) */
+__attribute__((target("avx2")))
+static void csr_times(long long rows, const long long *indptr, const long long *indices, const long long *pos,
+                      const double *data, int m, const double *x, double *y) {
+    for (long long i = 0; i < rows; i++) {
+        double *restrict yi = y + (size_t)i * m;
+        for (long long jj = indptr[i]; jj < indptr[i + 1]; jj++) {
+            const double a = data[pos[jj]];
+            const double *restrict xj = x + (size_t)indices[jj] * m;
+            for (int k = 0; k < m; k++) yi[k] += a * xj[k];
+        }
+    }
+}
+
+/* _AgentBlocks.complement's numpy and scipy.sparse operations, in their order, on its gathers and products.
+   dims: ng (states), m (columns), width (the band's), nI, na (rows of C and of A), and the gathers' lengths n_da,
+   n_band, n_ka; ix: da (flat, pos), band (flat, pos), Kx (indptr, indices, pos), Ka (flat, pos), touched,
+   Kl (indptr, indices, pos), Ap (indptr, indices, pos); work: ng m + ng (width + 1) + (ng + na) m + na m;
+   K: (nI + ng + na) m, the result (its last na rows the blocks). 0, or 1 where a diagonal entry of D_x is zero. */
+__attribute__((target("avx2")))
+int players_complement(const long long *dims, const long long *const *ix, const double *data, const double *D,
+                       double *work, double *K) {
+    long long ng = dims[0], nI = dims[3], na = dims[4];
+    int m = (int)dims[1], width = (int)dims[2];
+    double *Yx = work, *band = Yx + ng * m, *LY = band + ng * (width + 1), *tmp = LY + (ng + na) * m;
+    for (long long i = 0; i < ng * m; i++) Yx[i] = 0.0;
+    for (long long t = 0; t < dims[5]; t++) Yx[ix[0][t]] = -1.0 * data[ix[1][t]];
+    if (ng) {
+        for (long long i = 0; i < ng * (width + 1); i++) band[i] = 0.0;
+        for (long long t = 0; t < dims[6]; t++) band[ix[2][t]] = data[ix[3][t]];
+        if (first_zero((int)ng, width, band)) return 1;
+        lower((int)ng, width, band, m, Yx);
+    }
+    long long rows = nI + ng + na;
+    for (long long i = 0; i < rows * m; i++) K[i] = 0.0;
+    csr_times(rows, ix[4], ix[5], ix[6], data, m, Yx, K);
+    for (long long t = 0; t < dims[7]; t++) K[ix[7][t]] += data[ix[8][t]];
+    for (long long i = 0; i < nI; i++) {
+        double d = D[ix[9][i]];
+        for (int k = 0; k < m; k++) K[i * m + k] = K[i * m + k] / d;
+    }
+    for (long long i = 0; i < (ng + na) * m; i++) LY[i] = 0.0;
+    csr_times(ng + na, ix[10], ix[11], ix[12], data, m, K, LY);
+    double *G = K + nI * m;
+    for (long long i = 0; i < ng * m; i++) G[i] = -(G[i] + LY[i]);
+    if (ng) upper((int)ng, width, band, m, G);
+    for (long long i = 0; i < na * m; i++) tmp[i] = 0.0;
+    csr_times(na, ix[13], ix[14], ix[15], data, m, G, tmp);
+    double *S = G + ng * m;
+    for (long long i = 0; i < na * m; i++) S[i] = (S[i] + tmp[i]) + LY[ng * m + i];
+    return 0;
+}
 """
 
 
@@ -491,6 +547,41 @@ def one_norm(ab: np.ndarray) -> float | None:
     return kernels[3](ab.shape[1], ab.ctypes.data, ab.shape[0])
 
 
+class PlayersComplement:
+    """The compiled form of :meth:`gnerun.solvers.interior_point._AgentBlocks.complement` for one set of its gathers
+    and products (``parts``: the index arrays in the order of ``players_complement``'s ``ix``; ``dims``: ng, m,
+    width, nI, na): the same operations in the same order, so the same bits (checked on the first call against the
+    numpy and scipy.sparse code by the caller)."""
+
+    def __init__(self, function, dims: tuple[int, ...], parts: list[np.ndarray]) -> None:
+        self._function = function
+        self._parts = [np.ascontiguousarray(p, dtype=np.int64) for p in parts]  # held: the pointers point into them
+        ng, m, width, nI, na = dims
+        self._dims = np.array([*dims, self._parts[0].size, self._parts[2].size, self._parts[7].size], dtype=np.int64)
+        self._pointers = (ctypes.c_void_p * len(self._parts))(*[p.ctypes.data for p in self._parts])
+        self._work = ng * m + ng * (width + 1) + (ng + na) * m + na * m
+        self._shape = (nI + ng + na, m)
+
+    def __call__(self, data: np.ndarray, D: np.ndarray) -> np.ndarray | None:
+        """K = [Y_lambda; Y_p; S] (S: the players' blocks stacked), or None where D_x has a zero on its diagonal."""
+        data = np.ascontiguousarray(data, dtype=np.float64)
+        D = np.ascontiguousarray(D, dtype=np.float64)
+        work = np.empty(self._work)  # per call: a system's blocks may serve several solves at once
+        K = np.empty(self._shape)
+        if self._function(self._dims.ctypes.data, ctypes.addressof(self._pointers), data.ctypes.data, D.ctypes.data,
+                          work.ctypes.data, K.ctypes.data):
+            return None
+        return K
+
+
+def players_complement(dims: tuple[int, ...], parts: list[np.ndarray]) -> PlayersComplement | None:
+    """The compiled players' complement for these gathers and products, or None where nothing is compiled."""
+    kernels = _lu_kernels()
+    if kernels is None:
+        return None
+    return PlayersComplement(kernels[4], dims, parts)
+
+
 def status() -> str:
     """Which solves and factorisations this module makes: "compiled", or "lapack (why)"."""
     _kernel()
@@ -542,7 +633,10 @@ def _load():
                                               ctypes.c_void_p, ctypes.c_int]
     if not (_agrees(kernel) and _lu_agrees(factor, solve_lu)):
         return None, None, "lapack (the compiled solves round differently from this LAPACK's)"
-    return kernel, (factor, solve_lu, inverse_norm, norm), "compiled"
+    complement = lib.players_complement
+    complement.restype = ctypes.c_int
+    complement.argtypes = [ctypes.c_void_p] * 6
+    return kernel, (factor, solve_lu, inverse_norm, norm, complement), "compiled"
 
 
 def _agrees(kernel) -> bool:
