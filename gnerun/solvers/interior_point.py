@@ -456,14 +456,15 @@ class SparseBarrier:
         dynamics block is singular (then no shift). ``data``: K's nonzeros without -D."""
         ip = self.ip
         shift = np.zeros(ip.n)
-        scale = 1.0
-        blocks = self._blocks().complement(data, D)
+        templates = self._blocks()
+        blocks = templates.complement(data, D)
         if blocks is None:
             return None
-        for ai, block in zip(ip.newton.game.agent_slices, blocks, strict=True):
-            shift[ai] = convexifying_shift(block)
-            scale = max(scale, float(np.max(np.abs(np.diag(block) + shift[ai]), initial=0.0)))
-        return shift, scale
+        deltas = [convexifying_shift(block) for block in blocks]
+        for ai, delta in zip(ip.newton.game.agent_slices, deltas, strict=True):
+            shift[ai] = delta
+        diagonal = np.concatenate([np.diagonal(block) for block in blocks]) + np.repeat(deltas, templates.decisions)
+        return shift, max(1.0, float(np.max(np.abs(diagonal), initial=0.0)))
 
     def _factored(self, parts, D: np.ndarray) -> _Factored:
         """The shifts and the factorisations (per regularisation) of the matrix at ``parts`` and ``D``: kept for
