@@ -427,6 +427,21 @@ def test_the_players_blocks_of_the_interior_complement(system) -> None:
         D2 = scale * np.random.default_rng(5).uniform(0.01, 100, ip.I.size)
         ours, reference = templates._stacked(state.parts.J, D2), templates._numpy(state.parts.J, D2)
         np.testing.assert_array_equal(ours.view(np.int64), reference.view(np.int64))
+        assert templates.shifts(state.parts.J, D2) == templates._numpy_shifts(reference)
+    # and the players' shifts, with scipy's dpotrf: on indefinite blocks (random), one that is not finite, one of inf
+    rng = np.random.default_rng(6)
+    for case in range(4):
+        K = rng.standard_normal(reference.shape) * 10.0 ** rng.uniform(-3, 3)
+        if case == 2:
+            K[-1, 0] = np.nan
+        if case == 3:
+            K[-2, 1] = np.inf
+        expected = templates._numpy_shifts(K)
+        assert any(expected[0]) and expected[1] >= 1.0
+        if templates.compiled:
+            found = templates._compiled.shifts(K, templates._rows, templates.decisions)
+            assert list(found[0]) == expected[0] and found[1] == expected[1]
+    assert templates._compiled_shifts is (True if templates.compiled else None)
     # another interior phase on the same system (the next draw of a Monte Carlo, a restart) reuses the templates
     again = InteriorPoint(solver.newton)
     assert again.linear._blocks() is ip.linear._blocks()

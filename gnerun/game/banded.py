@@ -463,6 +463,63 @@ int players_complement(const long long *dims, const long long *const *ix, const 
     for (long long i = 0; i < na * m; i++) S[i] = (S[i] + tmp[i]) + LY[ng * m + i];
     return 0;
 }
+
+/* ---- the players' convexifying shifts (gnerun.solvers.interior_point.convexifying_shift) ---- */
+
+typedef void (*potrf_t)(char *, int *, double *, int *, int *);
+
+/* whether LAPACK's dpotrf (lower; scipy's own, passed in) factorises sym + delta I (with shifted), as
+   interior_point._positive_definite asks it of the same array: sym is symmetric, so its row-major copy is the
+   column-major one */
+static int definite(potrf_t potrf, int k, const double *sym, double delta, int shifted, double *a) {
+    for (int i = 0; i < k; i++)
+        for (int j = 0; j < k; j++)
+            a[(size_t)i * k + j] = shifted ? sym[(size_t)i * k + j] + delta * (i == j ? 1.0 : 0.0)
+                                           : sym[(size_t)i * k + j];
+    char uplo = 'L';
+    int n = k, lda = k, info = 0;
+    potrf(&uplo, &n, a, &lda, &info);
+    return info == 0;
+}
+
+/* numpy's np.max(np.abs(v), initial=0.0) folded into Python's max(1.0, .): a NaN makes numpy's maximum NaN, and
+   max(1.0, NaN) is 1.0 */
+static double scale_of(int nan, double largest) { return nan ? 1.0 : (largest > 1.0 ? largest : 1.0); }
+
+/* convexifying_shift of the k x k block at b (row stride m): 0 where its symmetric part is positive definite, else
+   the first of 1e-8 scale, 1e-7 scale, ... (scale: the largest diagonal entry, at least 1) that makes it so */
+static double shift_of(potrf_t potrf, int k, const double *b, int m, double *sym, double *a) {
+    for (int i = 0; i < k; i++)
+        for (int j = 0; j < k; j++) sym[(size_t)i * k + j] = 0.5 * (b[(size_t)i * m + j] + b[(size_t)j * m + i]);
+    if (definite(potrf, k, sym, 0.0, 0, a)) return 0.0;
+    int nan = 0;
+    double largest = 0.0;
+    for (int i = 0; i < k; i++) {
+        double v = __builtin_fabs(sym[(size_t)i * k + i]);
+        if (v != v) nan = 1; else if (v > largest) largest = v;
+    }
+    double scale = scale_of(nan, largest), delta = 1e-8 * scale;
+    while (delta < 1e12 * scale && !definite(potrf, k, sym, delta, 1, a)) delta *= 10.0;
+    return delta;
+}
+
+/* SparseBarrier._shifts on the stacked blocks S (agents blocks of decisions[i] rows from row rows[i], m columns):
+   each block's shift into deltas, and the largest |diagonal entry + shift|, at least 1, returned; work: 2 m m */
+double players_shifts(int agents, const long long *rows, const long long *decisions, int m, const double *S,
+                      void *potrf, double *work, double *deltas) {
+    int nan = 0;
+    double largest = 0.0;
+    for (int i = 0; i < agents; i++) {
+        int k = (int)decisions[i];
+        const double *b = S + (size_t)rows[i] * m;
+        deltas[i] = shift_of((potrf_t)potrf, k, b, m, work, work + (size_t)m * m);
+        for (int j = 0; j < k; j++) {
+            double v = __builtin_fabs(b[(size_t)j * m + j] + deltas[i]);
+            if (v != v) nan = 1; else if (v > largest) largest = v;
+        }
+    }
+    return scale_of(nan, largest);
+}
 """
 
 
@@ -553,8 +610,8 @@ class PlayersComplement:
     width, nI, na): the same operations in the same order, so the same bits (checked on the first call against the
     numpy and scipy.sparse code by the caller)."""
 
-    def __init__(self, function, dims: tuple[int, ...], parts: list[np.ndarray]) -> None:
-        self._function = function
+    def __init__(self, function, dims: tuple[int, ...], parts: list[np.ndarray], shifts=(None, None)) -> None:
+        self._function, self._shifts = function, shifts
         self._parts = [np.ascontiguousarray(p, dtype=np.int64) for p in parts]  # held: the pointers point into them
         ng, m, width, nI, na = dims
         self._dims = np.array([*dims, self._parts[0].size, self._parts[2].size, self._parts[7].size], dtype=np.int64)
@@ -574,12 +631,31 @@ class PlayersComplement:
         return K
 
 
+    def shifts(self, K: np.ndarray, rows: np.ndarray, decisions: np.ndarray) -> tuple[np.ndarray, float] | None:
+        """The players' convexifying shifts (:func:`gnerun.solvers.interior_point.convexifying_shift` of each block
+        of K's last rows: ``decisions[i]`` rows from row ``rows[i]`` of them) and the largest |diagonal entry +
+        shift|, at least 1, as :meth:`~gnerun.solvers.interior_point.SparseBarrier._shifts` finds them, with the same
+        LAPACK dpotrf; None where that dpotrf is not at hand."""
+        function, potrf = self._shifts
+        if potrf is None:
+            return None
+        m = self._shape[1]
+        S = K[self._shape[0] - int(decisions.sum()):]
+        deltas = np.empty(decisions.size)
+        rows64 = np.ascontiguousarray(rows, dtype=np.int64)
+        decisions64 = np.ascontiguousarray(decisions, dtype=np.int64)
+        work = np.empty(2 * m * m)
+        scale = function(decisions.size, rows64.ctypes.data, decisions64.ctypes.data, m, S.ctypes.data, potrf,
+                         work.ctypes.data, deltas.ctypes.data)
+        return deltas, scale
+
+
 def players_complement(dims: tuple[int, ...], parts: list[np.ndarray]) -> PlayersComplement | None:
     """The compiled players' complement for these gathers and products, or None where nothing is compiled."""
     kernels = _lu_kernels()
     if kernels is None:
         return None
-    return PlayersComplement(kernels[4], dims, parts)
+    return PlayersComplement(kernels[4], dims, parts, kernels[5])
 
 
 def status() -> str:
@@ -636,7 +712,26 @@ def _load():
     complement = lib.players_complement
     complement.restype = ctypes.c_int
     complement.argtypes = [ctypes.c_void_p] * 6
-    return kernel, (factor, solve_lu, inverse_norm, norm, complement), "compiled"
+    shifts = lib.players_shifts
+    shifts.restype = ctypes.c_double
+    shifts.argtypes = [ctypes.c_int, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int] + [ctypes.c_void_p] * 4
+    return kernel, (factor, solve_lu, inverse_norm, norm, complement, (shifts, _potrf())), "compiled"
+
+
+def _potrf() -> int | None:
+    """The address of the dpotrf that scipy.linalg.lapack calls (scipy.linalg.cython_lapack's), or None."""
+    try:
+        from scipy.linalg import cython_lapack
+
+        capsule = cython_lapack.__pyx_capi__["dpotrf"]
+        api = ctypes.pythonapi
+        api.PyCapsule_GetName.restype = ctypes.c_char_p
+        api.PyCapsule_GetName.argtypes = [ctypes.py_object]
+        api.PyCapsule_GetPointer.restype = ctypes.c_void_p
+        api.PyCapsule_GetPointer.argtypes = [ctypes.py_object, ctypes.c_char_p]
+        return api.PyCapsule_GetPointer(capsule, api.PyCapsule_GetName(capsule)) or None
+    except (ImportError, AttributeError, KeyError, ValueError):
+        return None
 
 
 def _agrees(kernel) -> bool:

@@ -455,16 +455,14 @@ class SparseBarrier:
         the largest diagonal entry of the shifted complement (the condensed form's scale); ``None`` if a
         dynamics block is singular (then no shift). ``data``: K's nonzeros without -D."""
         ip = self.ip
-        shift = np.zeros(ip.n)
-        templates = self._blocks()
-        blocks = templates.complement(data, D)
-        if blocks is None:
+        found = self._blocks().shifts(data, D)
+        if found is None:
             return None
-        deltas = [convexifying_shift(block) for block in blocks]
+        deltas, scale = found
+        shift = np.zeros(ip.n)
         for ai, delta in zip(ip.newton.game.agent_slices, deltas, strict=True):
             shift[ai] = delta
-        diagonal = np.concatenate([np.diagonal(block) for block in blocks]) + np.repeat(deltas, templates.decisions)
-        return shift, max(1.0, float(np.max(np.abs(diagonal), initial=0.0)))
+        return shift, scale
 
     def _factored(self, parts, D: np.ndarray) -> _Factored:
         """The shifts and the factorisations (per regularisation) of the matrix at ``parts`` and ``D``: kept for
@@ -595,6 +593,7 @@ class _AgentBlocks:
         self._rows = np.concatenate([[0], np.cumsum(self.decisions)])  # each agent's rows of the result
         self._compiled = None  # gnerun.game.banded.PlayersComplement, False where it is not used (see _stacked)
         self.compiled = False  # whether the last call was computed by it
+        self._compiled_shifts: bool | None = None  # whether the compiled shifts agree with numpy's (None: not asked)
 
     def complement(self, data: np.ndarray, D: np.ndarray) -> list[np.ndarray] | None:
         """Each agent's block of the Schur complement, or None if some D_x is singular. The triangular solves are
@@ -606,6 +605,34 @@ class _AgentBlocks:
             return None
         S, rows = K[self.counts[0] + self.counts[1]:], self._rows
         return [S[rows[i]:rows[i + 1], :k] for i, k in enumerate(self.decisions)]  # views: K is new at every call
+
+    def shifts(self, data: np.ndarray, D: np.ndarray) -> tuple[list[float], float] | None:
+        """Each agent's :func:`convexifying_shift` of its block, and the largest |diagonal entry + shift| over all
+        blocks, at least 1; None if some D_x is singular. Compiled with the complement (the same dpotrf), once its
+        first result equals numpy's, else numpy's."""
+        K = self._stacked(data, D)
+        if K is None:
+            return None
+        compiled = self._compiled
+        if compiled and self._compiled_shifts is not False:
+            found = compiled.shifts(K, self._rows, self.decisions)
+            if found is not None and self._compiled_shifts is None:
+                reference = self._numpy_shifts(K)
+                same = list(found[0]) == list(reference[0]) and (
+                    found[1] == reference[1] or (math.isnan(found[1]) and math.isnan(reference[1])))
+                self._compiled_shifts = same
+                found = found if same else reference
+            if found is not None:
+                return list(found[0]), float(found[1])
+            self._compiled_shifts = False
+        return self._numpy_shifts(K)
+
+    def _numpy_shifts(self, K: np.ndarray) -> tuple[list[float], float]:
+        S, rows = K[self.counts[0] + self.counts[1]:], self._rows
+        blocks = [S[rows[i]:rows[i + 1], :k] for i, k in enumerate(self.decisions)]
+        deltas = [convexifying_shift(block) for block in blocks]
+        diagonal = np.concatenate([np.diagonal(block) for block in blocks]) + np.repeat(deltas, self.decisions)
+        return deltas, max(1.0, float(np.max(np.abs(diagonal), initial=0.0)))
 
     def _stacked(self, data: np.ndarray, D: np.ndarray) -> np.ndarray | None:
         """[Y_lambda; Y_p; S] (S: the agents' blocks stacked), or None if some D_x is singular: by
