@@ -131,21 +131,23 @@ def test_a_merge_takes_the_same_iterates_with_either_solve(compiled, monkeypatch
     cfg = load_config(text=trajectory.merge_problems(1)[0].config_yaml)
     game = compile_game(cfg)
     calls = []
-    complement = interior_point._AgentBlocks.complement
+    stacked = interior_point._AgentBlocks._stacked
 
     def counted(self, data, D):
-        calls.append(self)
-        return complement(self, data, D)
+        calls.append(self.compiled)
+        return stacked(self, data, D)
 
-    monkeypatch.setattr(interior_point._AgentBlocks, "complement", counted)
+    monkeypatch.setattr(interior_point._AgentBlocks, "_stacked", counted)
     runs = []
     for state in ({"kernel": None, "status": "lapack (as a reference)"}, dict(banded._STATE)):
         monkeypatch.setattr(banded, "_STATE", state)
         iterates: list[np.ndarray] = []
         solver = make_solver(cfg, game)
+        solver.newton.system.agent_blocks.clear()  # the players' blocks built anew, compiled or not
         final = iterate(solver, solver.init(), on_iterate=lambda s, seen=iterates: seen.append(s.z.copy()))
         runs.append((final.k, iterates))
     assert calls and runs[0][0] == runs[1][0] and len(runs[0][1]) == len(runs[1][1]) > 1
+    assert not calls[0] and calls[-1]  # numpy's players' blocks, then the compiled ones
     assert all(_same_bits(a, b) for a, b in zip(runs[0][1], runs[1][1], strict=True))
 
 
