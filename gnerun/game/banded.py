@@ -22,6 +22,12 @@ product: ddot's 16 lanes of fused multiply-adds for the first n & -16 terms, the
 the same operations on each entry in the same order; only where they are independent does it order them otherwise
 (dger's columns in one pass over the rows held in registers).
 
+The same library holds the rest of the interior step's players' blocks of the Schur complement
+(:class:`PlayersComplement`: numpy's gathers and divisions and scipy.sparse's products, csr_matvecs, in their order,
+without fused multiply-adds as those are compiled) and the players' convexifying shifts (with the dpotrf that
+scipy.linalg.lapack calls, its address taken from scipy.linalg.cython_lapack); the caller compares a system's first
+result with its numpy code bit for bit and keeps the numpy code where they differ.
+
 It is compiled once per machine by the system's C compiler into the kernels' cache (gnerun.game.kernels) and used
 when three things hold: the library builds and loads, the processor has fused multiply-add (the library's code for
 it is compiled for AVX2 and FMA and checks the processor before it runs), and its results on test bands equal
