@@ -650,8 +650,11 @@ class _AgentBlocks:
             compiled = banded.players_complement(dims, parts)
             if compiled is not None:
                 ours, reference = compiled(data, D), self._numpy(data, D)
-                if (ours is None) != (reference is None) or (ours is not None and not np.array_equal(
-                        ours.view(np.int64), reference.view(np.int64))):
+                if ours is None and reference is None:  # a singular D_x: nothing to compare; the next call compares
+                    self.compiled = False
+                    return None
+                if ours is None or reference is None or not np.array_equal(ours.view(np.int64),
+                                                                            reference.view(np.int64)):
                     compiled = None
             self._compiled = compiled if compiled is not None else False
         self.compiled = bool(compiled)
