@@ -495,6 +495,7 @@ static double scale_of(int nan, double largest) { return nan ? 1.0 : (largest > 
 /* convexifying_shift of the k x k block at b (row stride m): 0 where its symmetric part is positive definite, else
    the first of 1e-8 scale, 1e-7 scale, ... (scale: the largest diagonal entry, at least 1) that makes it so */
 static double shift_of(potrf_t potrf, int k, const double *b, int m, double *sym, double *a) {
+    if (k == 0) return 0.0; /* an empty block is positive definite (dpotrf of order 0 succeeds) */
     for (int i = 0; i < k; i++)
         for (int j = 0; j < k; j++) sym[(size_t)i * k + j] = 0.5 * (b[(size_t)i * m + j] + b[(size_t)j * m + i]);
     if (definite(potrf, k, sym, 0.0, 0, a)) return 0.0;
