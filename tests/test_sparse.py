@@ -439,7 +439,7 @@ def test_the_players_blocks_of_the_interior_complement(system) -> None:
         expected = templates._numpy_shifts(K)
         assert any(expected[0]) and expected[1] >= 1.0
         if templates.compiled:
-            found = templates._compiled.shifts(K, templates._rows, templates.decisions)
+            found = templates._compiled.shifts(K)
             assert list(found[0]) == expected[0] and found[1] == expected[1]
     assert templates._compiled_shifts is (True if templates.compiled else None)
     # another interior phase on the same system (the next draw of a Monte Carlo, a restart) reuses the templates

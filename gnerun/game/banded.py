@@ -614,10 +614,12 @@ def one_norm(ab: np.ndarray) -> float | None:
 class PlayersComplement:
     """The compiled form of :meth:`gnerun.solvers.interior_point._AgentBlocks.complement` for one set of its gathers
     and products (``parts``: the index arrays in the order of ``players_complement``'s ``ix``; ``dims``: ng, m,
-    width, nI, na): the same operations in the same order, so the same bits (checked on the first call against the
-    numpy and scipy.sparse code by the caller)."""
+    width, nI, na; the players' blocks: ``decisions[i]`` rows of the last na from row ``rows[i]`` of them): the same
+    operations in the same order, so the same bits (checked on the first call against the numpy and scipy.sparse
+    code by the caller)."""
 
-    def __init__(self, function, dims: tuple[int, ...], parts: list[np.ndarray], shifts=(None, None)) -> None:
+    def __init__(self, function, dims: tuple[int, ...], parts: list[np.ndarray], rows: np.ndarray,
+                 decisions: np.ndarray, shifts=(None, None)) -> None:
         self._function, self._shifts = function, shifts
         self._parts = [np.ascontiguousarray(p, dtype=np.int64) for p in parts]  # held: the pointers point into them
         ng, m, width, nI, na = dims
@@ -625,6 +627,8 @@ class PlayersComplement:
         self._pointers = (ctypes.c_void_p * len(self._parts))(*[p.ctypes.data for p in self._parts])
         self._work = ng * m + ng * (width + 1) + (ng + na) * m + na * m
         self._shape = (nI + ng + na, m)
+        self._rows = np.ascontiguousarray(rows, dtype=np.int64)
+        self._decisions = np.ascontiguousarray(decisions, dtype=np.int64)
 
     def __call__(self, data: np.ndarray, D: np.ndarray) -> np.ndarray | None:
         """K = [Y_lambda; Y_p; S] (S: the players' blocks stacked), or None where D_x has a zero on its diagonal."""
@@ -637,32 +641,29 @@ class PlayersComplement:
             return None
         return K
 
-
-    def shifts(self, K: np.ndarray, rows: np.ndarray, decisions: np.ndarray) -> tuple[np.ndarray, float] | None:
+    def shifts(self, K: np.ndarray) -> tuple[list[float], float] | None:
         """The players' convexifying shifts (:func:`gnerun.solvers.interior_point.convexifying_shift` of each block
-        of K's last rows: ``decisions[i]`` rows from row ``rows[i]`` of them) and the largest |diagonal entry +
-        shift|, at least 1, as :meth:`~gnerun.solvers.interior_point.SparseBarrier._shifts` finds them, with the same
-        LAPACK dpotrf; None where that dpotrf is not at hand."""
+        of K, a result of this object) and the largest |diagonal entry + shift|, at least 1, as
+        :meth:`~gnerun.solvers.interior_point.SparseBarrier._shifts` finds them, with the same LAPACK dpotrf; None
+        where that dpotrf is not at hand."""
         function, potrf = self._shifts
         if potrf is None:
             return None
-        m = self._shape[1]
-        S = K[self._shape[0] - int(decisions.sum()):]
-        deltas = np.empty(decisions.size)
-        rows64 = np.ascontiguousarray(rows, dtype=np.int64)
-        decisions64 = np.ascontiguousarray(decisions, dtype=np.int64)
-        work = np.empty(2 * m * m)
-        scale = function(decisions.size, rows64.ctypes.data, decisions64.ctypes.data, m, S.ctypes.data, potrf,
+        m, players = self._shape[1], self._decisions.size
+        S = K[self._shape[0] - int(self._decisions.sum()):]
+        deltas, work = np.empty(players), np.empty(2 * m * m)
+        scale = function(players, self._rows.ctypes.data, self._decisions.ctypes.data, m, S.ctypes.data, potrf,
                          work.ctypes.data, deltas.ctypes.data)
-        return deltas, scale
+        return deltas.tolist(), float(scale)
 
 
-def players_complement(dims: tuple[int, ...], parts: list[np.ndarray]) -> PlayersComplement | None:
+def players_complement(dims: tuple[int, ...], parts: list[np.ndarray], rows: np.ndarray,
+                       decisions: np.ndarray) -> PlayersComplement | None:
     """The compiled players' complement for these gathers and products, or None where nothing is compiled."""
     kernels = _lu_kernels()
     if kernels is None:
         return None
-    return PlayersComplement(kernels[4], dims, parts, kernels[5])
+    return PlayersComplement(kernels[4], dims, parts, rows, decisions, kernels[5])
 
 
 def status() -> str:

@@ -601,10 +601,12 @@ class _AgentBlocks:
         that rounds otherwise, without LAPACK's fused multiply-adds, changed a best response the certificate finds
         on one of ten ALGAMES merges)."""
         K = self._stacked(data, D)
-        if K is None:
-            return None
+        return None if K is None else self._split(K)
+
+    def _split(self, K: np.ndarray) -> list[np.ndarray]:
+        """Each agent's block of the stacked result K (views: K is new at every call)."""
         S, rows = K[self.counts[0] + self.counts[1]:], self._rows
-        return [S[rows[i]:rows[i + 1], :k] for i, k in enumerate(self.decisions)]  # views: K is new at every call
+        return [S[rows[i]:rows[i + 1], :k] for i, k in enumerate(self.decisions)]
 
     def shifts(self, data: np.ndarray, D: np.ndarray) -> tuple[list[float], float] | None:
         """Each agent's :func:`convexifying_shift` of its block, and the largest |diagonal entry + shift| over all
@@ -613,23 +615,17 @@ class _AgentBlocks:
         K = self._stacked(data, D)
         if K is None:
             return None
-        compiled = self._compiled
-        if compiled and self._compiled_shifts is not False:
-            found = compiled.shifts(K, self._rows, self.decisions)
-            if found is not None and self._compiled_shifts is None:
-                reference = self._numpy_shifts(K)
-                same = list(found[0]) == list(reference[0]) and (
-                    found[1] == reference[1] or (math.isnan(found[1]) and math.isnan(reference[1])))
-                self._compiled_shifts = same
-                found = found if same else reference
-            if found is not None:
-                return list(found[0]), float(found[1])
+        if self._compiled and self._compiled_shifts is not False:
+            found = self._compiled.shifts(K)
+            if found is not None and self._compiled_shifts is None:  # the first: compared with numpy's
+                self._compiled_shifts = found == self._numpy_shifts(K)
+            if found is not None and self._compiled_shifts:
+                return found
             self._compiled_shifts = False
         return self._numpy_shifts(K)
 
     def _numpy_shifts(self, K: np.ndarray) -> tuple[list[float], float]:
-        S, rows = K[self.counts[0] + self.counts[1]:], self._rows
-        blocks = [S[rows[i]:rows[i + 1], :k] for i, k in enumerate(self.decisions)]
+        blocks = self._split(K)
         deltas = [convexifying_shift(block) for block in blocks]
         diagonal = np.concatenate([np.diagonal(block) for block in blocks]) + np.repeat(deltas, self.decisions)
         return deltas, max(1.0, float(np.max(np.abs(diagonal), initial=0.0)))
@@ -647,7 +643,7 @@ class _AgentBlocks:
                      self._Ka.flat, self._Ka.positions, self.touched,
                      *(getattr(self._Kl.matrix, k) for k in ("indptr", "indices")), self._Kl.positions,
                      *(getattr(self._Ap.matrix, k) for k in ("indptr", "indices")), self._Ap.positions]
-            compiled = banded.players_complement(dims, parts)
+            compiled = banded.players_complement(dims, parts, self._rows[:-1], self.decisions)
             if compiled is not None:
                 ours, reference = compiled(data, D), self._numpy(data, D)
                 if ours is None and reference is None:  # a singular D_x: nothing to compare; the next call compares
