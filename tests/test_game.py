@@ -135,6 +135,7 @@ def test_exact_derivatives_match_central_differences(name: str, cfg) -> None:
             for i, sl in enumerate(game.agent_slices)
         ])
         _assert_matches_fd(F, F_fd, f"{name}: F")
+        np.testing.assert_array_equal(game.own_gradients(a, x), F)  # the same expression, without H
         # L at lambda = 0 is the pseudogradient [KKT_concatenated]
         np.testing.assert_allclose(game.kkt_parts(np.r_[a, np.zeros(m)], x).L, F, rtol=1e-12, atol=1e-12)
 

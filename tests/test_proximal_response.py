@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from gnerun.errors import InputError
-from gnerun.game.compile import compile_agent_problem, compile_game
+from gnerun.game.compile import agent_problem, compile_agent_problem, compile_game
 from gnerun.language.config import load_config
 from gnerun.runs.closed_loop import simulate
 from gnerun.runs.solving import make_solver, solve
@@ -63,6 +63,7 @@ def test_an_agent_computes_with_its_own_cost_and_constraints_only() -> None:
     mine = compile_agent_problem(cfg, 0, 0.3)
     theirs = compile_agent_problem(other, 0, 0.3)
     game = compile_game(cfg)
+    taken = agent_problem(compile_game(other), 0, 0.3)  # from the other game's expressions, as the solvers build it
     assert mine.n == game.agent_slices[0].stop  # its own inputs only
     assert mine.nx == game.nx + game.n  # parameters: the plant state, the others' decisions, its own centre
     assert mine.m == game.multiplier_slices[0].stop - game.multiplier_slices[0].start
@@ -70,9 +71,10 @@ def test_an_agent_computes_with_its_own_cost_and_constraints_only() -> None:
     for _ in range(5):
         z = rng.standard_normal(mine.size)
         p = rng.standard_normal(mine.nx)
-        a, b = mine.kkt_parts(z, p), theirs.kkt_parts(z, p)
+        a, b, c = mine.kkt_parts(z, p), theirs.kkt_parts(z, p), taken.kkt_parts(z, p)
         for field in ("L", "c", "dL_dz", "dc_da"):
             np.testing.assert_array_equal(getattr(a, field), getattr(b, field))
+            np.testing.assert_array_equal(getattr(a, field), getattr(c, field))
             assert np.all(np.isfinite(getattr(a, field)))
     # and the proximal term is the only addition to its own cost: tau enters the Hessian as tau * I
     plain = compile_agent_problem(cfg, 0, 0.0)
@@ -80,6 +82,31 @@ def test_an_agent_computes_with_its_own_cost_and_constraints_only() -> None:
     p = rng.standard_normal(mine.nx)
     diff = mine.kkt_parts(z, p).dL_dz[:, : mine.n] - plain.kkt_parts(z, p).dL_dz[:, : mine.n]
     np.testing.assert_allclose(diff, 0.3 * np.eye(mine.n), atol=1e-12)
+
+
+@pytest.mark.parametrize("name", ["fk_a01.yaml", "variational_gne.yaml", "formation_ring.yaml", "moving_obstacle.yaml",
+                                  "paper_study3.yaml"])
+def test_an_agent_problem_from_the_games_expressions_is_the_one_compiled_from_the_config(name: str) -> None:
+    # static and dynamic, generalized and variational (shared rows carried: stage by stage after the agent's own),
+    # runtime parameters (moving_obstacle): the same rows in the same order, the same values to the bit
+    cfg = load_config(CONFIGS / name)
+    game = compile_game(cfg)
+    rng = np.random.default_rng(1)
+    for agent in (0, len(game.agent_names) - 1):
+        for tau in (0.0, 0.7):
+            old, new = compile_agent_problem(cfg, agent, tau), agent_problem(game, agent, tau)
+            assert new.constraints == old.constraints
+            assert new.agent_names == old.agent_names and new.variable_names == old.variable_names
+            for field in ("a_start", "a_lower", "a_upper", "x0"):
+                np.testing.assert_array_equal(getattr(new, field), getattr(old, field))
+            for _ in range(3):
+                z, p = rng.standard_normal(old.size), rng.standard_normal(old.nx)
+                np.testing.assert_array_equal(new.costs(z[: old.n], p), old.costs(z[: old.n], p))
+                a, b = old.kkt_parts(z, p), new.kkt_parts(z, p)
+                for field in ("L", "c", "dL_dz", "dc_da"):
+                    np.testing.assert_array_equal(getattr(b, field), getattr(a, field))
+    with pytest.raises(ValueError, match="smoothing"):
+        agent_problem(compile_game(cfg, smoothing=0.1), 0, 0.0)
 
 
 def test_the_round_hands_each_agent_only_the_others_last_decisions() -> None:

@@ -33,7 +33,7 @@ NODES_LIMIT = 10_000_000
 SPARSE_FROM = 800
 SPARSE_WORK = 1_000
 LOOP_STEPS_WARN = 10_000_000  # from this many solver steps of a simulate on (sum over K of run.steps * K)
-# The certificate of a solve builds every agent's own problem, condensed and dense (gnerun.game.compile_agent_problem):
+# The certificate of a solve builds every agent's own problem, condensed and dense (gnerun.game.compile.agent_problem):
 # its decisions and constraint rows, the others' decisions as parameters; its time and memory grow with the square of
 # the unknowns (the constants below: fitted to measured builds, docs/failures.md "Size limits").
 RESPONSE_WARN = DENSE_WARN  # unknowns of the largest agent problem from which a solve warns

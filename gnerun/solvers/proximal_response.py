@@ -10,8 +10,8 @@ updates every agent once: all from the same abar (``jacobi``) or one after the o
 the others' newest decisions (``gauss_seidel``). In a closed loop K counts rounds.
 
 Information isolation: each :class:`Agent` holds only its own compiled proximal problem
-(:func:`gnerun.game.compile_agent_problem`, built from its own cost and constraints, the common
-dynamics and parameters) and its inner solver; a round hands it the plant state, the others' last
+(:func:`gnerun.game.compile.agent_problem`: its own cost and constraints, the common dynamics and parameters, taken
+from the game's expressions) and its inner solver; a round hands it the plant state, the others' last
 decisions and its own last decision and multipliers, nothing else.
 """
 
@@ -22,7 +22,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..errors import InputError
-from ..game.compile import CompiledGame, compile_agent_problem
+from ..game.compile import CompiledGame, agent_problem, compile_agent_problem
 from ..language.config import Config, SolverConfig
 from .driver import Solver, iterate
 from .globalization import globalized
@@ -54,7 +54,7 @@ def make_agents(cfg: Config, game: CompiledGame) -> list[Agent]:
                                  "tol": opts.tol / 100})
     agents = []
     for i, name in enumerate(game.agent_names):
-        problem = compile_agent_problem(cfg, i, opts.tau)
+        problem = compile_agent_problem(cfg, i, opts.tau) if game.smoothing else agent_problem(game, i, opts.tau)
         if opts.inner == "jn":
             inner: Solver = JosephyNewton(problem, inner_opts)
         else:

@@ -24,7 +24,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import linprog
 
 STEPS = 11  # t = s * 10^k, k = -2..8
 TAIL = 3  # strict decreases at the end of the ray
@@ -117,6 +116,8 @@ def recession_direction(gradient: np.ndarray, rows_jacobian: np.ndarray, equalit
     n = gradient.size
     if not np.all(np.isfinite(gradient)) or not np.all(np.isfinite(rows_jacobian)):
         return None
+    from scipy.optimize import linprog  # (loaded where a ray is sought: 0.2-0.4 s of import)
+
     C = rows_jacobian.reshape(-1, n)
     res = linprog(gradient, A_ub=C[~equality] if (~equality).any() else None,
                   b_ub=np.zeros(int((~equality).sum())) if (~equality).any() else None,
