@@ -335,6 +335,36 @@ def test_a_certificate_restart_begins_in_the_interior_phase_with_the_warm_barrie
         assert np.any(np.isclose(scaled, interior_point.WARM))
 
 
+@pytest.mark.parametrize("noisy", [False, True])
+def test_a_restart_that_would_repeat_an_earlier_one_is_not_run(monkeypatch: pytest.MonkeyPatch, noisy: bool) -> None:
+    # every restart of this solver goes back to the first start, so it reaches the same KKT point, where the
+    # certificate finds the same best response: the second restart would start where the first did and repeat it.
+    # A solver that draws noise (a solver-side disturbance) is not a function of its start: its restarts all run
+    from gnerun.runs import solving
+
+    cfg = load_config(text=SADDLE, overrides={"disturbance.kind": "residual", "disturbance.scale": 1e-14}
+                      if noisy else None)
+    game = compile_game(cfg)
+    solver = make_solver(cfg, game)
+    first = solver.init()
+    starts = []
+
+    def back(z0, x=None, rng=None):
+        starts.append(z0[: game.n].copy())
+        return solver.init(first.z, x, rng)
+
+    monkeypatch.setattr(solver, "restart", back)
+    notes: list[str] = []
+    out = solving.certified_solve(game, solver, first, note=notes.append)
+    assert out.status == "not_an_equilibrium"
+    if noisy:
+        assert out.restarts == solving.CERTIFY_RESTARTS and out.repeats is None
+        return
+    assert out.restarts == len(starts) == 1 and out.repeats == 1
+    assert "another would have started where restart 1 did" in out.message
+    assert "no restart again" in notes[-1]
+
+
 @pytest.mark.slow
 def test_a_first_newton_step_that_climbs_hands_a_nonlinear_game_to_the_interior_phase(
         monkeypatch: pytest.MonkeyPatch) -> None:

@@ -86,6 +86,7 @@ def reference_solution(game: CompiledGame, cfg: Config, z0: np.ndarray, x: np.nd
 
 
 CERTIFY_RESTARTS = 3  # restarts from the improving players' best responses before not_an_equilibrium
+REPEAT_TOL = 1e-9  # a restart's start this close to an earlier one's (relative) is not run: the solve is deterministic
 
 
 @dataclass
@@ -101,6 +102,7 @@ class Certified:
     message: str = ""
     diagnosis: dict = field(default_factory=dict)  # a failed solve's phase 1 (``infeasibility``), when run
     certificate_time_s: float = 0.0  # the certificates' time (best responses, their builds)
+    repeats: int | None = None  # the restart whose start the next one would have repeated (it was not run)
 
 
 def certified_solve(game: CompiledGame, solver: Solver, state: SSNState, x: np.ndarray | None = None,
@@ -121,6 +123,7 @@ def certified_solve(game: CompiledGame, solver: Solver, state: SSNState, x: np.n
     restarts = CERTIFY_RESTARTS if restarts is None else restarts
     elapsed = checking = 0.0
     used = 0
+    tried: list[np.ndarray] = []  # the restarts' starts (decisions)
     while True:
         t = time.perf_counter()
         state = iterate(solver, state, on_iterate=on_iterate)
@@ -137,15 +140,28 @@ def certified_solve(game: CompiledGame, solver: Solver, state: SSNState, x: np.n
         verdict = assess(game, cert, state.z[: game.n], x)
         checking += time.perf_counter() - t
         improving = verdict.improving if state.status == Status.CONVERGED else {}
+        out = Certified(state, cert, improving, used, elapsed, certificate_time_s=checking)
         if (not improving or verdict.unbounded or verdict.not_finite or used >= restarts
                 or not all(name in best for name in improving)):
-            return conclude(game, Certified(state, cert, improving, used, elapsed, certificate_time_s=checking), x)
-        used += 1
+            return conclude(game, out, x)
         z = state.z.copy()
         for i, name in enumerate(game.agent_names):
             if name in improving:
                 z[game.agent_slices[i]] = best[name]
         z[game.n:] = 0.0
+        # a solver that draws no noise (no rng) is a function of its start: from an earlier restart's start (the same
+        # KKT point reached, the same best responses found) a restart would repeat that one's iterations and end there
+        a = z[: game.n]
+        if state.rng is None:
+            out.repeats = next((k + 1 for k, s in enumerate(tried) if np.max(np.abs(a - s), initial=0.0)
+                                <= REPEAT_TOL * max(1.0, float(np.max(np.abs(s), initial=0.0)))), None)
+        if out.repeats is not None:
+            if note is not None:
+                note(f"iteration {state.k}: a KKT point at which {', '.join(improving)} can improve alone; their best "
+                     f"responses are where restart {out.repeats} started: no restart again")
+            return conclude(game, out, x)
+        tried.append(a.copy())
+        used += 1
         if note is not None:
             note(f"iteration {state.k}: a KKT point at which {', '.join(improving)} can improve alone; restart "
                  f"{used} from their best responses")
@@ -190,8 +206,9 @@ def conclude(game: CompiledGame, out: Certified, x: np.ndarray | None = None, ce
             who = ", ".join(f"{name} by {gap:.2e}" for name, gap in out.improving.items())
             status, message = Status.NOT_AN_EQUILIBRIUM, (
                 f"{kkt} that is not an equilibrium: alone, {who} (best response found by the certificate), after "
-                f"{out.restarts} restart(s) from the players' best responses; a nonconvex player's stationary point, "
-                "not its minimum (try other start values)")
+                f"{out.restarts} restart(s) from the players' best responses"
+                + (f" (another would have started where restart {out.repeats} did)" if out.repeats else "")
+                + "; a nonconvex player's stationary point, not its minimum (try other start values)")
         elif verdict.unchecked:
             who = "; ".join(f"{name}: {why}" for name, why in verdict.unchecked.items())
             status, message = Status.KKT_POINT, f"{kkt}, not certified: a best response could not be checked ({who})"
