@@ -7,7 +7,8 @@ benchmarks runtime` what runtime parameters cost per iteration against constants
 benchmarks montecarlo` random merges solved with one compiled game: benchmarks/montecarlo.py; `python -m benchmarks
 stages` the sparse formulation's banded factorisation against SuperLU: benchmarks/stages.py; `python -m benchmarks
 condensed` the condensed KKT function compiled against interpreted on the FK library and the paper's game, iterate by
-iterate: benchmarks/condensed.py.)
+iterate: benchmarks/condensed.py; `python -m benchmarks wall` what the certificate adds to the wall time of one
+`gnerun solve` process: benchmarks/wall.py.)
 
 Prints a markdown table and writes JSON to benchmarks/results/. Every number is a median over repeats;
 every ratio is baseline time / gnerun time, both measured here, in this run.
@@ -779,6 +780,10 @@ if __name__ == "__main__":
         from .condensed import main as condensed
 
         sys.exit(condensed(sys.argv[2:]))
+    if sys.argv[1:2] == ["wall"]:
+        from .wall import main as wall
+
+        sys.exit(wall(sys.argv[2:]))
     if sys.argv[1:2] == ["identical"]:
         from .identical import main as identical
 
