@@ -331,6 +331,43 @@ def test_reference_none_never_solves_for_z_star(monkeypatch: pytest.MonkeyPatch)
         simulate(load_config(CONFIGS / "vehicles.yaml", {"run.steps": 4, "run.K": [2]}))
 
 
+def test_an_undisturbed_solve_is_its_own_reference_solve(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    """With run.reference: exact and no solver-side disturbance, the solve is the reference solve (the same solver
+    from the same start): it runs once, z* is its end polished, and every iterate is logged with its error to z*.
+    A disturbed solve still solves for z* apart."""
+    from gnerun.runs import solving
+
+    calls = []
+    original = solving.reference_solution
+
+    def counted(*args, **kwargs):
+        calls.append(1)
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(solving, "reference_solution", counted)
+    cfg = load_config(CONFIGS / "nonlinear_gne.yaml")
+    res = solve(cfg, out=tmp_path / "run")
+    assert res.status == "converged" and not calls
+    assert res.reference_status == "converged" and res.residual_norm <= cfg.solver.tol
+    logged = [np.linalg.norm(z - res.z_star) for z in _iterates(tmp_path / "run")]
+    np.testing.assert_array_equal(res.error_history, logged)
+    messages = read_messages(tmp_path / "run" / "run.mcap")
+    errors = [m["error_norm"] for topic, m, _ in messages if topic == "/solve/iterate"]
+    np.testing.assert_allclose(errors, logged, rtol=1e-15)
+    assert res.error_history[-1] <= 1e-9 and res.error_history[0] > 0.1
+    # the same numbers as the reference solve of a separate solver
+    ref = original(res.game, cfg, res.game.z_start(), res.game.x0)
+    np.testing.assert_array_equal(ref.z, res.z_star)
+    assert len(res.residual_history) == res.iterations + 1
+    disturbed = solve(load_config(CONFIGS / "nonlinear_gne.yaml", {"disturbance.kind": "residual",
+                                                                  "disturbance.scale": 1e-6}))
+    assert calls and disturbed.reference_status == "converged"
+
+
+def _iterates(run: Path) -> list[np.ndarray]:
+    return [np.asarray(m["z"]) for topic, m, _ in read_messages(run / "run.mcap") if topic == "/solve/iterate"]
+
+
 def test_cli_says_the_best_responses_were_not_checked(tmp_path: Path) -> None:
     proc = run_cli("solve", str(CONFIGS / "harker.yaml"), "--set", "run.certificate=false", "--set",
                    "run.reference=none", "--out", str(tmp_path / "run"))
@@ -409,7 +446,8 @@ def test_a_terminal_sees_progress_of_simulate_and_of_a_long_solve(tmp_path: Path
     code, text = _in_a_terminal("solve", str(CONFIGS / "harker.yaml"), "--out", str(tmp_path / "h"))
     assert code == 0, text
     stages = [s.strip() for s in text.splitlines() if s.startswith("... ")]
-    assert stages == ["... solving for the exact solution z* of the error norms (run.reference: none skips it)",
+    assert stages == ["... solving; the iterates are shown when its end, polished, gives the exact solution z* of "
+                      "their error norms (run.reference: none shows them as they come)",
                       "... checking the best response of each of 2 agents (run.certificate: false skips it)"]
     assert text.index("... checking") < text.index("status: converged")
     code, text = _in_a_terminal("simulate", str(STUDY2), "--out", str(tmp_path / "q"), "--set", "run.steps=2",

@@ -87,8 +87,9 @@ def test_a_failure_while_compiling_leaves_no_directory(tmp_path, monkeypatch) ->
 def test_a_failure_at_each_stage_of_a_solve_leaves_a_complete_directory(stage: str, tmp_path, monkeypatch) -> None:
     cfg = load_config(STUDY1)
     on_iterate = on_stage = None
-    if stage == "reference":
+    if stage == "reference":  # the reference solve, or the polish of the solve's own end (an undisturbed solve)
         monkeypatch.setattr(solving_module, "reference_solution", _raiser("the reference solve failed"))
+        monkeypatch.setattr(solving_module, "polished", _raiser("the reference solve failed"))
     elif stage.startswith("iterate"):
         k = int(stage.split()[1])
 

@@ -74,15 +74,21 @@ def reference_solution(game: CompiledGame, cfg: Config, z0: np.ndarray, x: np.nd
         state = iterate(solver, solver.init(z0, x), on_iterate=check)
         last = state
         if state.converged:
-            polisher = getattr(solver, "polisher", solver)  # its iterations, on from a solution
-            for _ in range(polish):
-                nxt = polisher.iteration(state)
-                if nxt.status != Status.RUNNING or not nxt.residual_norm < state.residual_norm:
-                    break
-                state = nxt
-            return Reference(state.z, Status.CONVERGED, state.residual_norm, state.k, state.message)
+            return polished(solver, state, polish)
     assert last is not None
     return Reference(last.z, last.status, last.residual_norm, last.k, last.message)
+
+
+def polished(solver: Solver, state: SSNState, polish: int = 3) -> Reference:
+    """z* from ``solver``'s converged ``state``: up to ``polish`` further Newton steps while ||Phi|| keeps
+    decreasing (accurate to rounding, not just to ``solver.tol``)."""
+    polisher = getattr(solver, "polisher", solver)  # its iterations, on from a solution
+    for _ in range(polish):
+        nxt = polisher.iteration(state)
+        if nxt.status != Status.RUNNING or not nxt.residual_norm < state.residual_norm:
+            break
+        state = nxt
+    return Reference(state.z, Status.CONVERGED, state.residual_norm, state.k, state.message)
 
 
 CERTIFY_RESTARTS = 3  # restarts from the improving players' best responses before not_an_equilibrium
@@ -109,7 +115,7 @@ def certified_solve(game: CompiledGame, solver: Solver, state: SSNState, x: np.n
                     on_iterate: Callable[[SSNState], None] | None = None,
                     note: Callable[[str], None] | None = None, restarts: int | None = None,
                     best_responses: bool = True, responses=None,
-                    on_stage: Callable[[str], None] | None = None, check=None) -> Certified:
+                    on_stage: Callable[[str], None] | None = None, check=None, solved: bool = False) -> Certified:
     """Iterate from ``state`` to the end and certify: converged means that no agent can improve alone. At a KKT
     point where some can (a nonconvex player's saddle or a worse local minimum), those agents move to the best
     responses the certificate found, the multipliers are reset, and the solver starts again from there (one
@@ -117,7 +123,8 @@ def certified_solve(game: CompiledGame, solver: Solver, state: SSNState, x: np.n
     residuals alone (``run.certificate: false``), no best responses and no restarts: a KKT point then ends
     ``kkt_point``. ``responses``: a :class:`~gnerun.solvers.certificate.NewtonResponses` for the best responses
     (SLSQP without); ``on_stage`` is told when the certificate starts; ``check`` is called between agents (a stop
-    request may raise there). The status and message are :func:`conclude`'s."""
+    request may raise there); ``solved``: ``state`` is already where ``iterate`` ended (its iterates shown to
+    ``on_iterate`` already), the first certificate is taken there. The status and message are :func:`conclude`'s."""
     from ..solvers.certificate import assess, certificate, kkt_residuals
 
     restarts = CERTIFY_RESTARTS if restarts is None else restarts
@@ -125,9 +132,12 @@ def certified_solve(game: CompiledGame, solver: Solver, state: SSNState, x: np.n
     used = 0
     tried: list[np.ndarray] = []  # the restarts' starts (decisions)
     while True:
-        t = time.perf_counter()
-        state = iterate(solver, state, on_iterate=on_iterate)
-        elapsed += time.perf_counter() - t
+        if solved:
+            solved = False
+        else:
+            t = time.perf_counter()
+            state = iterate(solver, state, on_iterate=on_iterate)
+            elapsed += time.perf_counter() - t
         if not best_responses:
             return conclude(game, Certified(state, kkt_residuals(game, state.z, x), {}, used, elapsed), x,
                             certified=False)
@@ -468,8 +478,11 @@ def _solve(cfg: Config, game: CompiledGame, solver: Solver, run: RunDirectory | 
     ref, z_star = None, None
 
     def record(state: SSNState) -> None:
-        nonlocal sink_time
         interrupt.check()  # before the iterate is counted: the last one recorded is the result
+        keep(state)
+
+    def keep(state: SSNState) -> None:
+        nonlocal sink_time
         t = time.perf_counter()
         history.append(state)
         error = None if z_star is None else float(np.linalg.norm(state.z - z_star))
@@ -489,21 +502,44 @@ def _solve(cfg: Config, game: CompiledGame, solver: Solver, run: RunDirectory | 
     from ..solvers.certificate import NewtonResponses
 
     responses = NewtonResponses(cfg, game, interrupt.check)  # a stop request is honoured between two steps
+    # undisturbed, with the configured method, the solve is the reference solve itself (the same solver from the same
+    # start): it runs once, and its iterates are recorded when its end, polished, gives z*
+    once = exact and cfg.disturbance.kind == "none" and cfg.solver.kind != "distributed"
+    early: list[SSNState] = []  # the solve's iterates before z* is known (once)
+    first, first_time = None, 0.0
     try:
         if exact:
-            if on_stage is not None:
-                on_stage("solving for the exact solution z* of the error norms (run.reference: none skips it)")
             t = time.perf_counter()
-            ref = reference_solution(game, cfg, z0, x, interrupt=interrupt)
+            if once:
+                if on_stage is not None:
+                    on_stage("solving; the iterates are shown when its end, polished, gives the exact solution z* of "
+                             "their error norms (run.reference: none shows them as they come)")
+                first = iterate(solver, solver.init(z0, x), on_iterate=lambda s: (interrupt.check(), early.append(s)))
+                first_time = time.perf_counter() - t
+                t = time.perf_counter()
+            elif on_stage is not None:
+                on_stage("solving for the exact solution z* of the error norms (run.reference: none skips it)")
+            if first is not None and first.status == Status.CONVERGED:
+                ref = polished(solver, first)
+            else:  # the fallback method of reference_solution too, where the solve did not converge
+                ref = reference_solution(game, cfg, z0, x, interrupt=interrupt)
             reference_time = time.perf_counter() - t
             z_star = ref.z if ref.converged else None
             if run is not None and not ref.converged:
                 run.log("warning", f"the undisturbed reference solve did not converge ({ref.message}); "
                                    "error norms are not available")
-        outcome = certified_solve(game, solver, solver.init(z0, x), x, record, note,
+            for s in early:
+                keep(s)
+        replayed = sink_time  # the early iterates' recording: not the solver's time
+        outcome = certified_solve(game, solver, first if first is not None else solver.init(z0, x), x, record, note,
                                   best_responses=cfg.run.certificate, responses=responses,
-                                  on_stage=on_stage, check=interrupt.check)
+                                  on_stage=on_stage, check=interrupt.check, solved=first is not None)
+        outcome.time_s += first_time + replayed  # (the sink's time is taken off below)
     except Stopped:
+        if early and not history:  # stopped before z* was known: the iterates made, without error norms
+            z_star = None
+            for s in early:
+                keep(s)
         return _interrupted(cfg, game, run, history, z_star, ref, interrupt,
                             time.perf_counter() - started - sink_time, compile_time)
     if _smoothable(cfg, game, outcome):
