@@ -51,6 +51,31 @@ def test_shipped_configs_load_and_round_trip(path: Path) -> None:
     assert again.config_hash() == cfg.config_hash()
 
 
+def _cournot_200() -> str:
+    from benchmarks.wall import cournot_yaml
+
+    return cournot_yaml(200)  # 200 expanded costs of ~2,400 characters each: long scalars, folded at the width
+
+
+@pytest.mark.parametrize("path", [*SHIPPED, "cournot-200"], ids=lambda p: getattr(p, "name", p))
+def test_the_resolved_yaml_is_the_text_of_pyyamls_own_emitter(path: Path | str) -> None:
+    # where libyaml's faster emitter writes config.yaml, it writes PyYAML's text: the same file, the same config_hash
+    import yaml
+
+    from gnerun.language import config as config_module
+
+    class Python(yaml.SafeDumper):
+        pass
+
+    Python.add_representer(list, config_module._represent_list)
+    cfg = load_config(path) if isinstance(path, Path) else load_config(text=_cournot_200())
+    data = cfg.model_dump(mode="json")
+    for optional in ("runtime", "references"):
+        if not data["game"].get(optional) and optional in data["game"]:
+            data["game"].pop(optional)
+    assert cfg.resolved_yaml() == yaml.dump(data, Dumper=Python, sort_keys=False, allow_unicode=True, width=100)
+
+
 def test_defaults_are_filled_in() -> None:
     cfg = load_config("cfg.yaml", text=STATIC)
     assert cfg.version == 1
