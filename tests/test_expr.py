@@ -225,3 +225,52 @@ def test_pi_is_a_constant_and_not_a_name_to_declare() -> None:
     text = 'game: {kind: static, agents: [{name: p, variables: {pi: {}}, cost: "pi**2"}]}'
     with pytest.raises(ConfigError, match="'pi' is the name of a constant"):
         load_config(text=text)
+
+
+# --- large repeated subtrees built once (gnerun.language.expr.Shared) ----------------------------------------------
+
+
+def _aggregate_game(N: int, cost: str) -> str:
+    return f"""name: aggregate
+game:
+  kind: static
+  parameters: {{N: {N}}}
+  definitions:
+    S: "sum(0.5*q{{k}} + 0.1 for k in 1..N)"
+  agents:
+    - for: {{i: 1..N}}
+      name: "p{{i}}"
+      variables: {{"q{{i}}": {{lower: 0, upper: 50, start: 1}}}}
+      cost: "{cost}"
+"""
+
+
+def test_a_large_subtree_written_into_every_cost_is_built_once(monkeypatch: pytest.MonkeyPatch) -> None:
+    from gnerun.game.compile import compile_game
+    from gnerun.language.config import load_config
+    from gnerun.language.expr import Shared
+
+    cfg = load_config(text=_aggregate_game(40, "q{i}**2 - q{i}*(100 - S)"))
+    shared = compile_game(cfg)
+    monkeypatch.setattr(Shared, "SMALLEST", 10**9)  # nothing reused: every cost its own copy of S
+    copies = compile_game(cfg)
+    size = [ca.Function("J", [g._symbolic.a], [g._symbolic.J]).n_instructions() for g in (shared, copies)]
+    assert size[0] * 10 < size[1]  # one S for 40 costs, against 40 copies of it
+    rng = np.random.default_rng(3)
+    for _ in range(3):
+        z = np.r_[rng.uniform(0, 50, shared.n), rng.standard_normal(shared.m)]
+        np.testing.assert_array_equal(shared.costs(z[: shared.n]), copies.costs(z[: shared.n]))
+        for ours, theirs in zip(shared.kkt_parts(z), copies.kkt_parts(z), strict=True):
+            np.testing.assert_allclose(ours, theirs, rtol=1e-13, atol=1e-12)
+
+
+def test_a_shared_subtree_under_a_function_still_records_each_cost_s_domain() -> None:
+    # log(S) in every cost: the calls are evaluated per cost (never reused), so each cost records where its log is
+    # defined, and a point with S < 0 leaves every cost undefined
+    from gnerun.game.compile import compile_game
+    from gnerun.language.config import load_config
+
+    game = compile_game(load_config(text=_aggregate_game(40, "q{i}**2 - log(S)")))
+    a = np.full(game.n, -1.0)  # S = 40 * (-0.5 + 0.1) < 0
+    assert game.agents.outside_domain(a).all()
+    assert not game.agents.outside_domain(np.ones(game.n)).any()

@@ -42,7 +42,7 @@ from ..language.config import (
     constraint_stages,
     constraint_text,
 )
-from ..language.expr import casadi_functions, evaluate, parse_constraint, parse_expression
+from ..language.expr import Shared, casadi_functions, evaluate, parse_constraint, parse_expression
 from ..language.runtime import RuntimeLayout, runtime_layout
 from .affine import LQStructure, derivatives_affine, offset_map
 from .agents import AgentFunctions
@@ -429,7 +429,7 @@ def _bound_rows(var: ca.SX, name: str, lower: float | None, upper: float | None,
 
 
 def _constraint_rows(texts: list, env: dict, fns: dict, owner: int | None, stage: int | None,
-                     agent_names: list[str] | None = None) -> list[_Row]:
+                     agent_names: list[str] | None = None, shared: Shared | None = None) -> list[_Row]:
     """The rows of ``texts`` at ``stage`` for ``owner`` (an agent index: the shared constraints it carries; None:
     the common rows of a variational game, each with the agents that carry it)."""
     rows = []
@@ -445,7 +445,7 @@ def _constraint_rows(texts: list, env: dict, fns: dict, owner: int | None, stage
         con = parse_constraint(text)
         who = None if carriers is None or owner is not None else tuple(agent_names.index(a) for a in carriers)
         info = ConstraintInfo(text + suffix, owner, con.is_equality, stage, who)
-        rows.append(_Row(ca.SX(con.residual(env, fns)), info))
+        rows.append(_Row(ca.SX(con.residual(env, fns, shared)), info))
     return rows
 
 
@@ -554,25 +554,26 @@ def _expressions(g: StaticGame | DynamicGame, lay: _Layout, a: ca.SX, x: ca.SX, 
     own: dict[int, list[_Row]] = {i: [] for i in agents}
     common: list[_Row] = []
 
-    def constrain(env: dict, stage: int | None) -> None:
+    def constrain(env: dict, stage: int | None, shared: Shared) -> None:
         for i in agents:
             agent = g.agents[i]
             variables = agent.variables if isinstance(g, StaticGame) else agent.inputs
             for vname, var in variables.items():
                 own[i] += _bound_rows(env[vname], vname, var.lower, var.upper, i, stage)
-            own[i] += _constraint_rows(agent.constraints, env, fns, i, stage)
+            own[i] += _constraint_rows(agent.constraints, env, fns, i, stage, shared=shared)
             if own_shared:
-                own[i] += _constraint_rows(g.shared_constraints, env, fns, i, stage, names_of_agents)
+                own[i] += _constraint_rows(g.shared_constraints, env, fns, i, stage, names_of_agents, shared)
         if not own_shared:
-            common.extend(_constraint_rows(g.shared_constraints, env, fns, None, stage, names_of_agents))
+            common.extend(_constraint_rows(g.shared_constraints, env, fns, None, stage, names_of_agents, shared))
 
     if isinstance(g, StaticGame):
         env: dict = dict(params)
         for i, vars_ in enumerate(names):
             env.update({v: a[slices[i].start + j] for j, v in enumerate(vars_)})
+        shared = Shared()  # an aggregate written into every cost is built once
         for i in agents:
-            costs[i] = ca.SX(evaluate(parse_expression(g.agents[i].cost), env, cost_fns[i]))
-        constrain(env, None)
+            costs[i] = ca.SX(evaluate(parse_expression(g.agents[i].cost), env, cost_fns[i], shared))
+        constrain(env, None, shared)
         return _Expressions(costs, own, common, None, domain=domain)
 
     inputs = [(i, j, u) for i, vars_ in enumerate(names) for j, u in enumerate(vars_)]
@@ -617,20 +618,22 @@ def _expressions(g: StaticGame | DynamicGame, lay: _Layout, a: ca.SX, x: ca.SX, 
                 env["t"] = p[0]
         env.update({s: xi[k] for k, s in enumerate(g.states)})
         env.update({name: u[k] for k, (_, _, name) in enumerate(inputs)})
+        shared = Shared()
         for i in agents:
-            l_i = evaluate(stage_cost[i], env, cost_fns[i])
+            l_i = evaluate(stage_cost[i], env, cost_fns[i], shared)
             total[i] += l_i
             if states is not None:
                 stage_costs[i].append(ca.SX(l_i))
-        constrain(env, tau)
+        constrain(env, tau, shared)
     env_T = dict(params)
     if rt is not None:
         rt.at_stage(env_T, p, per_stage, lay.horizon + 1)
         if local_time and rt.time:
             env_T["t"] = p[0] + rt.dt
     env_T.update({s: xi[k] for k, s in enumerate(g.states)})
+    shared = Shared()
     for i in agents:
-        psi = evaluate(terminal_cost[i], env_T, cost_fns[i])
+        psi = evaluate(terminal_cost[i], env_T, cost_fns[i], shared)
         costs[i] = ca.SX(total[i] + psi)
         if states is not None:
             stage_costs[i].append(ca.SX(psi))

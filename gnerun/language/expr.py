@@ -146,10 +146,11 @@ class Constraint:
     def is_equality(self) -> bool:
         return self.relation == "=="
 
-    def residual(self, env: Mapping[str, Any], functions: Mapping[str, Callable] | None = None) -> Any:
+    def residual(self, env: Mapping[str, Any], functions: Mapping[str, Callable] | None = None,
+                 shared: Shared | None = None) -> Any:
         """g = lhs - rhs for ``<=`` and ``==``, rhs - lhs for ``>=``: feasible iff g <= 0 (or == 0)."""
-        lhs = evaluate(self.lhs, env, functions)
-        rhs = evaluate(self.rhs, env, functions)
+        lhs = evaluate(self.lhs, env, functions, shared)
+        rhs = evaluate(self.rhs, env, functions, shared)
         return rhs - lhs if self.relation == ">=" else lhs - rhs
 
 
@@ -552,22 +553,47 @@ def casadi_functions(domain: list | None = None, smoothing: float = 0.0) -> dict
     }
 
 
-def evaluate(node: Node | Expression, env: Mapping[str, Any], functions: Mapping[str, Callable] | None = None):
+class Shared:
+    """The subexpressions of one environment (a compile's names for a stage) built once: a large subtree written more
+    than once (an aggregate definition spliced into every agent's cost, ``S = sum(x{k} for k in 1..N)``) is evaluated
+    the first time and its value reused, so N costs share one S instead of building N copies of it (the expressions of
+    200 Cournot firms: 40,000 additions -> 200, and their derivatives a graph 200 times smaller). Subtrees are matched
+    by structure (operators, names, numbers); those with a function call (whose evaluation may record where a log or
+    sqrt is defined, or smooth abs, min and max) or a runtime entry are never reused, nor are subtrees of fewer than
+    ``SMALLEST`` nodes, so that the derivatives of a game without large repeated subtrees are the same to the bit."""
+
+    SMALLEST = 64
+
+    def __init__(self) -> None:
+        self.keys: dict[tuple, int] = {}  # a subtree's structure -> its number
+        self.values: dict[int, Any] = {}  # a large subtree's number -> its value
+
+
+def evaluate(node: Node | Expression, env: Mapping[str, Any], functions: Mapping[str, Callable] | None = None,
+             shared: Shared | None = None):
     """Interpret a syntax tree with names bound by ``env``.
 
     Works for any values that support + - * / ** (floats, numpy arrays, CasADi SX/MX). The tree is
-    walked with an explicit stack, so the interpreter's depth does not grow with the expression.
+    walked with an explicit stack, so the interpreter's depth does not grow with the expression. ``shared``: the
+    large subtrees already evaluated in ``env`` (:class:`Shared`), reused by structure.
     """
     if isinstance(node, Expression):
         node = node.tree
     fns = functions if functions is not None else numpy_functions()
-    # Post-order evaluation with an explicit stack: (node, visited) pairs and a value stack.
+    # Post-order evaluation with an explicit stack: (node, visited) pairs and a value stack; with ``shared``, also
+    # each value's structure number (None: not reusable) and its subtree's size
     values: list[Any] = []
+    keys: list[int | None] = []
+    sizes: list[int] = []
+    numbers = shared.keys if shared is not None else None
     stack: list[tuple[Node, bool]] = [(node, False)]
     while stack:
         n, visited = stack.pop()
         if isinstance(n, Num):
             values.append(n.value)
+            if numbers is not None:
+                keys.append(numbers.setdefault(("n", type(n.value).__name__, repr(n.value)), len(numbers)))
+                sizes.append(1)
         elif isinstance(n, Name):
             try:
                 values.append(env[n.id])
@@ -575,6 +601,9 @@ def evaluate(node: Node | Expression, env: Mapping[str, Any], functions: Mapping
                 if n.id not in CONSTANTS:
                     raise KeyError(n.id) from None
                 values.append(CONSTANTS[n.id])
+            if numbers is not None:
+                keys.append(numbers.setdefault(("v", n.id), len(numbers)))
+                sizes.append(1)
         elif not visited:
             stack.append((n, True))
             if isinstance(n, Unary):
@@ -585,27 +614,52 @@ def evaluate(node: Node | Expression, env: Mapping[str, Any], functions: Mapping
             else:  # Call, Index
                 for arg in reversed(children(n)):
                     stack.append((arg, False))
-        elif isinstance(n, Index):
-            k = len(n.indices)
-            where = [_integer_index(v, n) for v in values[len(values) - k:]]
+        elif isinstance(n, Unary | Binary):
+            k = 1 if isinstance(n, Unary) else 2
+            operands = values[len(values) - k:]
             del values[len(values) - k:]
-            try:
-                table = env[n.name + "[]"]
-            except KeyError:
-                raise KeyError(n.name) from None
-            values.append(table.at(where))
-        elif isinstance(n, Unary):
-            v = values.pop()
-            values.append(-v if n.op == "-" else v)
-        elif isinstance(n, Binary):
-            right = values.pop()
-            left = values.pop()
-            values.append(_BINARY[n.op](left, right))
-        else:  # Call
-            args = values[len(values) - len(n.args) :]
-            del values[len(values) - len(n.args) :]
-            values.append(fns[n.function](*args))
+            if numbers is None:
+                values.append(_apply(n, operands))
+                continue
+            parts = keys[len(keys) - k:]
+            size = 1 + sum(sizes[len(sizes) - k:])
+            del keys[len(keys) - k:], sizes[len(sizes) - k:]
+            key = None if None in parts else numbers.setdefault((n.op, *parts), len(numbers))
+            reuse = key is not None and size >= Shared.SMALLEST
+            if reuse and key in shared.values:
+                value = shared.values[key]
+            else:
+                value = _apply(n, operands)
+                if reuse:
+                    shared.values[key] = value
+            values.append(value)
+            keys.append(key)
+            sizes.append(size)
+        else:  # Call, Index: evaluated every time, never reused
+            k = len(n.indices) if isinstance(n, Index) else len(n.args)
+            args = values[len(values) - k:]
+            del values[len(values) - k:]
+            if isinstance(n, Index):
+                where = [_integer_index(v, n) for v in args]
+                try:
+                    table = env[n.name + "[]"]
+                except KeyError:
+                    raise KeyError(n.name) from None
+                values.append(table.at(where))
+            else:
+                values.append(fns[n.function](*args))
+            if numbers is not None:
+                size = 1 + sum(sizes[len(sizes) - k:])
+                del keys[len(keys) - k:], sizes[len(sizes) - k:]
+                keys.append(None)
+                sizes.append(size)
     return values[0]
+
+
+def _apply(n: Unary | Binary, operands: list[Any]) -> Any:
+    if isinstance(n, Unary):
+        return -operands[0] if n.op == "-" else operands[0]
+    return _BINARY[n.op](operands[0], operands[1])
 
 
 def _integer_index(value: Any, node: Index) -> int:
