@@ -88,24 +88,6 @@ def _median_time(fn, repeats: int, inner: int | None = None) -> float:
 # gnerun ------------------------------------------------------------------------------------------
 
 
-def _paired_median_times(fa, fb, repeats: int) -> tuple[float, float]:
-    """Median times of one call of ``fa`` and of ``fb``, their samples (each >= 20 ms, as in :func:`_median_time`)
-    taken in turn, so that a change of the machine's load meets both alike."""
-    inner = []
-    for fn in (fa, fb):
-        t0 = time.perf_counter()
-        fn()  # warm up
-        inner.append(max(1, int(0.02 / max(time.perf_counter() - t0, 1e-7))))
-    samples: tuple[list[float], list[float]] = ([], [])
-    for _ in range(repeats):
-        for fn, n, out in zip((fa, fb), inner, samples, strict=True):
-            t0 = time.perf_counter()
-            for _ in range(n):
-                fn()
-            out.append((time.perf_counter() - t0) / n)
-    return statistics.median(samples[0]), statistics.median(samples[1])
-
-
 def gnerun_solve(cfg, game: CompiledGame):
     """A cold solve from the config's start; returns (iterations, final state)."""
     solver = make_solver(cfg, game)
@@ -659,8 +641,7 @@ def main(argv: list[str] | None = None) -> int:
         it, solve_t, k, res = per_iteration(cfg_T, game_T, reps)
         dense = dense_ssn(game_T, cfg_T.solver.tol)
         zd, kd, resd = dense()
-        # the ratio from samples taken in turn (a shared machine's load changes between two blocks of samples)
-        solve_t, t_dense = _paired_median_times(gnerun_solve(cfg_T, game_T)[1], dense, reps)
+        t_dense = _median_time(dense, reps)
         size = f"{game_T.size} unknowns, {form}"
         if T == 10:
             st = step_time(cfg_T, game_T, reps)
