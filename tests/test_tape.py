@@ -83,6 +83,42 @@ def test_piecewise_outputs_follow_the_decisions() -> None:
     np.testing.assert_array_equal(piecewise_outputs(f), [True, False, False])
 
 
+@pytest.mark.parametrize("config", ["algames_merge.yaml", "nonsmooth"])
+def test_an_agents_kinks_are_those_of_its_whole_cost_and_rows(config: str) -> None:
+    # the agent's kink function walks only its parts that pass through a piecewise function: the same functions, the
+    # same distances as walking its whole cost and every row (the merge: a min in each car's ramp rows; a game with
+    # abs and max in its costs and rows)
+    from .conftest import CONFIGS
+
+    text = (CONFIGS / config).read_text() if config.endswith(".yaml") else """
+game:
+  kind: static
+  agents:
+    - name: p1
+      variables: {x1: {lower: -3, upper: 3, start: 0.5}}
+      cost: "abs(x1 - x2) + x1**2"
+      constraints: ["max(x1, x2) <= 2", "x1 + x2 <= 4"]
+    - name: p2
+      variables: {x2: {lower: -3, upper: 3, start: 0}}
+      cost: "(x2 - 1)**2 + 0.5*x1*x2"
+"""
+    game = compile_game(load_config(text=text))
+    sym = game._symbolic
+    rng = np.random.default_rng(2)
+    for agent in range(len(game.agent_names)):
+        rows = game.agents.constraint_rows(agent).tolist()
+        whole = kink_function(ca.Function("parts", [sym.a, sym.x], [ca.vertcat(sym.J[agent], sym.c[rows])]))
+        found = game.agents.kinks(agent)
+        assert (whole is None) == (found is None)
+        if whole is None:
+            continue
+        assert sorted(found[1]) == sorted(whole[1])
+        for _ in range(3):
+            a, x = game.a_start + rng.standard_normal(game.n), game._x(game.x0 if game.nx else None)
+            np.testing.assert_array_equal(np.sort(np.asarray(found[0](a, x)).ravel()),
+                                          np.sort(np.asarray(whole[0](a, x)).ravel()))
+
+
 def test_mx_functions_are_refused() -> None:
     x = ca.MX.sym("x")
     with pytest.raises(UnsupportedTape):

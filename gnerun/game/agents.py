@@ -67,13 +67,16 @@ class AgentFunctions:
     def kinks(self, agent: int) -> tuple[ca.Function, list[str]] | None:
         """The distances from their kinks of the piecewise functions of the decisions in agent ``agent``'s cost and
         rows, as one Function of (a, x), and the functions' names (gnerun.game.tape.kink_function); None if none.
-        Built once per agent."""
+        Built once per agent, from the parts that pass through such a function (``piecewise_parts``): they hold
+        every one of them, and the rest of the graph is not walked (a merge car's cost: 50-60 -> 17-23 ms)."""
         cache = self.game.derived.setdefault("kinks", {})
         if agent not in cache:
             sym = self.game._symbolic
-            rows = self.constraint_rows(agent).tolist()
-            parts = ca.vertcat(sym.J[agent], sym.c[rows]) if rows else sym.J[agent]
-            cache[agent] = kink_function(ca.Function("parts", [sym.a, sym.x], [parts]))
+            costs, pieces = self.game.lq.piecewise_parts
+            rows = [r for r in self.constraint_rows(agent).tolist() if pieces[r]]
+            parts = ([sym.J[agent]] if costs[agent] else []) + ([sym.c[rows]] if rows else [])
+            cache[agent] = (kink_function(ca.Function("parts", [sym.a, sym.x], [ca.vertcat(*parts)])) if parts
+                            else None)
         return cache[agent]
 
     def own_problem(self, agent: int, a: np.ndarray,
