@@ -864,14 +864,17 @@ def compile_agent_problem(cfg: Config, agent: int, tau: float) -> CompiledGame:
                      lay=own_lay, equilibrium="generalized", n_shared=0, state_names=[], dynamics=None)
 
 
-def agent_problem(game: CompiledGame, agent: int, tau: float) -> CompiledGame:
+def agent_problem(game: CompiledGame, agent: int, tau: float, cfg: Config | None = None) -> CompiledGame:
     """:func:`compile_agent_problem` built from the game's own expressions instead of its config: agent ``agent``'s
     cost and the rows it carries are the game's (the same expressions, so the same values), with its decisions as
     the variables and p = (x, abar_-i, abar_i) as the parameters; nothing is parsed, evaluated or condensed again
     (0.1-0.2 s per agent of a trajectory game). The rows come in the order that function gives them: stage by stage,
-    the agent's own rows, then the shared rows it carries. ``game`` must be compiled without smoothing."""
+    the agent's own rows, then the shared rows it carries. A smoothed game's expressions are not the player's: its
+    problem is compiled from ``cfg`` (the game as written), and without ``cfg`` that is an error."""
     if game.smoothing:
-        raise ValueError("an agent's problem is built from the game as written (smoothing 0)")
+        if cfg is None:
+            raise ValueError("an agent's problem is built from the game as written (smoothing 0)")
+        return compile_agent_problem(cfg, agent, tau)
     sym = game._symbolic
     a, xs = sym.a, sym.x
     sl = game.agent_slices[agent]

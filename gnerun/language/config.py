@@ -456,8 +456,9 @@ class Config(Strict):
             data["game"]["runtime"][name]["file"] = file
         return dump_yaml(data)
 
-    def config_hash(self) -> str:
-        return hashlib.sha256(self.resolved_yaml().encode()).hexdigest()
+    def config_hash(self, resolved: str | None = None) -> str:
+        """sha256 of :meth:`resolved_yaml` (``resolved``: that text, where the caller has it already)."""
+        return hashlib.sha256((self.resolved_yaml() if resolved is None else resolved).encode()).hexdigest()
 
 
 # ---------------------------------------------------------------------------------------------

@@ -43,6 +43,7 @@ from .interrupt import Interrupt, Stopped
 from .reference import ReferenceSolver
 from .rundir import RunDirectory, ended_by, recording
 from .safeguard import Fallback, PaperRule
+from .solving import own_reference
 
 
 @dataclass
@@ -425,7 +426,7 @@ class ClosedLoop:
         self.z_star_prev = game.z_start()  # z*(t-1), a start of the z*(t) solve
         # a converged iterate of the loop is the reference's own where the loop's solver is the reference's method,
         # undisturbed (a distributed loop is measured against centralised SSN: always solved again)
-        self.own_reference = cfg.disturbance.kind == "none" and cfg.solver.kind != "distributed"
+        self.own_reference = own_reference(cfg)
         self.rng = None  # the solver's random state, from one sampling time to the next
 
     def _iterate(self, state, budget: int, seen: list | None = None, solver=None) -> tuple[object, list, float]:

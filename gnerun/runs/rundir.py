@@ -5,7 +5,6 @@ from __future__ import annotations
 import contextlib
 import datetime as dt
 import functools
-import hashlib
 import json
 import math
 import shutil
@@ -142,8 +141,7 @@ class RunDirectory:
             write_text(path / "config.yaml", config_yaml)
             metadata = {
                 "version": __version__,
-                "config_hash": (cfg.config_hash() if copies else  # the same text as config.yaml's: hashed as it is
-                                hashlib.sha256(config_yaml.encode()).hexdigest()),
+                "config_hash": cfg.config_hash(None if copies else config_yaml),  # config.yaml's text, as written
                 "seed": str(cfg.disturbance.seed),
                 "git_describe": git_describe(),
                 "command": command,

@@ -79,6 +79,12 @@ def reference_solution(game: CompiledGame, cfg: Config, z0: np.ndarray, x: np.nd
     return Reference(last.z, last.status, last.residual_norm, last.k, last.message)
 
 
+def own_reference(cfg: Config) -> bool:
+    """Whether the configured method is the reference's, undisturbed (no solver-side disturbance; a distributed run is
+    measured against centralised SSN): its converged iterate, polished, is z* itself."""
+    return cfg.disturbance.kind == "none" and cfg.solver.kind != "distributed"
+
+
 def polished(solver: Solver, state: SSNState, polish: int = 3) -> Reference:
     """z* from ``solver``'s converged ``state``: up to ``polish`` further Newton steps while ||Phi|| keeps
     decreasing (accurate to rounding, not just to ``solver.tol``)."""
@@ -504,7 +510,7 @@ def _solve(cfg: Config, game: CompiledGame, solver: Solver, run: RunDirectory | 
     responses = NewtonResponses(cfg, game, interrupt.check)  # a stop request is honoured between two steps
     # undisturbed, with the configured method, the solve is the reference solve itself (the same solver from the same
     # start): it runs once, and its iterates are recorded when its end, polished, gives z*
-    once = exact and cfg.disturbance.kind == "none" and cfg.solver.kind != "distributed"
+    once = exact and own_reference(cfg)
     early: list[SSNState] = []  # the solve's iterates before z* is known (once)
     first, first_time = None, 0.0
     try:

@@ -240,16 +240,13 @@ class NewtonResponses:
     def _build(self, agent: int, opts, full):
         """(the agent's problem, its globalized solver, the game's rows in the problem's order); ``full``: the game's
         sparse system, where the game was solved in the sparse formulation."""
-        from ..game.compile import agent_problem, compile_agent_problem
+        from ..game.compile import agent_problem
         from .globalization import globalized
         from .ssn import SemismoothNewton
 
         built = self.game.derived.setdefault("agent_problems", {})  # once per game (a sweep's points share it)
         if agent not in built:
-            # from the game's own expressions (the same problem, 5-10x faster to build); a smoothed game's are not
-            # the player's, which the certificate checks: those are built from the config
-            built[agent] = (compile_agent_problem(self.cfg, agent, 0.0) if self.game.smoothing
-                            else agent_problem(self.game, agent, 0.0))
+            built[agent] = agent_problem(self.game, agent, 0.0, self.cfg)  # from the game's own expressions
         problem = built[agent]
         # the candidate's multipliers in the agent problem's row order (matched by label: the game lists an
         # agent's own rows, then the common shared rows; the agent's problem, stage by stage)

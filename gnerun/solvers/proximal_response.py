@@ -22,7 +22,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..errors import InputError
-from ..game.compile import CompiledGame, agent_problem, compile_agent_problem
+from ..game.compile import CompiledGame, agent_problem
 from ..language.config import Config, SolverConfig
 from .driver import Solver, iterate
 from .globalization import globalized
@@ -54,7 +54,7 @@ def make_agents(cfg: Config, game: CompiledGame) -> list[Agent]:
                                  "tol": opts.tol / 100})
     agents = []
     for i, name in enumerate(game.agent_names):
-        problem = compile_agent_problem(cfg, i, opts.tau) if game.smoothing else agent_problem(game, i, opts.tau)
+        problem = agent_problem(game, i, opts.tau, cfg)
         if opts.inner == "jn":
             inner: Solver = JosephyNewton(problem, inner_opts)
         else:
