@@ -149,6 +149,29 @@ def test_local_and_dask_executors_write_identical_indexes(tmp_path: Path) -> Non
     assert local.executor == "local" and remote.executor == "dask"
 
 
+@pytest.mark.slow
+def test_a_dask_sweep_beside_another_cluster_prints_nothing_of_its_ports(tmp_path: Path) -> None:
+    """Port 8787 (a Dask dashboard's default) held by another program: the sweep's LocalCluster, which has no
+    dashboard, takes a free port for its HTTP server without a warning on stderr."""
+    pytest.importorskip("distributed")
+    import socket
+
+    holder = socket.socket()
+    try:
+        holder.bind(("0.0.0.0", 8787))
+        holder.listen()
+    except OSError:
+        pass  # already held by something else: the case under test
+    try:
+        proc = run_cli("sweep", str(_spec(tmp_path)), "--out", str(tmp_path / "out"), "--workers", "2", "--executor",
+                       "dask", "-q", timeout=300)
+    finally:
+        holder.close()
+    assert proc.returncode == 0, proc.stderr
+    assert "in use" not in proc.stderr and "Warning" not in proc.stderr, proc.stderr
+    assert len(read_index(tmp_path / "out")) == 6
+
+
 def _csv_without_timings(d: Path) -> list[list[str]]:
     with (d / "index.csv").open() as f:
         rows = list(csv.reader(f))
