@@ -10,6 +10,7 @@ from gnerun.solvers.unbounded import (
     descending_ray,
     flat_directions,
     free_directions,
+    no_descent,
     ray_points,
     recession_direction,
 )
@@ -69,3 +70,36 @@ def test_flat_and_recession_directions() -> None:
     d = recession_direction(np.array([-0.9, -1.0]), np.array([[1.0, 2.0], [-1.0, 1.0]]), np.zeros(2, dtype=bool))
     assert d is not None and d @ np.array([-0.9, -1.0]) < 0 and d @ np.array([1.0, 2.0]) <= 1e-12
     assert recession_direction(np.array([1.0, 1.0]), -np.eye(2), np.zeros(2, dtype=bool)) is None  # y >= 0, cost up
+
+
+def test_multipliers_spare_the_linear_program_only_where_it_finds_no_descent() -> None:
+    """Random cones in 6 dimensions, 2-9 rows (some equalities): where a gradient is balanced by nonnegative
+    multipliers of its rows (a KKT point, up to 1e-14 or 1e-11), :func:`no_descent` proves what the linear program
+    finds (no direction); where it is not (a multiplier negative, or a part of the gradient no row balances), the
+    proof is not claimed and the linear program runs. Every claim is checked against the linear program."""
+    rng = np.random.default_rng(7)
+    claimed = unbalanced = 0
+    for trial in range(300):
+        n, m = 6, int(rng.integers(2, 10))
+        C = rng.standard_normal((m, n))
+        eq = rng.random(m) < 0.2
+        lam = np.where(rng.random(m) < 0.6, rng.random(m) * 3.0, 0.0)
+        kind = trial % 3
+        if kind == 2:  # a multiplier of an inequality negative: the cone does not hold -g
+            lam[np.flatnonzero(~eq)[:1]] = -1.0
+        g = -C.T @ lam
+        if kind == 1:
+            g = g + rng.standard_normal(n)  # a part no row balances (when m < n, a true descent)
+        noisy = g + rng.standard_normal(n) * (1e-14 if trial % 2 else 1e-11)
+        floor = 1e-12 * max(1.0, float(np.max(np.abs(noisy))))
+        given = lam + rng.standard_normal(m) * 1e-12 * (rng.random(m) < 0.5)
+        lp = recession_direction(noisy, C, eq)
+        if no_descent(noisy, C, eq, given, floor):
+            claimed += 1
+            assert lp is None, (trial, noisy @ lp)
+            assert recession_direction(noisy, C, eq, given) is None
+        elif lp is not None:
+            unbalanced += 1
+            d = recession_direction(noisy, C, eq, given)
+            assert d is not None and np.allclose(d, lp)
+    assert claimed >= 60 and unbalanced >= 60, (claimed, unbalanced)
