@@ -393,7 +393,10 @@ def factorization_rows(row, quick: bool) -> None:
             target="ratio >= 1", met=c.banded_s <= c.superlu_s,
             note=f"n = {c.size}, kl = {c.lower}, ku = {c.upper}; LU alone {us(c.lu_banded_s)} vs "
                  f"{us(c.lu_superlu_s)}; limit {us(limit)} ({c.flops / 1e6:.2f} MFLOP); solutions agree to "
-                 f"{c.difference:.0e} (relative), condition estimates to a factor {c.rcond_ratio:.2f}")
+                 f"{c.difference:.0e} (relative), condition estimates to a factor {c.rcond_ratio:.2f}"
+                 + (f" (on the {c.singular} numerically singular matrices of the sample, rcond below min_rcond, which "
+                    "the solver refuses, they are not compared)" if c.singular else "")
+                 + f"; backward errors at most {c.backward:.0e}")
     for label, problems, limit in (
             ("ALGAMES merge", trajectory.merge_problems(3 if quick else 10), limits["ALGAMES merge, 21 knots"]),
             ("ALGAMES intersection", trajectory.intersection_problems(2 if quick else 5),

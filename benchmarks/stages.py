@@ -11,6 +11,7 @@ same run.
 
 from __future__ import annotations
 
+import math
 import os
 import statistics
 import sys
@@ -111,10 +112,12 @@ class Comparison:
     superlu_s: float  # the same by SuperLU
     lu_banded_s: float  # the LU alone (dgbtrf)
     lu_superlu_s: float  # the LU alone (splu)
-    difference: float  # largest relative difference of the two solutions
-    rcond_ratio: float  # largest ratio of the two condition estimates (max / min)
+    difference: float  # largest relative difference of the two solutions (matrices the solver would use)
+    rcond_ratio: float  # largest ratio of the two condition estimates (max / min; the same matrices)
     matrices: int
     iterations: int
+    singular: int = 0  # matrices of the sample whose condition estimate is below min_rcond (the solver refuses them)
+    backward: float = 0.0  # largest backward error of either solution, ||M x - b|| / (||M|| ||x|| + ||b||), all
 
     @property
     def flops(self) -> float:
@@ -122,13 +125,20 @@ class Comparison:
 
 
 def compare(case: Case, repeats: int = 5, sample: int = 12) -> Comparison:
-    """Both factorisations of up to ``sample`` of the recorded matrices (evenly spaced), timed on the same ones."""
+    """Both factorisations of up to ``sample`` of the recorded matrices (evenly spaced), timed on the same ones. The
+    two solutions are compared where the solver would use them (a condition estimate of at least the default
+    ``solver.min_rcond``): on a numerically singular matrix any two backward-stable solutions may differ without
+    bound, so there each one's backward error is what is checked."""
     from scipy.sparse import linalg as spla
 
+    from gnerun.language.config import SolverConfig
+
+    min_rcond = SolverConfig().min_rcond
     system, seen, iterations = record(case)
     order = system.stage_order
     picked = [seen[i] for i in np.unique(np.linspace(0, len(seen) - 1, min(sample, len(seen))).astype(int))]
     banded, superlu, lu_b, lu_s, diffs, rconds, sizes = [], [], [], [], [], [], []
+    singular, backward = 0, 0.0
     rng = np.random.default_rng(0)
     for _, data, keep, at, add, eliminate in picked:  # the matrices as factorised (the interior's: eliminated)
         band = KeptLayout(order, keep, at, banded=True, eliminate=eliminate)
@@ -142,8 +152,15 @@ def compare(case: Case, repeats: int = 5, sample: int = 12) -> Comparison:
             continue
         b = rng.standard_normal(keep.size)
         x1, x2 = lu1.solve(b), lu2.solve(b)
-        diffs.append(float(np.abs(x1 - x2).max() / max(np.abs(x2).max(), 1e-300)))
-        rconds.append(max(r1, r2) / max(min(r1, r2), 1e-300))
+        M = KeptLayout(order, keep, at, banded=False).csc(data, add)  # the matrix itself (before any elimination)
+        norm = float(abs(M).sum(axis=0).max())
+        for x in (x1, x2):
+            backward = max(backward, float(np.abs(M @ x - b).max() / (norm * np.abs(x).max() + np.abs(b).max())))
+        if min(r1, r2) < min_rcond:
+            singular += 1
+        else:
+            diffs.append(float(np.abs(x1 - x2).max() / max(np.abs(x2).max(), 1e-300)))
+            rconds.append(max(r1, r2) / max(min(r1, r2), 1e-300))
         ab, M = band.band(data, add), csc.csc(data, add)
         banded.append(_time(band.factor, repeats, data, add))
         superlu.append(_time(lambda o, c, d, a: o.factor(c.csc(d, a)), repeats, ordering, csc, data, add))
@@ -152,23 +169,24 @@ def compare(case: Case, repeats: int = 5, sample: int = 12) -> Comparison:
         sizes.append((band.size, band.lower, band.upper))
     size, lower, upper = max(sizes)
     return Comparison(case.name, size, lower, upper, statistics.median(banded), statistics.median(superlu),
-                      statistics.median(lu_b), statistics.median(lu_s), max(diffs), max(rconds), len(seen),
-                      iterations)
+                      statistics.median(lu_b), statistics.median(lu_s), max(diffs, default=math.nan),
+                      max(rconds, default=math.nan), len(seen), iterations, singular, backward)
 
 
 def main(argv: list[str] | None = None) -> int:
     quick = "--quick" in (argv or [])
     gflops = dense_gflops()
     print(f"dense 39 x 39 LU: {gflops:.2f} GFLOP/s")
-    print("| case | n | kl, ku | banded | SuperLU | ratio | LU alone: banded, SuperLU | limit | difference | rcond |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
+    print("| case | n | kl, ku | banded | SuperLU | ratio | LU alone: banded, SuperLU | limit | difference | rcond | "
+          "singular | backward error |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     for case in cases(quick):
         c = compare(case)
         limit = c.flops / (gflops * 1e9)
         print(f"| {c.name} | {c.size} | {c.lower}, {c.upper} | {c.banded_s * 1e6:.0f} us | "
               f"{c.superlu_s * 1e6:.0f} us | {c.superlu_s / c.banded_s:.2f} | "
               f"{c.lu_banded_s * 1e6:.0f}, {c.lu_superlu_s * 1e6:.0f} us | {limit * 1e6:.0f} us | "
-              f"{c.difference:.1e} | {c.rcond_ratio:.2f} |", flush=True)
+              f"{c.difference:.1e} | {c.rcond_ratio:.2f} | {c.singular} | {c.backward:.0e} |", flush=True)
     return 0
 
 
