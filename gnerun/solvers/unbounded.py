@@ -142,7 +142,8 @@ def no_descent(gradient: np.ndarray, C: np.ndarray, equality: np.ndarray, multip
     for -g = C_I' mu + C_E' nu + r with mu >= 0, every such d has g . d = -mu' C_I d - nu' C_E d + r . d >= -|r|_1.
 
     Tried with the given multipliers (those of inequalities clipped at 0), then refitted by least squares on the rows
-    they use (at a KKT point solved to 1e-10 the given ones leave |r|_1 ~ 1e-11, above a floor of ~1e-12)."""
+    they use and clipped again (at a KKT point solved to 1e-10 the given ones leave |r|_1 ~ 1e-11, above a floor of
+    ~1e-12)."""
     if C.size == 0 or not np.all(np.isfinite(multipliers)):
         return False
     lam = np.where(equality, multipliers, np.maximum(multipliers, 0.0))
@@ -152,8 +153,7 @@ def no_descent(gradient: np.ndarray, C: np.ndarray, equality: np.ndarray, multip
     if not used.any():
         return False
     mu = np.linalg.lstsq(C[used].T, -gradient, rcond=None)[0]
-    if np.any(mu[~equality[used]] < 0.0):
-        return False
+    mu = np.where(equality[used], mu, np.maximum(mu, 0.0))  # any mu >= 0 proves it: the residual is checked as is
     return float(np.sum(np.abs(gradient + C[used].T @ mu))) <= floor
 
 
