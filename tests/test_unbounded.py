@@ -4,6 +4,7 @@ what does not."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from gnerun.solvers.unbounded import (
     STEPS,
@@ -11,6 +12,7 @@ from gnerun.solvers.unbounded import (
     flat_directions,
     free_directions,
     no_descent,
+    nonnegative_least_squares,
     ray_points,
     recession_direction,
 )
@@ -103,3 +105,36 @@ def test_multipliers_spare_the_linear_program_only_where_it_finds_no_descent() -
             d = recession_direction(noisy, C, eq, given)
             assert d is not None and np.allclose(d, lp)
     assert claimed >= 60 and unbalanced >= 60, (claimed, unbalanced)
+
+
+def test_nonnegative_least_squares_agrees_with_scipys() -> None:
+    """Lawson-Hanson against scipy.optimize.nnls on 200 random problems (tall, wide and square, with and without an
+    exact nonnegative solution): the same residual norm to 1e-10 (relative), x >= 0, and the optimality conditions
+    (the gradient A'(b - Ax) is <= 0 where x = 0 and 0 where x > 0, to 1e-9 of its scale)."""
+    from scipy.optimize import nnls
+
+    rng = np.random.default_rng(11)
+    for trial in range(200):
+        m, n = int(rng.integers(2, 30)), int(rng.integers(1, 60))
+        A = rng.standard_normal((m, n))
+        b = A @ np.maximum(rng.standard_normal(n), 0.0) if trial % 2 else rng.standard_normal(m)
+        x = nonnegative_least_squares(A, b)
+        ref, rnorm = nnls(A, b, maxiter=50 * n)
+        assert np.all(x >= 0.0)
+        assert np.linalg.norm(A @ x - b) == pytest.approx(rnorm, rel=1e-10, abs=1e-10 * max(1.0, np.linalg.norm(b)))
+        grad = A.T @ (b - A @ x)
+        scale = 1e-9 * max(1.0, float(np.abs(A).sum() * np.abs(b).max()))
+        assert np.all(grad[x == 0.0] <= scale) and np.all(np.abs(grad[x > 0.0]) <= scale), trial
+
+
+def test_the_multipliers_of_every_row_can_prove_it() -> None:
+    """A cone whose rows in use (positive multipliers) leave a part of g unbalanced, which the other rows' span
+    holds: the given multipliers and their least-squares refit do not prove that nothing descends, nonnegative least
+    squares over every row does, as the linear program agrees."""
+    C = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [-1.0, -1.0, -1.0]])
+    eq = np.zeros(4, dtype=bool)
+    g = -C.T @ np.array([2.0, 0.0, 0.0, 0.0]) - C.T @ np.array([0.0, 0.0, 0.0, 1e-6])  # row 4 holds a little
+    given = np.array([2.0, 0.0, 0.0, 0.0])  # the part along row 4 is not in row 1's span
+    floor = 1e-12 * max(1.0, float(np.max(np.abs(g))))
+    assert recession_direction(g, C, eq) is None  # the linear program: the cone is {0}
+    assert no_descent(g, C, eq, given, floor)

@@ -142,19 +142,59 @@ def no_descent(gradient: np.ndarray, C: np.ndarray, equality: np.ndarray, multip
     for -g = C_I' mu + C_E' nu + r with mu >= 0, every such d has g . d = -mu' C_I d - nu' C_E d + r . d >= -|r|_1.
 
     Tried with the given multipliers (those of inequalities clipped at 0), then refitted by least squares on the rows
-    they use and clipped again (at a KKT point solved to 1e-10 the given ones leave |r|_1 ~ 1e-11, above a floor of
-    ~1e-12)."""
-    if C.size == 0 or not np.all(np.isfinite(multipliers)):
+    they use and clipped again, then by nonnegative least squares on every row (:func:`nonnegative_least_squares`; at
+    a KKT point solved to 1e-10 the given ones leave |r|_1 ~ 1e-11, above a floor of ~1e-12, and the part of g that
+    the rows in use do not span, ~1e-12, is balanced by the others). Whatever the fit, the residual it leaves is what
+    is checked: a poor fit sends the question to the linear program, never to a wrong answer."""
+    if C.size == 0 or not np.all(np.isfinite(multipliers)) or not np.all(np.isfinite(C)):
         return False
     lam = np.where(equality, multipliers, np.maximum(multipliers, 0.0))
     if float(np.sum(np.abs(gradient + C.T @ lam))) <= floor:
         return True
     used = equality | (lam > 0.0)
-    if not used.any():
-        return False
-    mu = np.linalg.lstsq(C[used].T, -gradient, rcond=None)[0]
-    mu = np.where(equality[used], mu, np.maximum(mu, 0.0))  # any mu >= 0 proves it: the residual is checked as is
-    return float(np.sum(np.abs(gradient + C[used].T @ mu))) <= floor
+    if used.any():
+        mu = np.linalg.lstsq(C[used].T, -gradient, rcond=None)[0]
+        mu = np.where(equality[used], mu, np.maximum(mu, 0.0))  # any mu >= 0 proves it: the residual is checked
+        if float(np.sum(np.abs(gradient + C[used].T @ mu))) <= floor:
+            return True
+    # every row: the equalities' multipliers free, as the difference of two nonnegative ones
+    A = np.vstack([C[~equality], C[equality], -C[equality]]).T
+    mu = nonnegative_least_squares(A, -gradient)
+    return float(np.sum(np.abs(gradient + A @ mu))) <= floor
+
+
+def nonnegative_least_squares(A: np.ndarray, b: np.ndarray, max_iter: int | None = None) -> np.ndarray:
+    """x >= 0 minimising ||A x - b||_2: the active-set method of Lawson and Hanson (Solving Least Squares Problems,
+    1974, ch. 23), as scipy.optimize.nnls does it (which a certificate would otherwise import for this alone, 0.1-0.2 s
+    of a fresh process). Each outer step frees the variable whose gradient says it lowers the residual most; an inner
+    loop steps back along the segment to the unconstrained least-squares point of the free ones until they are all
+    positive."""
+    m, n = A.shape
+    x = np.zeros(n)
+    free = np.zeros(n, dtype=bool)
+    tol = 10.0 * np.finfo(float).eps * max(m, n) * max(1.0, float(np.abs(A).sum(axis=0).max(initial=0.0)))
+    budget = 3 * n if max_iter is None else max_iter
+    for _ in range(budget):
+        w = A.T @ (b - A @ x)
+        w[free] = -np.inf
+        j = int(np.argmax(w))
+        if not w[j] > tol:
+            break
+        free[j] = True
+        while True:
+            s = np.zeros(n)
+            s[free] = np.linalg.lstsq(A[:, free], b, rcond=None)[0]
+            if np.all(s[free] > 0.0):
+                x = s
+                break
+            blocked = free & (s <= 0.0)
+            alpha = float(np.min(x[blocked] / (x[blocked] - s[blocked])))
+            x = x + alpha * (s - x)
+            free &= x > tol
+            x[~free] = 0.0
+            if not free.any():
+                break
+    return x
 
 
 def _admissible(d: np.ndarray, up: np.ndarray, down: np.ndarray) -> bool:
