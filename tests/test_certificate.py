@@ -663,3 +663,30 @@ def test_the_recession_cone_reads_the_players_own_row_jacobian(config: str) -> N
         assert np.abs(own - ref).max() <= 1e-14 * max(1.0, float(np.abs(ref).max()))
         found += 1
     assert found or config == "algames_merge.yaml"
+
+
+@pytest.mark.parametrize("config", ["formation_ring.yaml", "fk_a01.yaml", "variational_gne.yaml",
+                                    "moving_obstacle.yaml", "paper_study3.yaml"])
+def test_a_players_derivatives_taken_from_the_games_are_its_own(config: str) -> None:
+    """A player's own problem given its dense derivatives as blocks of the game's (what the certificate's local
+    solves use): L, c, dL/dz and dc/da at random points and multipliers equal those it builds by differentiating its
+    own stationarity and rows, to rounding; and nothing is given where the game has not built its derivatives."""
+    from gnerun.game.compile import agent_problem, derivatives_from_game
+
+    cfg = load_config(CONFIGS / config)
+    game = compile_game(cfg)
+    assert not derivatives_from_game(agent_problem(game, 0, 0.0, cfg), game, 0)  # not built yet: not given
+    game.kkt_parts(game.z_start())  # the game's derivatives built
+    rng = np.random.default_rng(5)
+    for agent in range(len(game.agent_names)):
+        own, given = agent_problem(game, agent, 0.0, cfg), agent_problem(game, agent, 0.0, cfg)
+        assert derivatives_from_game(given, game, agent)
+        sl = game.agent_slices[agent]
+        for _ in range(3):
+            a = game.a_start + 0.3 * rng.standard_normal(game.n)
+            z = np.concatenate([a[sl], np.abs(rng.standard_normal(own.m))])
+            p = np.concatenate([game._x(None), a[: sl.start], a[sl.stop:], a[sl]])
+            for u, v in zip(own.kkt_parts(z, p), given.kkt_parts(z, p), strict=True):
+                u, v = np.asarray(u), np.asarray(v)
+                assert u.shape == v.shape
+                assert np.abs(u - v).max(initial=0.0) <= 1e-14 * max(1.0, float(np.abs(u).max(initial=0.0)))

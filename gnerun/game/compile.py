@@ -121,9 +121,15 @@ class CompiledGame:
     @stoppable
     def _derivatives(self) -> dict:
         sym = self._symbolic
+        dL = ca.jacobian(sym.L, ca.vertcat(sym.a, sym.lam))
+        dc = ca.jacobian(sym.c, sym.a) if self.m else ca.SX(0, self.n)
+        return self._derivative_functions(dL, dc)
+
+    def _derivative_functions(self, dL: ca.SX, dc: ca.SX) -> dict:
+        """What ``_derivatives`` holds, from the expressions dL/dz and dc/da (kept as ``expressions``: a player's
+        own problem takes its blocks, :func:`derivatives_from_game`)."""
+        sym = self._symbolic
         a, lam, x, L, c = sym.a, sym.lam, sym.x, sym.L, sym.c
-        dL = ca.jacobian(L, ca.vertcat(a, lam))
-        dc = ca.jacobian(c, a) if self.m else ca.SX(0, self.n)
         # abs, min, max of the decisions have a zero second derivative almost everywhere, and are not affine
         affine = derivatives_affine(sym, dL, dc) and not self.lq.piecewise
         kkt = ca.Function("kkt", [a, lam, x], [ca.densify(L), ca.densify(c), dL, dc], ["a", "lam", "x"],
@@ -131,7 +137,7 @@ class CompiledGame:
         # [L; c] at z = 0 as a function of the state: for LQ dynamic games it is affine in x as well
         offsets = offset_map(sym, self.n, self.m) if affine else None
         return {"kkt": DenseOutputs(kkt), "sparsity": (dL.sparsity(), dc.sparsity()), "affine": affine,
-                "offset_map": offsets}
+                "offset_map": offsets, "expressions": (dL, dc)}
 
     @property
     def _kkt(self) -> Evaluator:
@@ -896,6 +902,35 @@ def agent_problem(game: CompiledGame, agent: int, tau: float, cfg: Config | None
     own_lay = _Layout([game.variable_names[agent]], [slice(0, ni)], ni, game.nx + p0.size + game.n, None,
                       game.a_start[sl].copy(), np.concatenate([game.x0, p0, np.zeros(game.n)]),
                       game.a_lower[sl].copy(), game.a_upper[sl].copy())
-    return _assemble(kind="static", a=ai, x=ca.vertcat(xs, others, centre), costs=[cost], own_rows=[own],
-                     shared_common=[], agent_names=[game.agent_names[agent]], lay=own_lay,
-                     equilibrium="generalized", n_shared=0, state_names=[], dynamics=None)
+    problem = _assemble(kind="static", a=ai, x=ca.vertcat(xs, others, centre), costs=[cost], own_rows=[own],
+                        shared_common=[], agent_names=[game.agent_names[agent]], lay=own_lay,
+                        equilibrium="generalized", n_shared=0, state_names=[], dynamics=None)
+    problem.derived["game_rows"] = np.array(rows, dtype=int)  # its row j is the game's row game_rows[j]
+    return problem
+
+
+@stoppable
+def derivatives_from_game(problem: CompiledGame, game: CompiledGame, agent: int) -> bool:
+    """Give agent ``agent``'s own problem (:func:`agent_problem` at weight 0: its row j is the game's row
+    ``problem.derived["game_rows"][j]``) its dense derivatives as blocks of the game's, where the game has built
+    them: its rows of dL/dz at
+    its decisions and its rows' multipliers, and its rows of dc/da at its decisions, the game's multipliers of those
+    rows replaced by the problem's own. The same expressions as differentiating the player's stationarity and rows
+    in its own unknowns, without differentiating again (a robot of the 6-robot formation: 25 -> 6 ms); the values
+    agree to rounding (the last bit where CasADi's two derivatives order their operations differently). Returns
+    whether it did (not where the game's derivatives are not built, or the blocks depend on anything else)."""
+    built = game.__dict__.get("_derivatives")
+    rows = problem.derived.get("game_rows")
+    if built is None or rows is None or game.smoothing or "_derivatives" in problem.__dict__:
+        return False
+    dL, dc = built["expressions"]
+    sl = game.agent_slices[agent]
+    own = list(range(sl.start, sl.stop))
+    rows = [int(r) for r in rows]
+    sym = problem._symbolic
+    dL_i = ca.substitute(dL[own, own + [game.n + r for r in rows]], game._symbolic.lam[rows], sym.lam)
+    dc_i = dc[rows, own] if rows else ca.SX(0, len(own))
+    if ca.depends_on(ca.vec(ca.vertcat(ca.vec(dL_i), ca.vec(dc_i))), game._symbolic.lam):
+        return False  # another player's multipliers in its block: not this problem's derivatives
+    problem.__dict__["_derivatives"] = problem._derivative_functions(dL_i, dc_i)
+    return True

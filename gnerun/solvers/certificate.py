@@ -281,6 +281,9 @@ class NewtonResponses:
             newton = SparseSemismoothNewton(problem, opts.model_copy(update={"formulation": "sparse"}), None,
                                             system)
         else:
+            from ..game.compile import derivatives_from_game
+
+            derivatives_from_game(problem, self.game, agent)  # blocks of the game's, where the game has them
             newton = SemismoothNewton(problem, opts)
         return problem, globalized(newton), order
 
