@@ -354,15 +354,33 @@ def test_a_restart_that_would_repeat_an_earlier_one_is_not_run(monkeypatch: pyte
         return solver.init(first.z, x, rng)
 
     monkeypatch.setattr(solver, "restart", back)
+    from gnerun.solvers import certificate as certificates
+
+    computed = []
+    original = certificates.certificate
+
+    def counted(game, z, *args, **kwargs):
+        computed.append(z.copy())
+        return original(game, z, *args, **kwargs)
+
+    monkeypatch.setattr(certificates, "certificate", counted)
     notes: list[str] = []
     out = solving.certified_solve(game, solver, first, note=notes.append)
     assert out.status == "not_an_equilibrium"
     if noisy:
         assert out.restarts == solving.CERTIFY_RESTARTS and out.repeats is None
+        assert len(computed) == solving.CERTIFY_RESTARTS + 1  # every KKT point certified anew
         return
     assert out.restarts == len(starts) == 1 and out.repeats == 1
     assert "another would have started where restart 1 did" in out.message
     assert "no restart again" in notes[-1]
+    # the restart ended at the KKT point of the first certificate: the agent that could improve is checked again,
+    # the other's check stands as the first certificate made it
+    assert len(computed) == 2 and any("ended at the KKT point of the last certificate" in n for n in notes)
+    fresh = original(game, out.state.z)
+    assert out.certificate["best_response_gap"] == fresh["best_response_gap"]
+    assert out.certificate["best_response_kind"] == fresh["best_response_kind"]
+    assert out.certificate["kkt_residual"] == fresh["kkt_residual"]
 
 
 @pytest.mark.slow

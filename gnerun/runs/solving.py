@@ -137,6 +137,8 @@ def certified_solve(game: CompiledGame, solver: Solver, state: SSNState, x: np.n
     elapsed = checking = 0.0
     used = 0
     tried: list[np.ndarray] = []  # the restarts' starts (decisions)
+    # the last certificate's point, the certificate, its best responses and the agents it could not clear
+    last: tuple[np.ndarray, dict, dict, set[str]] | None = None
     while True:
         if solved:
             solved = False
@@ -148,12 +150,22 @@ def certified_solve(game: CompiledGame, solver: Solver, state: SSNState, x: np.n
             return conclude(game, Certified(state, kkt_residuals(game, state.z, x), {}, used, elapsed), x,
                             certified=False)
         best: dict[str, np.ndarray] = {}
-        if on_stage is not None:
+        t = time.perf_counter()
+        earlier = None
+        if last is not None and state.rng is None and _same_point(state.z, last[0]):
+            # a restart that ended where the last certificate was taken (a noise-free solver: the best responses
+            # found there lead back here): the agents it cleared stand as it checked them; those that could improve
+            # (or were not checked) are checked again here, from their own seeds
+            earlier = last[1:]
+            if note is not None:
+                note(f"iteration {state.k}: restart {used} ended at the KKT point of the last certificate; "
+                     f"{', '.join(sorted(last[3]))} checked again, the others' checks stand")
+        elif on_stage is not None:
             on_stage(f"checking the best response of each of {len(game.agent_names)} agents (run.certificate: "
                      "false skips it)")
-        t = time.perf_counter()
-        cert = certificate(game, state.z, x, best, responses, check)
+        cert = certificate(game, state.z, x, best, responses, check, earlier)
         verdict = assess(game, cert, state.z[: game.n], x)
+        last = (state.z.copy(), cert, dict(best), set(verdict.improving) | set(verdict.unchecked))
         checking += time.perf_counter() - t
         improving = verdict.improving if state.status == Status.CONVERGED else {}
         out = Certified(state, cert, improving, used, elapsed, certificate_time_s=checking)
@@ -169,8 +181,7 @@ def certified_solve(game: CompiledGame, solver: Solver, state: SSNState, x: np.n
         # KKT point reached, the same best responses found) a restart would repeat that one's iterations and end there
         a = z[: game.n]
         if state.rng is None:
-            out.repeats = next((k + 1 for k, s in enumerate(tried) if np.max(np.abs(a - s), initial=0.0)
-                                <= REPEAT_TOL * max(1.0, float(np.max(np.abs(s), initial=0.0)))), None)
+            out.repeats = next((k + 1 for k, s in enumerate(tried) if _same_point(a, s)), None)
         if out.repeats is not None:
             if note is not None:
                 note(f"iteration {state.k}: a KKT point at which {', '.join(improving)} can improve alone; their best "
@@ -185,6 +196,12 @@ def certified_solve(game: CompiledGame, solver: Solver, state: SSNState, x: np.n
         start = (solver.restart if hasattr(solver, "restart") else solver.init)(z, x, state.rng)
         elapsed += time.perf_counter() - t
         state = replace(start, k=state.k + 1)
+
+
+def _same_point(z: np.ndarray, earlier: np.ndarray) -> bool:
+    """z within ``REPEAT_TOL`` (relative) of an earlier iterate: the same point to a solver without noise."""
+    return bool(np.max(np.abs(z - earlier), initial=0.0) <= REPEAT_TOL * max(1.0, float(np.max(np.abs(earlier),
+                                                                                                initial=0.0))))
 
 
 def conclude(game: CompiledGame, out: Certified, x: np.ndarray | None = None, certified: bool = True) -> Certified:
