@@ -226,6 +226,21 @@ class AgentSparseKKT(SparseKKT):
         F, F0 = F[self._F_rows], F0[self._F_rows]
         return SparseParts(F[:self.n], F[self._lam0:], None, None, F, J[self._nonzeros], F0)
 
+    def rows_jacobian(self, a_i: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """The Jacobian of the agent's rows (in this system's row order) in its own decisions at a_i, the states
+        responding through the dynamics: dc/da_i = C_a + C_xi dxi/da_i with D_xi dxi/da_i = -D_a (the linearised
+        defects; D_xi is lower block-triangular with the identity's blocks on its diagonal). What the condensed
+        problem's dc/da is, to rounding, without building its dense derivatives."""
+        import scipy.sparse.linalg as spla
+
+        n, S, lam0 = self.n, self.S, self._lam0
+        M = self.matrix(self.evaluate(np.concatenate([a_i, np.zeros(self.m)]), x).J).tocsr()
+        defects = slice(lam0 - S, lam0)  # the rows d: after G_a and the agent's costate rows
+        D_a, D_x = M[defects][:, :n], M[defects][:, n:n + S]
+        C_a, C_x = M[lam0:][:, :n], M[lam0:][:, n:n + S]
+        response = -spla.spsolve(D_x.tocsc(), D_a.toarray())
+        return C_a.toarray() + C_x @ response.reshape(S, n)
+
 
 def sparse_system(cfg: Config, game: CompiledGame) -> SparseKKT:
     """The game's sparse system, compiled once per game (kept in ``game.derived``): ``gnerun solve`` and ``gnerun

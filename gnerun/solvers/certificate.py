@@ -291,16 +291,24 @@ class NewtonResponses:
         """The Jacobian of the agent's rows (``constraint_rows`` order) in its own decisions at a, from its own
         problem's dense derivatives where its local solves built them (the game's row expressions differentiated in
         the agent's decisions alone: the game's values to rounding, its last bit where the derivative's operations
-        come in another order); None where they are not built (a game solved in the sparse formulation: its agents'
-        problems have none). The game's own dense row Jacobian is then never built (on the 6-robot formation 50 ms,
-        on the intersection 0.3 s)."""
-        problem, _, order = self._solver(agent)
+        come in another order); in a game solved in the sparse formulation, from the agent's part of its sparse
+        system (:meth:`~gnerun.game.sparse.AgentSparseKKT.rows_jacobian`); None otherwise. The game's own dense row
+        Jacobian is then never built (on the 6-robot formation 50 ms, on the intersection 0.3 s)."""
+        from ..game.sparse import AgentSparseKKT
+
+        problem, solver, order = self._solver(agent)
         rows = self.game.agents.constraint_rows(agent)
-        if "_derivatives" not in problem.__dict__ or order.size != rows.size or (order < 0).any():
+        if order.size != rows.size or (order < 0).any():
             return None
         sl = self.game.agent_slices[agent]
         p = np.concatenate([self.game._x(x), a[: sl.start], a[sl.stop:], a[sl]])
-        dc = problem.kkt_parts(np.concatenate([a[sl], np.zeros(problem.m)]), p).dc_da
+        system = getattr(getattr(solver, "newton", None), "system", None)
+        if isinstance(system, AgentSparseKKT):  # a part of the game's sparse system: the states' response solved
+            dc = system.rows_jacobian(a[sl], p)
+        elif "_derivatives" in problem.__dict__:
+            dc = problem.kkt_parts(np.concatenate([a[sl], np.zeros(problem.m)]), p).dc_da
+        else:
+            return None
         out = np.empty((rows.size, sl.stop - sl.start))
         out[order] = dc  # the problem's row j is the agent's row order[j]
         return out
