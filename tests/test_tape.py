@@ -153,3 +153,35 @@ def test_rows_with_min_or_max_are_not_polyhedral() -> None:
     game = compile_game(cfg)
     linear = {c.label: bool(ok) for c, ok in zip(game.constraints, game.lq.linear_rows, strict=True)}
     assert linear == {"max(x1, x2) <= 1": False, "x1 + x2 <= 3": True}
+
+
+def test_kinks_read_off_the_tape_are_the_compiled_functions() -> None:
+    """An agent's kinks at a point, read off its parts' instruction tape (a certificate's first points) and by its
+    compiled kink function (from the ``KINK_TAPE_USES``-th on): the same names, at points on a kink of abs and max
+    (x1 = x2) and off them; the function is built only once the tape has served its uses."""
+    from gnerun.game.agents import KINK_TAPE_USES
+
+    text = """
+game:
+  kind: static
+  agents:
+    - name: p1
+      variables: {x1: {lower: -3, upper: 3, start: 0.5}}
+      cost: "abs(x1 - x2) + x1**2"
+      constraints: ["max(x1, x2) <= 2", "x1 + x2 <= 4"]
+    - name: p2
+      variables: {x2: {lower: -3, upper: 3, start: 0}}
+      cost: "(x2 - 1)**2 + 0.5*x1*x2"
+"""
+    game = compile_game(load_config(text=text))
+    x = game._x(None)
+    points = [np.array([0.7, 0.7]), np.array([0.7, 0.7 + 1e-9]), np.array([0.7, 0.2]), np.array([-1.0, 2.5])]
+    read = [game.agents.kinks_at(0, a, x, 1e-6) for a in points]
+    assert read[0] == read[1] and sorted(read[0]) == ["fabs", "fmax"] and read[2] == [] and read[3] == []
+    assert 0 not in game.derived.get("kinks", {})  # the tape served: no function built yet
+    for _ in range(KINK_TAPE_USES):
+        game.agents.kinks_at(0, points[0], x, 1e-6)
+    assert 0 in game.derived["kinks"]  # built once the tape's uses are spent
+    compiled = [game.agents.kinks_at(0, a, x, 1e-6) for a in points]
+    assert [sorted(r) for r in compiled] == [sorted(r) for r in read]
+    assert game.agents.kinks_at(1, points[0], x, 1e-6) == []  # p2: nothing piecewise

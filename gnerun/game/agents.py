@@ -15,12 +15,13 @@ import numpy as np
 
 from .building import stoppable
 from .evaluator import DenseOutputs, Evaluator
-from .tape import kink_function
+from .tape import Tape, kink_function
 
 if TYPE_CHECKING:
     from .compile import CompiledGame
 
 BATCHES = (8, 64, 512)  # block sizes of evaluate_many's mapped functions
+KINK_TAPE_USES = 8  # an agent's kinks are read off its instruction tape this many times before its function is built
 
 
 def batch_size(left: int) -> int:
@@ -71,13 +72,42 @@ class AgentFunctions:
         every one of them, and the rest of the graph is not walked (a merge car's cost: 50-60 -> 17-23 ms)."""
         cache = self.game.derived.setdefault("kinks", {})
         if agent not in cache:
-            sym = self.game._symbolic
-            costs, pieces = self.game.lq.piecewise_parts
-            rows = [r for r in self.constraint_rows(agent).tolist() if pieces[r]]
-            parts = ([sym.J[agent]] if costs[agent] else []) + ([sym.c[rows]] if rows else [])
-            cache[agent] = (kink_function(ca.Function("parts", [sym.a, sym.x], [ca.vertcat(*parts)])) if parts
-                            else None)
+            parts = self._piecewise_parts(agent)
+            cache[agent] = None if parts is None else kink_function(parts)
         return cache[agent]
+
+    def _piecewise_parts(self, agent: int) -> ca.Function | None:
+        """Agent ``agent``'s cost (where it passes through a piecewise function) and those of its rows that do, as
+        one Function of (a, x); None if none does."""
+        sym = self.game._symbolic
+        costs, pieces = self.game.lq.piecewise_parts
+        rows = [r for r in self.constraint_rows(agent).tolist() if pieces[r]]
+        parts = ([sym.J[agent]] if costs[agent] else []) + ([sym.c[rows]] if rows else [])
+        return ca.Function("parts", [sym.a, sym.x], [ca.vertcat(*parts)]) if parts else None
+
+    def kinks_at(self, agent: int, a: np.ndarray, x: np.ndarray, tol: float) -> list[str]:
+        """The piecewise functions of the decisions in agent ``agent``'s cost and rows that are within ``tol``
+        (relative) of their kink at a (x: the state with the runtime values), each name once. For its first
+        ``KINK_TAPE_USES`` points, read off the parts' instruction tape (5-10 ms to build and read for a car of the
+        intersection, whose compiled kink function, :meth:`kinks`, takes 40-80 ms to build); from then on (a closed
+        loop's or a sweep's many certificates) by the compiled function."""
+        cache = self.game.derived.setdefault("kink_tapes", {})
+        if agent not in self.game.derived.get("kinks", {}):
+            tape, uses = cache.get(agent, (None, 0))
+            if uses < KINK_TAPE_USES:
+                if tape is None:
+                    parts = self._piecewise_parts(agent)
+                    if parts is None:
+                        return []
+                    tape = Tape(parts)
+                cache[agent] = (tape, uses + 1)
+                return tape.kinks_within([a, x], tol)
+        found = self.kinks(agent)
+        if found is None:
+            return []
+        f, names = found
+        d = np.asarray(f(a, x), dtype=float).reshape(-1)
+        return list(dict.fromkeys(name for name, v in zip(names, d, strict=True) if v <= tol))
 
     def own_problem(self, agent: int, a: np.ndarray,
                     x: np.ndarray | None = None) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:

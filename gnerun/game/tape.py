@@ -90,9 +90,25 @@ class Tape:
         """At the point ``args`` (one vector per input): the smallest relative distance of a piecewise instruction
         whose arguments depend on input 0 from its kink (``inf`` if there is none), and the names of the
         instructions that realise it."""
+        best, where = _INF, []
+        for op, gap in self._distances(args):
+            if gap < best:
+                best, where = gap, [op.lower()]
+            elif gap == best and op.lower() not in where:
+                where.append(op.lower())
+        return best, where
+
+    def kinks_within(self, args: list[np.ndarray], tol: float) -> list[str]:
+        """At the point ``args``: the names of the piecewise instructions whose arguments depend on input 0 and lie
+        within ``tol`` (relative, as :meth:`kinks` measures) of their kink, each name once, in the tape's order (what
+        :func:`kink_function`'s distances say at one point, without building that function)."""
+        return list(dict.fromkeys(op.lower() for op, gap in self._distances(args) if gap <= tol))
+
+    def _distances(self, args: list[np.ndarray]):
+        """The tape evaluated at ``args``: (name, relative distance from its kink) of each piecewise instruction
+        whose arguments depend on input 0, in order."""
         w = np.zeros(self.size)
         dep = np.zeros(self.size, dtype=bool)
-        best, where = _INF, []
         for op, i, o, const in self.code:
             if op == "CONST":
                 w[o[0]], dep[o[0]] = const, False
@@ -106,15 +122,10 @@ class Tape:
             y = w[i[1]] if op in _BINARY else 0.0
             d = bool(dep[i[0]] or (op in _BINARY and dep[i[1]]))
             if op in PIECEWISE and d:
-                gap = _kink_distance(op, x, y)
-                if gap < best:
-                    best, where = gap, [op.lower()]
-                elif gap == best and op.lower() not in where:
-                    where.append(op.lower())
+                yield op, _kink_distance(op, x, y)
             with np.errstate(all="ignore"):
                 w[o[0]] = _point(op, x, y)
             dep[o[0]] = d
-        return best, where
 
 
 def kink_function(f: ca.Function) -> tuple[ca.Function, list[str]] | None:

@@ -202,13 +202,7 @@ def _kinks(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | None) 
     costs, rows = game.lq.piecewise_parts
     if not costs[agent] and not rows[game.agents.constraint_rows(agent)].any():
         return []
-    found = game.agents.kinks(agent)
-    if found is None:
-        return []
-    f, names = found
-    xv = game._x(x)
-    d = np.asarray(f(a, xv), dtype=float).reshape(-1)
-    return list(dict.fromkeys(name for name, v in zip(names, d, strict=True) if v <= KINK_TOL))
+    return game.agents.kinks_at(agent, a, game._x(x), KINK_TOL)
 
 
 def _agent_tape(game: CompiledGame, agent: int, f) -> Tape:
