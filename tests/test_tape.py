@@ -155,13 +155,7 @@ def test_rows_with_min_or_max_are_not_polyhedral() -> None:
     assert linear == {"max(x1, x2) <= 1": False, "x1 + x2 <= 3": True}
 
 
-def test_kinks_read_off_the_tape_are_the_compiled_functions() -> None:
-    """An agent's kinks at a point, read off its parts' instruction tape (a certificate's first points) and by its
-    compiled kink function (from the ``KINK_TAPE_USES``-th on): the same names, at points on a kink of abs and max
-    (x1 = x2) and off them; the function is built only once the tape has served its uses."""
-    from gnerun.game.agents import KINK_TAPE_USES
-
-    text = """
+NONSMOOTH_PAIR = """
 game:
   kind: static
   agents:
@@ -173,7 +167,15 @@ game:
       variables: {x2: {lower: -3, upper: 3, start: 0}}
       cost: "(x2 - 1)**2 + 0.5*x1*x2"
 """
-    game = compile_game(load_config(text=text))
+
+
+def test_kinks_read_off_the_tape_are_the_compiled_functions() -> None:
+    """An agent's kinks at a point, read off its parts' instruction tape (a certificate's first points) and by its
+    compiled kink function (from the ``KINK_TAPE_USES``-th on): the same names, at points on a kink of abs and max
+    (x1 = x2) and off them; the function is built only once the tape has served its uses."""
+    from gnerun.game.agents import KINK_TAPE_USES
+
+    game = compile_game(load_config(text=NONSMOOTH_PAIR))
     x = game._x(None)
     points = [np.array([0.7, 0.7]), np.array([0.7, 0.7 + 1e-9]), np.array([0.7, 0.2]), np.array([-1.0, 2.5])]
     read = [game.agents.kinks_at(0, a, x, 1e-6) for a in points]
@@ -185,3 +187,17 @@ game:
     compiled = [game.agents.kinks_at(0, a, x, 1e-6) for a in points]
     assert [sorted(r) for r in compiled] == [sorted(r) for r in read]
     assert game.agents.kinks_at(1, points[0], x, 1e-6) == []  # p2: nothing piecewise
+
+
+def test_kinks_fall_back_to_the_compiled_function_where_the_tape_cannot_read(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A parts function with an instruction the tape does not read: its kinks come from the compiled function."""
+    from gnerun.game import agents
+
+    def refuse(f):
+        raise UnsupportedTape("an instruction the tape does not read")
+
+    monkeypatch.setattr(agents, "Tape", refuse)
+    game = compile_game(load_config(text=NONSMOOTH_PAIR))
+    x = game._x(None)
+    assert sorted(game.agents.kinks_at(0, np.array([0.7, 0.7]), x, 1e-6)) == ["fabs", "fmax"]
+    assert 0 in game.derived["kinks"]

@@ -15,7 +15,7 @@ import numpy as np
 
 from .building import stoppable
 from .evaluator import DenseOutputs, Evaluator
-from .tape import Tape, kink_function
+from .tape import Tape, UnsupportedTape, kink_function
 
 if TYPE_CHECKING:
     from .compile import CompiledGame
@@ -99,9 +99,13 @@ class AgentFunctions:
                     parts = self._piecewise_parts(agent)
                     if parts is None:
                         return []
-                    tape = Tape(parts)
-                cache[agent] = (tape, uses + 1)
-                return tape.kinks_within([a, x], tol)
+                    try:
+                        tape = Tape(parts)
+                    except UnsupportedTape:  # an instruction the tape does not read: the compiled function
+                        uses = KINK_TAPE_USES
+                if tape is not None:
+                    cache[agent] = (tape, uses + 1)
+                    return tape.kinks_within([a, x], tol)
         found = self.kinks(agent)
         if found is None:
             return []
