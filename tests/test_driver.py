@@ -74,3 +74,16 @@ def test_the_status_module_imports_nothing_heavy() -> None:
             "print(sorted(m for m in ('scipy', 'casadi', 'gnerun.game', 'gnerun.solvers.ssn') if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "[]"
+
+
+def test_a_final_state_keeps_every_field_but_its_status_and_message() -> None:
+    """``SSNState.ended`` (a solve's finish, by the constructor) against ``dataclasses.replace`` on every field: a
+    field added to SSNState and not passed on would fail here."""
+    import dataclasses
+
+    values = {f.name: object() for f in dataclasses.fields(SSNState)}
+    state = SSNState(**values)
+    ended = state.ended(Status.CONVERGED, "done")
+    expected = dataclasses.replace(state, status=Status.CONVERGED, message="done")
+    for f in dataclasses.fields(SSNState):
+        assert getattr(ended, f.name) is getattr(expected, f.name), f.name

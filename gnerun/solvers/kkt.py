@@ -240,7 +240,7 @@ class KKTSystem:
                    f"||Phi|| = {state.residual_norm:.2e} > tol {self.options.tol:.0e}")
         else:
             msg = state.message
-        return replace(state, status=status, message=msg)
+        return state.ended(status, msg)
 
     # ------------------------------------------------------------------------------------
     def _check_finite(self, state: SSNState) -> SSNState:

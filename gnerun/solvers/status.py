@@ -72,6 +72,12 @@ class SSNState:
         d = self.z - self.z_prev
         return math.sqrt(d @ d)
 
+    def ended(self, status: Status, message: str) -> SSNState:
+        """This state with its final ``status`` and ``message`` (what ``dataclasses.replace`` makes, by the
+        constructor: a solve's last step, 0.3 instead of 1.8 us of the paper game's 40 us solve)."""
+        return SSNState(self.z, self.x, self.k, self.phi, self.residual_norm, self.parts, self.active, self.z_prev,
+                        self.active_prev, status, message, self.rng, self.rcond, self.search)
+
     @property
     def active_set_changes(self) -> int:
         """Rows whose branch changed from z^{k-1} to z^k."""
