@@ -540,13 +540,15 @@ def _dask(tasks: list[dict[str, Any]], workers: int, address: str | None) -> Com
         if address is None:
             import logging
 
-            # warnings of its own shutdown (Ctrl-C cancels the tasks in progress) are not the user's business
+            # warnings and errors of its own shutdown are not the user's business: Ctrl-C cancels the tasks in
+            # progress, and a worker whose heartbeat finds the scheduler gone logs an error with its traceback (a
+            # point that fails is reported by its future, in its row of the index)
             with _hangups_blocked():  # its processes, as a local pool's (see _hangups_blocked)
                 # no dashboard; its HTTP server (health routes) on a free port of this host, not 8787, which
                 # another cluster (another sweep, a notebook) may hold
                 cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                                        dashboard_address=None, scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
-                                       silence_logs=logging.ERROR)
+                                       silence_logs=logging.CRITICAL)
                 client = Client(cluster)
         elif Path(address).is_file():  # a scheduler file (`dask scheduler --scheduler-file F`), as on HPC
             client = Client(scheduler_file=address, timeout="20s")
