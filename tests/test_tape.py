@@ -83,14 +83,7 @@ def test_piecewise_outputs_follow_the_decisions() -> None:
     np.testing.assert_array_equal(piecewise_outputs(f), [True, False, False])
 
 
-@pytest.mark.parametrize("config", ["algames_merge.yaml", "nonsmooth"])
-def test_an_agents_kinks_are_those_of_its_whole_cost_and_rows(config: str) -> None:
-    # the agent's kink function walks only its parts that pass through a piecewise function: the same functions, the
-    # same distances as walking its whole cost and every row (the merge: a min in each car's ramp rows; a game with
-    # abs and max in its costs and rows)
-    from .conftest import CONFIGS
-
-    text = (CONFIGS / config).read_text() if config.endswith(".yaml") else """
+NONSMOOTH_PAIR = """
 game:
   kind: static
   agents:
@@ -102,6 +95,16 @@ game:
       variables: {x2: {lower: -3, upper: 3, start: 0}}
       cost: "(x2 - 1)**2 + 0.5*x1*x2"
 """
+
+
+@pytest.mark.parametrize("config", ["algames_merge.yaml", "nonsmooth"])
+def test_an_agents_kinks_are_those_of_its_whole_cost_and_rows(config: str) -> None:
+    # the agent's kink function walks only its parts that pass through a piecewise function: the same functions, the
+    # same distances as walking its whole cost and every row (the merge: a min in each car's ramp rows; a game with
+    # abs and max in its costs and rows)
+    from .conftest import CONFIGS
+
+    text = (CONFIGS / config).read_text() if config.endswith(".yaml") else NONSMOOTH_PAIR
     game = compile_game(load_config(text=text))
     sym = game._symbolic
     rng = np.random.default_rng(2)
@@ -154,19 +157,6 @@ def test_rows_with_min_or_max_are_not_polyhedral() -> None:
     linear = {c.label: bool(ok) for c, ok in zip(game.constraints, game.lq.linear_rows, strict=True)}
     assert linear == {"max(x1, x2) <= 1": False, "x1 + x2 <= 3": True}
 
-
-NONSMOOTH_PAIR = """
-game:
-  kind: static
-  agents:
-    - name: p1
-      variables: {x1: {lower: -3, upper: 3, start: 0.5}}
-      cost: "abs(x1 - x2) + x1**2"
-      constraints: ["max(x1, x2) <= 2", "x1 + x2 <= 4"]
-    - name: p2
-      variables: {x2: {lower: -3, upper: 3, start: 0}}
-      cost: "(x2 - 1)**2 + 0.5*x1*x2"
-"""
 
 
 def test_kinks_read_off_the_tape_are_the_compiled_functions() -> None:

@@ -913,12 +913,12 @@ def agent_problem(game: CompiledGame, agent: int, tau: float, cfg: Config | None
 def derivatives_from_game(problem: CompiledGame, game: CompiledGame, agent: int) -> bool:
     """Give agent ``agent``'s own problem (:func:`agent_problem` at weight 0: its row j is the game's row
     ``problem.derived["game_rows"][j]``) its dense derivatives as blocks of the game's, where the game has built
-    them: its rows of dL/dz at
-    its decisions and its rows' multipliers, and its rows of dc/da at its decisions, the game's multipliers of those
-    rows replaced by the problem's own. The same expressions as differentiating the player's stationarity and rows
-    in its own unknowns, without differentiating again (a robot of the 6-robot formation: 25 -> 6 ms); the values
-    agree to rounding (the last bit where CasADi's two derivatives order their operations differently). Returns
-    whether it did (not where the game's derivatives are not built, or the blocks depend on anything else)."""
+    them: its rows of dL/dz at its decisions and its rows' multipliers, and its rows of dc/da at its decisions, the
+    game's multipliers of those rows replaced by the problem's own. The same expressions as differentiating the
+    player's stationarity and rows in its own unknowns, without differentiating again (a robot of the 6-robot
+    formation: 25 -> 6 ms); the values agree to rounding (the last bit where CasADi's two derivatives order their
+    operations differently). Returns whether it did (not where the game's derivatives are not built, or the blocks
+    depend on anything else)."""
     built = game.__dict__.get("_derivatives")
     rows = problem.derived.get("game_rows")
     if built is None or rows is None or game.smoothing or "_derivatives" in problem.__dict__:

@@ -137,8 +137,8 @@ def certified_solve(game: CompiledGame, solver: Solver, state: SSNState, x: np.n
     elapsed = checking = 0.0
     used = 0
     tried: list[np.ndarray] = []  # the restarts' starts (decisions)
-    # the last certificate's point, the certificate, its best responses and the agents it could not clear
-    last: tuple[np.ndarray, dict, dict, set[str]] | None = None
+    # the last certificate's point, its agents' checks and the agents it could not clear
+    last: tuple[np.ndarray, dict, set[str]] | None = None
     while True:
         if solved:
             solved = False
@@ -150,22 +150,23 @@ def certified_solve(game: CompiledGame, solver: Solver, state: SSNState, x: np.n
             return conclude(game, Certified(state, kkt_residuals(game, state.z, x), {}, used, elapsed), x,
                             certified=False)
         best: dict[str, np.ndarray] = {}
+        checks: dict = {}
         t = time.perf_counter()
         earlier = None
         if last is not None and state.rng is None and _same_point(state.z, last[0]):
             # a restart that ended where the last certificate was taken (a noise-free solver: the best responses
             # found there lead back here): the agents it cleared stand as it checked them; those that could improve
             # (or were not checked) are checked again here, from their own seeds
-            earlier = last[1:]
+            earlier = {name: c for name, c in last[1].items() if name not in last[2]}
             if note is not None:
                 note(f"iteration {state.k}: restart {used} ended at the KKT point of the last certificate; "
-                     f"{', '.join(sorted(last[3]))} checked again, the others' checks stand")
+                     f"{', '.join(sorted(last[2]))} checked again, the others' checks stand")
         elif on_stage is not None:
             on_stage(f"checking the best response of each of {len(game.agent_names)} agents (run.certificate: "
                      "false skips it)")
-        cert = certificate(game, state.z, x, best, responses, check, earlier)
+        cert = certificate(game, state.z, x, best, responses, check, checks, earlier)
         verdict = assess(game, cert, state.z[: game.n], x)
-        last = (state.z.copy(), cert, dict(best), set(verdict.improving) | set(verdict.unchecked))
+        last = (state.z.copy(), checks, set(verdict.improving) | set(verdict.unchecked))
         checking += time.perf_counter() - t
         improving = verdict.improving if state.status == Status.CONVERGED else {}
         out = Certified(state, cert, improving, used, elapsed, certificate_time_s=checking)
@@ -200,8 +201,8 @@ def certified_solve(game: CompiledGame, solver: Solver, state: SSNState, x: np.n
 
 def _same_point(z: np.ndarray, earlier: np.ndarray) -> bool:
     """z within ``REPEAT_TOL`` (relative) of an earlier iterate: the same point to a solver without noise."""
-    return bool(np.max(np.abs(z - earlier), initial=0.0) <= REPEAT_TOL * max(1.0, float(np.max(np.abs(earlier),
-                                                                                                initial=0.0))))
+    size = max(1.0, float(np.max(np.abs(earlier), initial=0.0)))
+    return bool(np.max(np.abs(z - earlier), initial=0.0) <= REPEAT_TOL * size)
 
 
 def conclude(game: CompiledGame, out: Certified, x: np.ndarray | None = None, certified: bool = True) -> Certified:

@@ -686,12 +686,13 @@ def _box_search(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | N
 
 def certificate(game: CompiledGame, z: np.ndarray, x: np.ndarray | None = None,
                 best: dict[str, np.ndarray] | None = None, responses: NewtonResponses | None = None,
-                check=None, earlier: tuple[dict, dict[str, np.ndarray], set[str]] | None = None) -> dict:
+                check=None, checks: dict[str, PlayerCheck] | None = None,
+                earlier: dict[str, PlayerCheck] | None = None) -> dict:
     """KKT residuals and every agent's best-response check at z (``certificate`` in summary.json); ``best``, if
     given, receives each agent's best response found. With ``responses``, the local best responses are Newton
     solves of the agents' own problems, and SLSQP's where none of those ends feasible; without, SLSQP's. ``check``
-    is called before each agent (a stop request may raise there). ``earlier``: (a certificate of the same point, to
-    rounding, its best responses, the agents to check again): the other agents' checks are taken from it."""
+    is called before each agent (a stop request may raise there). ``checks``, if given, receives each agent's
+    check; ``earlier``: checks of agents made at the same point (to rounding), taken as they are."""
     out: dict = kkt_residuals(game, z, x)
     names = game.agent_names
     if not np.all(np.isfinite(z)):
@@ -712,8 +713,9 @@ def certificate(game: CompiledGame, z: np.ndarray, x: np.ndarray | None = None,
     for i, name in enumerate(names):
         if check is not None:
             check()
-        pc = (check_player(game, i, z, x, responses, gradients) if earlier is None or name in earlier[2] else
-              _earlier_check(earlier[0], earlier[1], name))
+        pc = earlier[name] if earlier and name in earlier else check_player(game, i, z, x, responses, gradients)
+        if checks is not None:
+            checks[name] = pc
         gaps[name] = pc.gap
         notes[name] = pc.note
         kinds[name] = pc.kind
@@ -743,19 +745,6 @@ def certificate(game: CompiledGame, z: np.ndarray, x: np.ndarray | None = None,
     if not_finite:
         out["not_finite"] = not_finite
     return out
-
-
-def _earlier_check(cert: dict, best: dict[str, np.ndarray], name: str) -> PlayerCheck:
-    """Agent ``name``'s check as the certificate ``cert`` (with its best responses ``best``) recorded it."""
-    box = (cert.get("best_response_box") or {}).get(name)
-    ray = (cert.get("unbounded") or {}).get(name)
-    if ray is not None:
-        ray = Ray(np.asarray(ray["direction"]), np.asarray(ray["steps"]), np.asarray(ray["costs"]),
-                  ray["cost_at_point"], ray["unbounded_below"])
-    return PlayerCheck(cert["best_response_gap"][name], best.get(name), cert["best_response_kind"][name],
-                       cert["best_response_note"][name], None if box is None else (box["lower"], box["upper"]),
-                       (cert.get("best_response_gap_bound") or {}).get(name), ray,
-                       name not in cert.get("not_finite", []), list((cert.get("kinks") or {}).get(name, [])))
 
 
 @dataclass(frozen=True)
