@@ -41,7 +41,10 @@ first, judged by a nonmonotone watchdog; a more robust method when it fails; res
    corrects its guess: rows whose multiplier came out negative leave it, rows the step violates join it. An
    interior iterate's guess (lambda_j > w_j) is wrong for the rows that are inactive at the solution with a slack
    below sqrt(eps), and these make the plain step climb far (||Phi|| times 80-380 on ALGAMES's merges). A refused
-   hand-over is tried again once ||Phi|| is below ``HANDOVER_RETRY`` times its value there.
+   hand-over is tried again once ||Phi|| is below ``HANDOVER_RETRY`` times its value there. A later Newton step of
+   the resumed phase that multiplies ||Phi|| by more than ``CORRECT_ABOVE`` is corrected in the same way (a row
+   whose multiplier the step drives negative, another it leaves violated); where no correction halves ||Phi||, the
+   climbing step is the watchdog's to judge, as before.
 4. **Pivoting** (LQ games only). When every interior start has failed, the KKT system, a linear complementarity
    problem, is solved by Lemke's method from z^0 (covering vectors: all ones, then seeded random ones). The
    central path of the interior phase gives the copies of a shared constraint equal multipliers, so it misses
@@ -97,6 +100,7 @@ HANDOVER_AT = 1e-2  # try the Newton step from an interior iterate once ||Phi|| 
 HANDOVER_DECREASE = 0.5  # ... and take it when it reduces ||Phi|| at least by this factor
 HANDOVER_RETRY = 0.5  # after a refused hand-over, the next try once ||Phi|| is below this fraction of where it was
 HANDOVER_ROUNDS = 3  # a refused hand-over step is tried again this many times with its active set corrected
+CORRECT_ABOVE = 30.0  # ... and so is a Newton step after a hand-over that multiplies ||Phi|| by more than this
 STALL = 15  # interior steps without a new best ||Phi|| (by 10%) before a restart (or a round of best responses)
 RESTARTS = len(STARTS) - 1
 LM_FAR = 1e-4  # far from a solution, a singular JPhi gets the Levenberg-Marquardt step with mu = LM_FAR ||Phi||
@@ -263,6 +267,13 @@ class HybridNewton:
             memory = replace(memory, crash=False)
         candidate, regularized = self._candidate(state, memory)
         merit = candidate.residual_norm
+        if (memory.interior is not None and not regularized and candidate.status == Status.RUNNING
+                and merit > CORRECT_ABOVE * state.residual_norm):
+            # after a hand-over: a step that climbs is corrected on the active set it points to, as a refused
+            # hand-over is; where no correction helps, the climbing step goes to the watchdog as before
+            corrected = self._corrected(state, candidate.z, candidate.parts.c)
+            if corrected is not None:
+                candidate, merit = corrected, corrected.residual_norm
         # a Levenberg-Marquardt step that barely changes ||Phi|| (neither a decrease nor a climb the watchdog may
         # allow) has met a stationary point of the merit that is no solution, and further ones stay there
         flat = regularized and abs(merit - state.residual_norm) < FLAT * state.residual_norm
@@ -317,9 +328,31 @@ class HybridNewton:
         z, rcond = newton.newton_point(state)
         if z is None:
             z = newton.regularized_point(state, state.residual_norm)
-        rounds = HANDOVER_ROUNDS if newton.reduced else 0  # the min map without noise: the active set is the step's
+        if z is None:
+            return None
+        L, c = newton.kkt_residual(z, state.x)
+        phi, _ = newton.phi(L, c, z)
+        if norm(phi) <= HANDOVER_DECREASE * state.residual_norm:
+            candidate = newton.advance(state, z, rcond=rcond)
+            return candidate if candidate.status == Status.RUNNING else None
+        return self._corrected(state, z, c)
+
+    def _corrected(self, state: SSNState, z: np.ndarray, c: np.ndarray) -> SSNState | None:
+        """The Newton step from ``state`` on the active set that a refused step to ``z`` (c = c(a) there) points to,
+        corrected up to ``HANDOVER_ROUNDS`` times as a primal-dual active-set method corrects its guess: rows whose
+        multiplier came out negative leave it, rows the step violates join it (inequalities only). The first
+        whose point reduces ||Phi|| HANDOVER_DECREASE-fold, judged on the residual alone; None if none does (or the
+        method is not the min map without noise: its active set is not the step's)."""
+        newton = self.newton
+        if not newton.reduced:
+            return None
         active = state.active
-        for _ in range(rounds + 1):
+        for _ in range(HANDOVER_ROUNDS):
+            corrected = ((active & (z[self.game.n:] >= 0.0)) | (~active & (c > 0.0))) & self._inequalities
+            if np.array_equal(corrected, active):
+                return None
+            active = corrected
+            z, rcond = newton.newton_point(replace(state, active=active))
             if z is None:
                 return None
             L, c = newton.kkt_residual(z, state.x)
@@ -327,12 +360,6 @@ class HybridNewton:
             if norm(phi) <= HANDOVER_DECREASE * state.residual_norm:
                 candidate = newton.advance(state, z, rcond=rcond)
                 return candidate if candidate.status == Status.RUNNING else None
-            # the step's own active set: negative multipliers leave, violated rows join (inequalities only)
-            corrected = ((active & (z[self.game.n:] >= 0.0)) | (~active & (c > 0.0))) & self._inequalities
-            if np.array_equal(corrected, active):
-                return None
-            active = corrected
-            z, rcond = newton.newton_point(replace(state, active=active))
         return None
 
     def _interior_step(self, state: SSNState, memory: Memory) -> SSNState:
