@@ -57,6 +57,9 @@ from . import global_response, unbounded
 from .unbounded import Ray
 
 FEASIBILITY_TOL = 1e-9
+# a local solve's interior-point iterates are polished by Newton steps once ||Phi|| <= POLISH (each step kept only where
+# it reduces ||Phi||): on 100 ALGAMES merges the certificate's median 134 -> 98 ms, no certificate changed
+POLISH = 1e-4
 PERTURBATIONS = (0.1, 1.0)  # relative sizes of the perturbed starts of a best response (of the box, or of |a_i|)
 GAP_TOL = 1e-6  # a best-response gap above this (relative to max(1, |J_i|)) means the agent can improve alone
 KINK_TOL = 1e-6  # a piecewise function this close to its kink (relative) is at its kink
@@ -218,8 +221,11 @@ class NewtonResponses:
     gnerun.game.compile.agent_problem with tau = 0, whose parameters are the plant state and the others' decisions):
     the interior-point method of the globalized solver (``globalization: interior_point``), whose direction makes
     the player's own block positive definite, so that it descends to a minimum of the player's problem; the plain
-    semismooth Newton step would stop at any stationary point, a concave player's maximum included. A start counts
-    when its solve converges to a point that satisfies the agent's constraints within ``FEASIBILITY_TOL``."""
+    semismooth Newton step would stop at any stationary point, a concave player's maximum included. Once ||Phi|| is
+    below ``POLISH`` the semismooth Newton steps polish the point the interior phase has come to, each kept only
+    where it reduces ||Phi|| (else the interior phase goes on), instead of the barrier's last decades at a fifth per
+    step. A start counts when its solve converges to a point that satisfies the agent's constraints within
+    ``FEASIBILITY_TOL``."""
 
     MAX_ITER = 200
 
@@ -251,7 +257,7 @@ class NewtonResponses:
         """(the agent's problem, its globalized solver, the game's rows in the problem's order); ``full``: the game's
         sparse system, where the game was solved in the sparse formulation."""
         from ..game.compile import agent_problem
-        from .globalization import globalized
+        from .hybrid import HybridNewton
         from .ssn import SemismoothNewton
 
         built = self.game.derived.setdefault("agent_problems", {})  # once per game (a sweep's points share it)
@@ -279,7 +285,7 @@ class NewtonResponses:
 
             derivatives_from_game(problem, self.game, agent)  # blocks of the game's, where the game has them
             newton = SemismoothNewton(problem, opts)
-        return problem, globalized(newton), order
+        return problem, HybridNewton(newton, handover=False, polish=POLISH), order
 
     def rows_jacobian(self, agent: int, a: np.ndarray, x: np.ndarray | None) -> np.ndarray | None:
         """The Jacobian of the agent's rows (``constraint_rows`` order) in its own decisions at a, from its own

@@ -146,12 +146,17 @@ class HybridNewton:
     method on the configured formulation (condensed or sparse); its init, terminate and finish are used as
     they are."""
 
-    def __init__(self, newton: SemismoothNewton, *, handover: bool = True) -> None:
+    def __init__(self, newton: SemismoothNewton, *, handover: bool = True, polish: float = 0.0) -> None:
         self.newton = newton
         self.game = newton.game
         self.options = newton.options
         self.interior = InteriorPoint(newton)
         self.handover = handover  # False: the interior phase alone (solver.globalization: interior_point)
+        # the interior phase alone, polished: Newton steps once ||Phi|| <= polish where every player's block of the
+        # barrier matrix needs no convexifying shift (second-order sufficiency: a minimum, not a saddle the interior
+        # phase would leave), each kept only where it reduces ||Phi|| (the certificate's local solves: the barrier's
+        # last decades in a step or two)
+        self.polish = 0.0 if handover else polish
         # LQ games whose KKT system is an affine VI: the first step solves it (unperturbed runs only: a perturbed
         # method is run to be studied step by step)
         d = newton.disturbance
@@ -228,7 +233,7 @@ class HybridNewton:
     def _threshold(self, merit0: float) -> float:
         """||Phi|| below which the Newton step is tried from an interior iterate."""
         if not self.handover:
-            return -1.0
+            return self.polish if self.polish > 0.0 else -1.0
         return HANDOVER_AT * min(merit0, 1.0) if math.isfinite(merit0) else HANDOVER_AT
 
     def _candidate(self, state: SSNState, memory: Memory) -> tuple[SSNState, bool]:
@@ -277,8 +282,9 @@ class HybridNewton:
         # a Levenberg-Marquardt step that barely changes ||Phi|| (neither a decrease nor a climb the watchdog may
         # allow) has met a stationary point of the merit that is no solution, and further ones stay there
         flat = regularized and abs(merit - state.residual_norm) < FLAT * state.residual_norm
-        if candidate.status == Status.RUNNING and not flat and not self._climbs_first(memory, state, merit) \
-                and merit <= BLOWUP * max(memory.merits[-MEMORY:]):
+        climbs = self.polish > 0.0 and not merit < state.residual_norm  # a polishing step must reduce ||Phi||
+        if candidate.status == Status.RUNNING and not flat and not climbs \
+                and not self._climbs_first(memory, state, merit) and merit <= BLOWUP * max(memory.merits[-MEMORY:]):
             best, stalls = memory.best, memory.stalls + 1
             if merit < (1.0 - SUFFICIENT) * best:
                 best, stalls = merit, 0
@@ -363,7 +369,8 @@ class HybridNewton:
         return None
 
     def _interior_step(self, state: SSNState, memory: Memory) -> SSNState:
-        if state.residual_norm <= memory.handover:
+        if state.residual_norm <= memory.handover and (
+                not self.polish or self.interior.convex_at(memory.interior, state.parts)):
             candidate = self._handover(state)
             if candidate is not None:
                 merit = candidate.residual_norm

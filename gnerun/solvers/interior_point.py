@@ -152,6 +152,14 @@ class InteriorPoint:
                   float(np.max(np.abs(c[E]), initial=0.0)), float(np.max(np.abs(lw - eps), initial=0.0)))
         return InteriorIterate(z, w, L, c, eps * SHRINK if err <= KAPPA * eps else eps, t, predict)
 
+    def convex_at(self, it: InteriorIterate, parts) -> bool:
+        """Whether every player's block of the barrier Newton matrix at ``it`` (``parts``: the derivatives there) is
+        positive definite as it is, with no convexifying shift: near a KKT point with strictly complementary
+        multipliers, second-order sufficiency for each player's own problem (the barrier terms hold the directions
+        off the active rows' tangent space). The matrix is kept for the step from ``it``."""
+        I = self.I
+        return self.linear._factored(parts, it.w / it.z[self.n + I]).convex
+
     def reset_slacks(self, z: np.ndarray, w: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The slack reset after a step to (z, w) with c = c(a) there: a row guessed inactive (lambda_j <= w_j) whose
         constraint is further inside than its slack says (-c_j > w_j, as the linearisation of a concave constraint,
@@ -335,7 +343,7 @@ class DenseBarrier:
                 S[targets, targets] += np.add.reduceat(c_single / D[single[order]], starts)
             else:
                 S[:, targets] += np.add.reduceat(B_single * (c_single / D[single[order]]), starts, axis=1)
-        convexify(S, ip.newton.game.agent_slices)
+        convex = convexify(S, ip.newton.game.agent_slices)
         k = E.size
         M = np.empty((n + k, n + k))
         M[:n, :n] = S
@@ -345,7 +353,7 @@ class DenseBarrier:
             M[n:, n:] = 0.0
         diag = np.diag(S).copy()
         scale = max(1.0, float(np.abs(diag).max(initial=0.0)))
-        self._held = _Factored(parts, parts.dL_dz, D.copy(), diag, scale, {}, M)
+        self._held = _Factored(parts, parts.dL_dz, D.copy(), diag, scale, {}, convex, M)
         return self._held
 
     def direction(self, parts, it: InteriorIterate, D: np.ndarray, rhs_I: np.ndarray):
@@ -470,15 +478,16 @@ class SparseBarrier:
         held = self._held
         if held is not None and held.holds(parts, parts.J, D):
             return held
-        convex = self._shifts(parts.J, D)
+        found = self._shifts(parts.J, D)
         shifts = np.zeros(self.ip.n)
-        if convex is None:
+        if found is None:  # a singular dynamics block: no shifts, and no statement on the players' curvature
             at = self._diagonal
             diagonal = np.where(at >= 0, parts.J[at], 0.0)
             scale = max(1.0, float(np.max(np.abs(diagonal), initial=0.0)))
         else:
-            shifts, scale = convex
-        self._held = _Factored(parts, parts.J, D.copy(), shifts, scale, {})
+            shifts, scale = found
+        convex = found is not None and not shifts.any()
+        self._held = _Factored(parts, parts.J, D.copy(), shifts, scale, {}, convex)
         return self._held
 
     def direction(self, parts, it: InteriorIterate, D: np.ndarray, rhs_I: np.ndarray):
@@ -528,6 +537,7 @@ class _Factored:
     diagonal: np.ndarray
     scale: float
     factors: dict
+    convex: bool  # every player's block was positive definite as it was (no shift)
     matrix: np.ndarray | None = None
     delta: float = 0.0
 
@@ -738,16 +748,19 @@ class _Gather:
         np.reshape(out, -1, copy=False)[self.flat] += data[self.positions]
 
 
-def convexify(S: np.ndarray, blocks: list[slice]) -> None:
+def convexify(S: np.ndarray, blocks: list[slice]) -> bool:
     """Make each player's own block of the barrier Newton matrix positive definite (in its symmetric part), in
     place, by adding the smallest multiple of the identity (from 1e-8 of the block's scale, times 10) that does:
     the direction is then a descent direction of every player's own barrier problem. Convex players' blocks are
-    left as they are."""
+    left as they are. Returns whether every block was left as it was."""
+    convex = True
     for sl in blocks:
         delta = convexifying_shift(S[sl, sl])
         if delta:
             idx = np.arange(sl.start, sl.stop)
             S[idx, idx] += delta
+            convex = False
+    return convex
 
 
 def convexifying_shift(block: np.ndarray) -> float:
