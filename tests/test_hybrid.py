@@ -439,6 +439,37 @@ def test_a_first_newton_step_that_climbs_hands_a_nonlinear_game_to_the_interior_
     assert len(phases) == 5 and phases[1] > 8.0 * phases[0], phases  # z^0, three climbing steps, the interior start
 
 
+@pytest.mark.slow
+def test_a_later_newton_step_from_z0_that_climbs_hands_a_nonlinear_game_to_the_interior_phase(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """ALGAMES's merge, draw 61 of seed 0: the first Newton step from z^0 raises ||Phi|| 1.48-fold (kept), the second
+    7.4-fold; that iteration is the interior phase's first step instead, and the solve converges in 13 iterations,
+    where the watchdog kept the Newton phase for 19 steps (17 of them Levenberg-Marquardt steps) and the solve took
+    31."""
+    from benchmarks.problems import trajectory
+
+    problem = trajectory.merge_problems(62)[61]
+    cfg = load_config(text=problem.config_yaml)
+    game = compile_game(cfg)
+    solver = make_solver(cfg, game)
+    start = solver.init()
+    first = solver.step(start)
+    assert first.search.phase == "newton" and start.residual_norm < first.residual_norm <= 1.5 * start.residual_norm
+    second = solver.step(first)
+    assert second.search.phase == "interior" and second.residual_norm < first.residual_norm
+    state = iterate(solver, start)
+    assert state.status == Status.CONVERGED and state.k == 13
+    assert max(problem.best_response_gaps(state.z[: game.n]).values()) <= 1e-5
+    phases = []
+    climbs = hybrid.HybridNewton._climbs_first
+    with monkeypatch.context() as m:  # the rule as it was: the first step alone
+        m.setattr(hybrid.HybridNewton, "_climbs_first",
+                  lambda self, memory, state, merit: len(memory.merits) == 1 and climbs(self, memory, state, merit))
+        solver = make_solver(cfg, game)
+        before = iterate(solver, solver.init(), on_iterate=lambda s: phases.append(s.search.phase))
+    assert before.status == Status.CONVERGED and before.k == 31 and phases[:20] == ["newton"] * 20
+
+
 def test_an_lq_games_first_newton_step_may_climb(no_avi_step: None) -> None:
     """FK A.7 from 0 (affine KKT system): the first min-map Newton step multiplies ||Phi|| by 22 and the next two
     solve the game; the rule for nonlinear games leaves it alone."""
