@@ -773,3 +773,33 @@ def test_a_polished_local_solve_started_at_a_concave_players_maximum_descends_to
     monkeypatch.setattr(interior_point.InteriorPoint, "convex_at", lambda self, it, parts: True)
     (end, converged), = NewtonResponses(cfg, game).solve_from(0, a, None, [a[:1]])
     assert converged and end[0] == pytest.approx(0.55, abs=1e-9)
+
+
+@pytest.mark.slow
+def test_a_large_players_gain_is_found_from_its_best_compared_points(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The 6-robot formation from draw 7 of seed 1 (benchmarks/problems/formation.py: 26 decisions per robot, checked
+    "over N starts"): the solve ends converged only where the independent check (SLSQP from each robot's plan and
+    three random ones) finds no robot that gains alone. Without local solves from a large player's best compared
+    points, it ended converged at a point where robot 4 gains 2e-3 alone (7e-5 of its cost)."""
+    from benchmarks.problems import formation
+    from gnerun.runs.solving import certified_solve, make_solver
+    from gnerun.solvers import certificate as cert_module
+    from gnerun.solvers.certificate import NewtonResponses
+
+    problem = formation.formation_problems(8)[7]
+    cfg = load_config(text=problem.config_yaml)
+
+    def solved() -> tuple[str, float]:
+        game = compile_game(cfg)
+        solver = make_solver(cfg, game)
+        out = certified_solve(game, solver, solver.init(), None, responses=NewtonResponses(cfg, game))
+        a = out.state.z[: game.n]
+        scale = np.maximum(1.0, np.abs(game.costs(a)))
+        gaps = np.array(list(problem.best_response_gaps(a).values()))
+        return out.status, float(np.max(gaps / scale))
+
+    status, gap = solved()
+    assert status != "converged" or gap <= cert_module.GAP_TOL
+    monkeypatch.setattr(cert_module, "LOCAL_FROM_DESIGN_LARGE", 0)
+    status, gap = solved()
+    assert status == "converged" and gap > 10 * cert_module.GAP_TOL  # the false certificate they prevent

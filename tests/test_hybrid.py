@@ -254,6 +254,16 @@ def test_every_globalization_keeps_the_status_contract(globalization: str) -> No
             assert state.message
 
 
+def _merge_draw(draw: int):
+    """ALGAMES's merge from draw ``draw`` of seed 0: the problem, its config, the compiled game and a default solver."""
+    from benchmarks.problems import trajectory
+
+    problem = trajectory.merge_problems(draw + 1)[draw]
+    cfg = load_config(text=problem.config_yaml)
+    game = compile_game(cfg)
+    return problem, cfg, game, make_solver(cfg, game)
+
+
 @pytest.mark.slow
 def test_merges_from_random_states_converge_and_are_equilibria() -> None:
     from benchmarks.problems import trajectory
@@ -297,11 +307,7 @@ def test_a_newton_step_that_climbs_after_the_hand_over_is_taken_on_the_corrected
     the step leaves with a violated constraint); the same step on the active set it points to is taken instead, at
     least halving ||Phi||, and the solve converges to an equilibrium in fewer iterations than with the climb left
     to the watchdog."""
-    from benchmarks.problems import trajectory
-
-    problem = trajectory.merge_problems(7)[6]
-    cfg = load_config(text=problem.config_yaml)
-    game = compile_game(cfg)
+    problem, cfg, game, _ = _merge_draw(6)
     taken: list[tuple[float, float]] = []
     corrected = hybrid.HybridNewton._corrected
 
@@ -421,12 +427,7 @@ def test_a_first_newton_step_that_climbs_hands_a_nonlinear_game_to_the_interior_
         monkeypatch: pytest.MonkeyPatch) -> None:
     """ALGAMES's merge, draw 0: the first Newton step from z^0 multiplies ||Phi|| by 8.5; that iteration is the
     interior phase's first step instead (||Phi|| falls), where the watchdog took three climbing steps before."""
-    from benchmarks.problems import trajectory
-
-    problem = trajectory.merge_problems(1)[0]
-    cfg = load_config(text=problem.config_yaml)
-    game = compile_game(cfg)
-    solver = make_solver(cfg, game)
+    _, cfg, game, solver = _merge_draw(0)
     start = solver.init()
     first = solver.step(start)
     assert first.search.phase == "interior" and first.residual_norm < start.residual_norm
@@ -435,6 +436,7 @@ def test_a_first_newton_step_that_climbs_hands_a_nonlinear_game_to_the_interior_
     warm = solver.step(solver.init(warm=True))
     assert warm.search.phase == "newton" and warm.residual_norm > 8.0 * start.residual_norm
     monkeypatch.setattr(hybrid, "FIRST_STEP", np.inf)
+    monkeypatch.setattr(hybrid, "LATER_STEP", np.inf)
     phases = _newton_steps_before_the_interior_phase(cfg, game)
     assert len(phases) == 5 and phases[1] > 8.0 * phases[0], phases  # z^0, three climbing steps, the interior start
 
@@ -443,15 +445,10 @@ def test_a_first_newton_step_that_climbs_hands_a_nonlinear_game_to_the_interior_
 def test_a_later_newton_step_from_z0_that_climbs_hands_a_nonlinear_game_to_the_interior_phase(
         monkeypatch: pytest.MonkeyPatch) -> None:
     """ALGAMES's merge, draw 61 of seed 0: the first Newton step from z^0 raises ||Phi|| 1.48-fold (kept), the second
-    7.4-fold; that iteration is the interior phase's first step instead, and the solve converges in 13 iterations,
-    where the watchdog kept the Newton phase for 19 steps (17 of them Levenberg-Marquardt steps) and the solve took
-    31."""
-    from benchmarks.problems import trajectory
-
-    problem = trajectory.merge_problems(62)[61]
-    cfg = load_config(text=problem.config_yaml)
-    game = compile_game(cfg)
-    solver = make_solver(cfg, game)
+    7.4-fold (more than LATER_STEP); that iteration is the interior phase's first step instead, and the solve
+    converges in 13 iterations, where the watchdog kept the Newton phase for 19 steps (17 of them
+    Levenberg-Marquardt steps) and the solve took 31."""
+    problem, cfg, game, solver = _merge_draw(61)
     start = solver.init()
     first = solver.step(start)
     assert first.search.phase == "newton" and start.residual_norm < first.residual_norm <= 1.5 * start.residual_norm
@@ -461,10 +458,8 @@ def test_a_later_newton_step_from_z0_that_climbs_hands_a_nonlinear_game_to_the_i
     assert state.status == Status.CONVERGED and state.k == 13
     assert max(problem.best_response_gaps(state.z[: game.n]).values()) <= 1e-5
     phases = []
-    climbs = hybrid.HybridNewton._climbs_first
     with monkeypatch.context() as m:  # the rule as it was: the first step alone
-        m.setattr(hybrid.HybridNewton, "_climbs_first",
-                  lambda self, memory, state, merit: len(memory.merits) == 1 and climbs(self, memory, state, merit))
+        m.setattr(hybrid, "LATER_STEP", np.inf)
         solver = make_solver(cfg, game)
         before = iterate(solver, solver.init(), on_iterate=lambda s: phases.append(s.search.phase))
     assert before.status == Status.CONVERGED and before.k == 31 and phases[:20] == ["newton"] * 20

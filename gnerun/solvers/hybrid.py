@@ -17,9 +17,9 @@ first, judged by a nonmonotone watchdog; a more robust method when it fails; res
    last ``MEMORY`` values), as PATH's watchdog does: the local method's own path may climb before it converges.
    ``WATCHDOG`` steps without a new best value (``SUFFICIENT`` below the best), a non-finite Phi or a refused
    step end the phase. Where JPhi is singular, the Levenberg-Marquardt step is taken instead (a proximal
-   perturbation of the singular matrix, mu = ``LM_FAR`` ||Phi||). In a nonlinear game (unperturbed), no min-map step
-   of the Newton phase from z^0 (before any interior phase; with the Fischer-Burmeister function its first step) may
-   raise ||Phi|| more than ``FIRST_STEP``-fold: the linearisation there is then no guide, and the interior phase
+   perturbation of the singular matrix, mu = ``LM_FAR`` ||Phi||). In a nonlinear game (unperturbed), the first step
+   from z^0 may not raise ||Phi|| more than ``FIRST_STEP``-fold, nor a later min-map step of that phase (before any
+   interior phase) more than ``LATER_STEP``-fold: the linearisation there is then no guide, and the interior phase
    takes this iteration instead of the watchdog's climb (on an LQ game the min-map
    Newton steps are an exact active-set search whose climbs lead to the solution: FK A.7; a closed loop's warm
    start keeps its Newton step too, see ``_climbs_first``). On the paper's games this takes exactly the paper's
@@ -110,12 +110,16 @@ PIVOTS = 8  # LQ games: Lemke's method from this many covering vectors after the
 SLOW = 60  # iterations without convergence, in the interior phase, after which the line-search phase is tried (once)
 SEARCH_STEPS = 30  # the line-search phase's budget of iterations
 RESET_ABOVE = 3.0  # the interior phase resets its slacks while ||Phi|| is above this times the hand-over threshold
-# nonlinear games: a Newton step from z^0, or of the Newton phase that goes on from it before any interior phase, is
-# refused if it multiplies ||Phi|| by more than FIRST_STEP; the merges' and intersections' first steps climb
-# 1.85-72-fold, FK A.1 from 0.01's 1.2-fold and the local method goes on to converge from there in 9 steps, cheaper
-# than the interior phase's 5 (the default's time 2.8 times the local one's at 1.0); a merge whose first step climbed
-# 1.48-fold climbed 7.4-fold at its second and then took 17 Levenberg-Marquardt steps of 4.5 ms each
+# nonlinear games: the first Newton step from z^0 is refused if it multiplies ||Phi|| by more than FIRST_STEP; the
+# merges' and intersections' first steps climb 1.85-72-fold, FK A.1 from 0.01's 1.2-fold and the local method goes on
+# to converge from there in 9 steps, cheaper than the interior phase's 5 (the default's time 2.8 times the local one's
+# at 1.0)
 FIRST_STEP = 1.5
+# ... and a later min-map step of that phase if it multiplies ||Phi|| by more than LATER_STEP: a merge whose first step
+# climbed 1.48-fold climbed 7.4-fold at its second and then took 17 Levenberg-Marquardt steps of 4.5 ms each (31
+# iterations, 13 with the rule); formation starts whose later steps climb 2-4-fold converge from there (draw 26 of
+# seed 1: 10 iterations, 71 with the rule at 1.5)
+LATER_STEP = 5.0
 
 
 @dataclass(slots=True, frozen=True, kw_only=True)
@@ -304,16 +308,19 @@ class HybridNewton:
     def _climbs_first(self, memory: Memory, state: SSNState, merit: float) -> bool:
         """Whether this is a Newton step of a nonlinear game's Newton phase from z^0 before any interior phase (the
         first step alone for the Fischer-Burmeister function; unperturbed, not a closed loop's warm start) and it
-        raises ||Phi|| more than ``FIRST_STEP``-fold: the Newton phase then ends at once. A closed
+        raises ||Phi|| more than ``FIRST_STEP``-fold (the first step) or ``LATER_STEP``-fold (a later min-map step):
+        the Newton phase then ends at once. A closed
         loop's budget of K steps from its warm start keeps the Newton step, climbing or not: an interior step from
         there leaves the last plan for a point inside every constraint (measured on MCPTrajectoryGameSolver's demo:
         at K = 1 a violation of 1.1e-3 instead of 0, at K = 5 and 10 48 and 49 of 50 sampling times converged
         instead of 50)."""
-        # the min map's steps from z^0 all (an active-set search that climbs has its guess wrong); the
+        # the min map's steps from z^0 all (an active-set search that climbs far has its guess wrong); the
         # Fischer-Burmeister function's first (its later climbs lead on: FK A.2 from 1 in 10 steps, 49 with the rule)
-        later = len(memory.merits) == 1 or self.newton.reduced
-        first = later and memory.interior is None and memory.attempt == 0 and not memory.warm
-        return first and self.exact and merit > FIRST_STEP * state.residual_norm and not self._affine()
+        first = len(memory.merits) == 1
+        if not (first or self.newton.reduced) or memory.interior is not None or memory.attempt or memory.warm:
+            return False
+        limit = FIRST_STEP if first else LATER_STEP
+        return self.exact and merit > limit * state.residual_norm and not self._affine()
 
     def _start_interior(self, state: SSNState, attempt: int, *, k: int | None = None,
                         warm: bool = False) -> SSNState:
@@ -342,12 +349,20 @@ class HybridNewton:
             z = newton.regularized_point(state, state.residual_norm)
         if z is None:
             return None
+        halved, candidate, c = self._judged(state, z, rcond)
+        return candidate if halved else self._corrected(state, z, c)
+
+    def _judged(self, state: SSNState, z: np.ndarray, rcond: float) -> tuple[bool, SSNState | None, np.ndarray]:
+        """Whether the point z reduces ||Phi|| HANDOVER_DECREASE-fold from ``state`` (judged on the residual alone,
+        so a refused point costs no derivatives), the iterate there where it does (None where its evaluation fails),
+        and c(a) at z."""
+        newton = self.newton
         L, c = newton.kkt_residual(z, state.x)
         phi, _ = newton.phi(L, c, z)
-        if norm(phi) <= HANDOVER_DECREASE * state.residual_norm:
-            candidate = newton.advance(state, z, rcond=rcond)
-            return candidate if candidate.status == Status.RUNNING else None
-        return self._corrected(state, z, c)
+        if norm(phi) > HANDOVER_DECREASE * state.residual_norm:
+            return False, None, c
+        candidate = newton.advance(state, z, rcond=rcond)
+        return True, (candidate if candidate.status == Status.RUNNING else None), c
 
     def _corrected(self, state: SSNState, z: np.ndarray, c: np.ndarray) -> SSNState | None:
         """The Newton step from ``state`` on the active set that a refused step to ``z`` (c = c(a) there) points to,
@@ -367,11 +382,9 @@ class HybridNewton:
             z, rcond = newton.newton_point(replace(state, active=active))
             if z is None:
                 return None
-            L, c = newton.kkt_residual(z, state.x)
-            phi, _ = newton.phi(L, c, z)
-            if norm(phi) <= HANDOVER_DECREASE * state.residual_norm:
-                candidate = newton.advance(state, z, rcond=rcond)
-                return candidate if candidate.status == Status.RUNNING else None
+            halved, candidate, c = self._judged(state, z, rcond)
+            if halved:
+                return candidate
         return None
 
     def _interior_step(self, state: SSNState, memory: Memory) -> SSNState:
