@@ -317,10 +317,11 @@ class HybridNewton:
         # the min map's steps from z^0 all (an active-set search that climbs far has its guess wrong); the
         # Fischer-Burmeister function's first (its later climbs lead on: FK A.2 from 1 in 10 steps, 49 with the rule)
         first = len(memory.merits) == 1
+        if not merit > (FIRST_STEP if first else LATER_STEP) * state.residual_norm:  # (most steps: at once)
+            return False
         if not (first or self.newton.reduced) or memory.interior is not None or memory.attempt or memory.warm:
             return False
-        limit = FIRST_STEP if first else LATER_STEP
-        return self.exact and merit > limit * state.residual_norm and not self._affine()
+        return self.exact and not self._affine()
 
     def _start_interior(self, state: SSNState, attempt: int, *, k: int | None = None,
                         warm: bool = False) -> SSNState:
