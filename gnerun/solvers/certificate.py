@@ -257,7 +257,8 @@ class NewtonResponses:
         return self._solvers[agent]
 
     def _build(self, agent: int, opts, full):
-        """(the agent's problem, its globalized solver, the game's rows in the problem's order); ``full``: the game's
+        """(the agent's problem, its solver: the interior phase alone, polished once ||Phi|| <= ``POLISH``, the game's
+        rows in the problem's order); ``full``: the game's
         sparse system, where the game was solved in the sparse formulation."""
         from ..game.compile import agent_problem
         from .hybrid import HybridNewton
@@ -500,10 +501,9 @@ def check_player(game: CompiledGame, agent: int, z: np.ndarray, x: np.ndarray | 
     # the best design points and any point already better than the candidate start local solves too
     vals, ok = _values(game, agent, a, x, starts.compare, prices)
     order = [k for k in np.argsort(np.where(ok, vals, np.inf)) if ok[k] and math.isfinite(vals[k])]
-    if ni <= global_response.MAX_DIM:
-        local = _unique(local + [starts.compare[k] for k in order[: LOCAL_FROM_DESIGN + 1]])
-    else:  # a larger player: its best compared points too (any point already better than the candidate among them)
-        local = _unique(local + [starts.compare[k] for k in order[:LOCAL_FROM_DESIGN_LARGE]])
+    # (any point already better than the candidate is among them)
+    count = LOCAL_FROM_DESIGN + 1 if ni <= global_response.MAX_DIM else LOCAL_FROM_DESIGN_LARGE
+    local = _unique(local + [starts.compare[k] for k in order[:count]])
 
     # the box search (small players): a global statement, or a witness
     box_result, box = None, None
