@@ -101,7 +101,7 @@ class KKTSystem:
             parts = self.game.kkt_parts(z, x)
             return parts, *self.residual(parts, z)
         n = self.game.n
-        v = self._W @ z
+        v = self._W.dot(z)
         v += self.game.lq.offsets(x)
         phi = v.copy()
         a = np.negative(v[n:], out=phi[n:])  # -c, in place in Phi's buffer
@@ -211,7 +211,7 @@ class KKTSystem:
         z = new.z
         new = self._check_finite(new)
         limit = self.options.divergence_limit
-        if new.status == Status.RUNNING and z @ z > limit * limit and np.abs(z).max() > limit:
+        if new.status == Status.RUNNING and z.dot(z) > limit * limit and np.abs(z).max() > limit:
             new = replace(new, status=Status.DIVERGED,
                           message=f"diverged at iteration {new.k}: ||z||_inf = {np.max(np.abs(z)):.2e} exceeds "
                                   f"divergence_limit {limit:.0e}")

@@ -34,7 +34,9 @@ def levenberg_marquardt(M: np.ndarray, r: np.ndarray, mu: float) -> np.ndarray |
 
 
 def norm(v: np.ndarray) -> float:
-    return math.sqrt(v @ v)  # nan if v has a nan, inf if it overflows; 0 for an empty v
+    # nan if v has a nan, inf if it overflows; 0 for an empty v (ndarray.dot: the BLAS call of @ with less of numpy's
+    # dispatch, 0.3 instead of 0.5 us on a short vector)
+    return math.sqrt(v.dot(v))
 
 
 def noise(rng: np.random.Generator, shape: tuple[int, ...], distribution: str) -> np.ndarray:

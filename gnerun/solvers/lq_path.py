@@ -173,7 +173,7 @@ class LQPath:
             return None, entry.rcond
         w0 = self.game.lq.offsets(x)
         if entry.G is not None:
-            return entry.G @ w0, entry.rcond
+            return entry.G.dot(w0), entry.rcond
         entry.uses += 1
         if entry.uses >= MAP_AFTER:
             # an active set that comes back (a closed loop, repeated solves): the map z^+ = G_A w0, one product per step

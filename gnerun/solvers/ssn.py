@@ -147,18 +147,18 @@ class SemismoothNewton(KKTSystem):
             return self.singular(state, rcond)
         w0 = self.game.lq.offsets(x)
         n = self.game.n
-        v = self.lq.W @ z
+        v = self.lq.W.dot(z)  # (ndarray.dot: the same BLAS call as @ with less of numpy's dispatch)
         v += w0
         phi = v.copy()
         a = np.negative(v[n:], out=phi[n:])
         lam = z[n:]
         active = a < lam - self._tie_tol
         np.minimum(a, lam, out=a)
-        new = SSNState(z=z, x=x, k=state.k + 1, phi=phi, residual_norm=math.sqrt(phi @ phi),
+        new = SSNState(z=z, x=x, k=state.k + 1, phi=phi, residual_norm=math.sqrt(phi.dot(phi)),
                        parts=KKTParts(v[:n], v[n:], self.lq.dL, self.lq.dc), active=active, z_prev=state.z,
                        active_prev=state.active, status=Status.RUNNING, message="", rng=state.rng, rcond=rcond)
         limit = self.options.divergence_limit
-        if not math.isfinite(new.residual_norm) or z @ z > limit * limit:  # rare: the general checks decide
+        if not math.isfinite(new.residual_norm) or z.dot(z) > limit * limit:  # rare: the general checks decide
             return self.checked(new)
         return new
 
