@@ -33,6 +33,13 @@ game:
 
 
 @pytest.fixture
+def no_decoupled_start(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The globalized method from the configured start, without its first step on cold-started trajectory games
+    (the players' decoupled plans), so that the mechanisms after it meet the starts that need them."""
+    monkeypatch.setattr(hybrid, "DECOUPLE_ABOVE", np.inf)
+
+
+@pytest.fixture
 def no_avi_step(monkeypatch: pytest.MonkeyPatch) -> None:
     """The globalized method without its first step on LQ games (the affine VI's solution, gnerun.solvers.avi), so
     that the mechanisms after it meet the games that need them."""
@@ -302,11 +309,11 @@ def test_a_hand_over_refused_on_the_interior_guess_is_taken_on_the_corrected_act
 
 @pytest.mark.slow
 def test_a_newton_step_that_climbs_after_the_hand_over_is_taken_on_the_corrected_active_set(
-        monkeypatch: pytest.MonkeyPatch) -> None:
-    """ALGAMES's merge, draw 6 of seed 0: after the hand-over a min-map Newton step multiplies ||Phi|| 750-fold (a row
-    the step leaves with a violated constraint); the same step on the active set it points to is taken instead, at
-    least halving ||Phi||, and the solve converges to an equilibrium in fewer iterations than with the climb left
-    to the watchdog."""
+        monkeypatch: pytest.MonkeyPatch, no_decoupled_start: None) -> None:
+    """ALGAMES's merge, draw 6 of seed 0, from the configured start: after the hand-over a min-map Newton step
+    multiplies ||Phi|| 750-fold (a row the step leaves with a violated constraint); the same step on the active set it
+    points to is taken instead, at least halving ||Phi||, and the solve converges to an equilibrium in fewer iterations
+    than with the climb left to the watchdog."""
     problem, cfg, game, _ = _merge_draw(6)
     taken: list[tuple[float, float]] = []
     corrected = hybrid.HybridNewton._corrected
@@ -424,9 +431,10 @@ def test_a_restart_that_would_repeat_an_earlier_one_is_not_run(monkeypatch: pyte
 
 @pytest.mark.slow
 def test_a_first_newton_step_that_climbs_hands_a_nonlinear_game_to_the_interior_phase(
-        monkeypatch: pytest.MonkeyPatch) -> None:
-    """ALGAMES's merge, draw 0: the first Newton step from z^0 multiplies ||Phi|| by 8.5; that iteration is the
-    interior phase's first step instead (||Phi|| falls), where the watchdog took three climbing steps before."""
+        monkeypatch: pytest.MonkeyPatch, no_decoupled_start: None) -> None:
+    """ALGAMES's merge, draw 0, from the configured start: the first Newton step from z^0 multiplies ||Phi|| by 8.5;
+    that iteration is the interior phase's first step instead (||Phi|| falls), where the watchdog took three climbing
+    steps before."""
     _, cfg, game, solver = _merge_draw(0)
     start = solver.init()
     first = solver.step(start)
@@ -443,10 +451,10 @@ def test_a_first_newton_step_that_climbs_hands_a_nonlinear_game_to_the_interior_
 
 @pytest.mark.slow
 def test_a_later_newton_step_from_z0_that_climbs_hands_a_nonlinear_game_to_the_interior_phase(
-        monkeypatch: pytest.MonkeyPatch) -> None:
-    """ALGAMES's merge, draw 61 of seed 0: the first Newton step from z^0 raises ||Phi|| 1.48-fold (kept), the second
-    7.4-fold (more than LATER_STEP); that iteration is the interior phase's first step instead, and the solve
-    converges in 13 iterations, where the watchdog kept the Newton phase for 19 steps (17 of them
+        monkeypatch: pytest.MonkeyPatch, no_decoupled_start: None) -> None:
+    """ALGAMES's merge, draw 61 of seed 0, from the configured start: the first Newton step from z^0 raises ||Phi||
+    1.48-fold (kept), the second 7.4-fold (more than LATER_STEP); that iteration is the interior phase's first step
+    instead, and the solve converges in 13 iterations, where the watchdog kept the Newton phase for 19 steps (17 of them
     Levenberg-Marquardt steps) and the solve took 31."""
     problem, cfg, game, solver = _merge_draw(61)
     start = solver.init()
@@ -541,3 +549,85 @@ def test_without_the_line_search_phase_that_start_is_not_solved(monkeypatch: pyt
     res = solve(_formation(**{"run.certificate": False}))
     assert res.status == "stalled", res.message  # every interior start stalls
     assert "after 3 start(s)" in res.message
+
+
+@pytest.mark.slow
+def test_a_cold_merge_starts_from_the_players_decoupled_plans(monkeypatch: pytest.MonkeyPatch) -> None:
+    """ALGAMES's merge, draw 4 of seed 0: the first iteration is the cars' plans as if each were alone (its rows
+    that another car's decisions reach dropped), ||Phi|| 70 times lower than at zero inputs; from there the solve
+    converges to an equilibrium in 12 iterations, where from zero inputs it stalls twice and takes 54 (a round of
+    best responses among them)."""
+    problem, cfg, game, solver = _merge_draw(4)
+    start = solver.init()
+    assert start.search.decouple and start.residual_norm > hybrid.DECOUPLE_ABOVE
+    first = solver.step(start)
+    assert first.k == 1 and first.search.phase == "newton"
+    assert first.residual_norm <= hybrid.DECOUPLED_GAIN * start.residual_norm
+    assert np.array_equal(first.search.origin, first.z) and np.array_equal(first.search.start, start.z)
+    # each car's plan alone: no other car's decisions reach its rows there, and its own rows hold
+    joint = game.pattern.joint_rows
+    for i in range(len(game.agent_slices)):
+        rows = game.agents.constraint_rows(i)
+        c = game.agents.own_problem(i, first.z[: game.n], start.x)[2]
+        assert np.max(c[~joint[rows]], initial=0.0) <= 1e-5
+    state = iterate(solver, start)
+    assert state.status == Status.CONVERGED and state.k <= 15, (state.k, state.message)
+    assert max(problem.best_response_gaps(state.z[: game.n]).values()) <= 1e-5
+    monkeypatch.setattr(hybrid, "DECOUPLE_ABOVE", np.inf)
+    solver = make_solver(cfg, game)
+    plain = iterate(solver, solver.init())
+    assert plain.status == Status.CONVERGED and plain.k > 3 * state.k, plain.k
+
+
+@pytest.mark.slow
+def test_decoupled_plans_that_drive_through_each_other_give_way_to_the_configured_start(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """The overtaking game from "car 1 brakes": planned alone, the faster car drives through the slower one;
+    ||Phi|| there is 90 times lower than at the start, but the interior phase from it climbs above ||Phi(z^0)||.
+    That iterate's place is taken by the configured start, and the solve goes on as it would have without the
+    decoupled plans: the same solution, in the same iterations after the trial."""
+    from benchmarks.problems import trajectory
+
+    problem = next(p for p in trajectory.overtaking_problems() if "brakes" in p.start)
+    cfg = load_config(text=problem.config_yaml)
+    game = compile_game(cfg)
+    solver = make_solver(cfg, game)
+    start = solver.init()
+    states: list = []
+    state = iterate(solver, start, on_iterate=states.append)
+    assert states[1].residual_norm <= hybrid.DECOUPLED_GAIN * start.residual_norm
+    back = next(k for k, s in enumerate(states) if k > 1 and np.array_equal(s.z, start.z))
+    assert all(s.search.abandon == start.residual_norm for s in states[1:back])
+    assert states[back].search.abandon == np.inf
+    monkeypatch.setattr(hybrid, "DECOUPLE_ABOVE", np.inf)
+    solver = make_solver(cfg, game)
+    plain = iterate(solver, solver.init())
+    assert state.status == plain.status == Status.CONVERGED
+    assert state.k == plain.k + back and np.allclose(state.z, plain.z, atol=1e-9)
+    assert max(problem.best_response_gaps(state.z[: game.n]).values()) <= 1e-5
+
+
+def test_the_decoupled_plans_are_only_a_cold_start_of_a_trajectory_game_far_from_stationary() -> None:
+    """Not for a closed loop's warm start, nor where ||Phi(z^0)|| <= DECOUPLE_ABOVE (ALGAMES's intersection from zero
+    inputs), nor for static games (FK A.2); the rows that couple the players are those two players' decisions reach,
+    as the structural nonzeros of dc/da say (found without building dc/da)."""
+    from benchmarks.problems import trajectory
+
+    _, cfg, game, solver = _merge_draw(0)
+    assert solver.init().search.decouple and not solver.init(warm=True).search.decouple
+    assert "_derivatives" not in game.__dict__  # the sparse formulation's solver built no condensed derivatives
+    joint = game.pattern.joint_rows
+    owner = np.zeros(game.n, dtype=int)
+    for i, sl in enumerate(game.agent_slices):
+        owner[sl] = i
+    rows, cols = game.pattern.constraint_nonzeros()
+    reached = np.zeros((len(game.agent_slices), game.m), dtype=bool)
+    reached[owner[cols], rows] = True
+    assert joint.any() and np.array_equal(joint, reached.sum(axis=0) > 1)
+    cfg = load_config(text=trajectory.intersection_problems(1)[0].config_yaml)
+    game = compile_game(cfg)
+    start = make_solver(cfg, game).init()
+    assert start.residual_norm < hybrid.DECOUPLE_ABOVE and not start.search.decouple
+    cfg = load_config(text=_fk("A.2", "x0 = 1").config_yaml)
+    assert not make_solver(cfg, compile_game(cfg)).init().search.decouple
+

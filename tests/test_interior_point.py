@@ -228,14 +228,15 @@ def test_a_blocked_predictor_keeps_the_barriers_target(monkeypatch: pytest.Monke
 
 @pytest.mark.slow
 def test_the_predictor_corrector_step_ends_a_stalled_merge(monkeypatch: pytest.MonkeyPatch) -> None:
-    """ALGAMES's merge, draw 4, without the slack reset: with the barrier's monotone target alone the interior
-    phase cycles at eps = 8e-6 and is restarted twice (136 iterations); with Mehrotra's steps it converges without a
-    restart. (With the slack reset it cycles at eps = 1.6e-6 either way: 157 iterations.)"""
+    """ALGAMES's merge, draw 4 from zero inputs, without the slack reset: with the barrier's monotone target alone the
+    interior phase cycles at eps = 8e-6 and is restarted twice (136 iterations); with Mehrotra's steps it converges
+    without a restart. (With the slack reset it cycles at eps = 1.6e-6 either way: 157 iterations.)"""
     from benchmarks.problems import trajectory
 
     problem = trajectory.merge_problems(5)[4]
     cfg = load_config(text=problem.config_yaml)
     game = compile_game(cfg)
+    monkeypatch.setattr(hybrid, "DECOUPLE_ABOVE", np.inf)  # from zero inputs, not the cars' decoupled plans
     monkeypatch.setattr(hybrid, "RESET_ABOVE", np.inf)  # Mehrotra's step alone (with the slack reset it cycles)
     monkeypatch.setattr(hybrid, "response_round", lambda g, a, x: None)  # the restarts from z^0, not the answers
     iterations = _iterations_with(monkeypatch, cfg, game, interior_point, "PREDICT_AFTER",
@@ -267,13 +268,14 @@ def test_the_slack_reset_moves_only_rows_guessed_inactive_that_are_further_insid
 
 @pytest.mark.slow
 def test_the_slack_reset_shortens_a_merge(monkeypatch: pytest.MonkeyPatch) -> None:
-    """ALGAMES's merge, draw 8: the collision rows' slacks lag behind their (concave) constraints, whose
-    linearisation underestimates how far inside a step goes; with the slack reset 16 iterations, without 34."""
+    """ALGAMES's merge, draw 8 from zero inputs: the collision rows' slacks lag behind their (concave) constraints,
+    whose linearisation underestimates how far inside a step goes; with the slack reset 16 iterations, without 34."""
     from benchmarks.problems import trajectory
 
     problem = trajectory.merge_problems(9)[8]
     cfg = load_config(text=problem.config_yaml)
     game = compile_game(cfg)
+    monkeypatch.setattr(hybrid, "DECOUPLE_ABOVE", np.inf)  # from zero inputs, not the cars' decoupled plans
     iterations = _iterations_with(monkeypatch, cfg, game, hybrid, "RESET_ABOVE", (hybrid.RESET_ABOVE, np.inf))
     assert iterations[0] <= 20 < 30 <= iterations[1], iterations
 

@@ -198,7 +198,8 @@ def test_when_the_answers_to_the_stalled_plans_stall_the_start_plans_are_answere
 
 
 def test_an_algames_merge_that_stalls_from_every_start_is_solved_from_the_answers_to_its_stalled_plans() -> None:
-    """ALGAMES's merge draw 48 (seed 0): every interior start from zero inputs stalls near ||Phi|| = 0.04 (car 3
+    """ALGAMES's merge draw 48 (seed 0), without the cars' decoupled plans as its start: every interior start from
+    zero inputs stalls near ||Phi|| = 0.04 (car 3
     between car 1 and the ramp), and cars 1 and 3 collide in the zero-input plans, so no car has a feasible answer to
     them. The answers to the plans where the first start stalled start the solve that converges, certified (the
     solve's own check), and each car's independent numpy best response (SLSQP from three starts) finds nothing
@@ -213,6 +214,7 @@ def test_an_algames_merge_that_stalls_from_every_start_is_solved_from_the_answer
 
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(hybrid, "response_round", counted)
+        mp.setattr(hybrid, "DECOUPLE_ABOVE", np.inf)  # from zero inputs, not the cars' decoupled plans
         res = gnerun.solve(load_config(text=problem.config_yaml), out=None)
     assert res.status == "converged", res.message
     assert calls and calls[0].any()  # the first round answers the stalled plans, not the zero inputs

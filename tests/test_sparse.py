@@ -305,10 +305,13 @@ def test_the_sparse_system_is_built_with_the_game_before_the_run(command: str, t
 
 
 def _merge_system():
-    """ALGAMES's merge in the sparse formulation, a point of its solve (after the Newton phase and a few interior
-    steps: multipliers of all sizes) and that point's parts."""
+    """ALGAMES's merge in the sparse formulation, a point of its solve from the configured start (after the Newton
+    phase and a few interior steps: multipliers of all sizes; not from the cars' decoupled plans) and that point's
+    parts."""
     cfg = load_config(CONFIGS / "algames_merge.yaml", {"solver.formulation": "sparse"})
-    return _stepped(cfg, 15)
+    with pytest.MonkeyPatch.context() as m:
+        m.setattr(hybrid, "DECOUPLE_ABOVE", np.inf)
+        return _stepped(cfg, 15)
 
 
 def _stepped(cfg, steps: int):

@@ -66,6 +66,20 @@ class Pattern:
                 coupled.add(int(r))
         return sorted(coupled)
 
+    @functools.cached_property
+    def joint_rows(self) -> np.ndarray:
+        """Per row of c, whether it depends on the decisions of two or more agents (collision rows, shared resources:
+        what couples the players' feasible sets), as a read-only mask. By CasADi's dependency propagation on c, not
+        the Jacobian: 1 ms where building dc/da takes 0.4 s (ALGAMES's merge) or 2.3 s (its intersection)."""
+        game = self.game
+        sym = game._symbolic
+        joint = np.zeros(game.m, dtype=bool)
+        if game.m:
+            reached = np.array([ca.which_depends(sym.c, sym.a[sl], 1, True) for sl in game.agent_slices], dtype=int)
+            joint = reached.sum(axis=0) > 1
+        joint.flags.writeable = False
+        return joint
+
     def jacobian(self) -> sp.csr_matrix:
         """Structural nonzeros of JPhi (the union over both branches of every complementarity row)."""
         sL, sc = self.game._sparsity
