@@ -553,10 +553,11 @@ def test_without_the_line_search_phase_that_start_is_not_solved(monkeypatch: pyt
 
 @pytest.mark.slow
 def test_a_cold_merge_starts_from_the_players_decoupled_plans(monkeypatch: pytest.MonkeyPatch) -> None:
-    """ALGAMES's merge, draw 4 of seed 0: the first iteration is the cars' plans as if each were alone (its rows
-    that another car's decisions reach dropped), ||Phi|| 70 times lower than at zero inputs; from there the solve
-    converges to an equilibrium in 12 iterations, where from zero inputs it stalls twice and takes 54 (a round of
-    best responses among them)."""
+    """ALGAMES's merge, draw 4 of seed 0: the first iteration is the cars' plans as if each were alone (the rows that
+    two cars' decisions reach left out), ||Phi|| 70 times lower than at zero inputs, where each car's own rows hold
+    and SLSQP on its problem without the others' rows finds nothing better; from there the solve converges to an
+    equilibrium in 12 iterations, where from zero inputs it stalls twice and takes 54 (a round of best responses
+    among them)."""
     problem, cfg, game, solver = _merge_draw(4)
     start = solver.init()
     assert start.search.decouple and start.residual_norm > hybrid.DECOUPLE_ABOVE
@@ -564,12 +565,22 @@ def test_a_cold_merge_starts_from_the_players_decoupled_plans(monkeypatch: pytes
     assert first.k == 1 and first.search.phase == "newton"
     assert first.residual_norm <= hybrid.DECOUPLED_GAIN * start.residual_norm
     assert np.array_equal(first.search.origin, first.z) and np.array_equal(first.search.start, start.z)
-    # each car's plan alone: no other car's decisions reach its rows there, and its own rows hold
+    # each car's plan alone: its own rows hold, and it is a best response on its problem without the joint rows
+    from scipy.optimize import minimize
+
+    from gnerun.game.agents import OwnProblem
+
     joint = game.pattern.joint_rows
-    for i in range(len(game.agent_slices)):
-        rows = game.agents.constraint_rows(i)
-        c = game.agents.own_problem(i, first.z[: game.n], start.x)[2]
-        assert np.max(c[~joint[rows]], initial=0.0) <= 1e-5
+    plans = first.z[: game.n]
+    for i, sl in enumerate(game.agent_slices):
+        alone = OwnProblem(game, i, plans, start.x)
+        own = ~joint[alone.rows] & ~alone.eq  # (the merge has no equality rows)
+        assert np.max(alone.at(plans[sl])[2][own], initial=0.0) <= 1e-8
+        res = minimize(alone.objective, plans[sl].copy(), jac=True, method="SLSQP",
+                       constraints=[{"type": "ineq", "fun": lambda ai, p=alone, k=own: -p.at(ai)[2][k],
+                                     "jac": lambda ai, p=alone, k=own: -p.at(ai)[3][k]}], options={"maxiter": 200})
+        feasible = np.max(alone.at(res.x)[2][own], initial=0.0) <= 1e-8
+        assert not feasible or alone.objective(res.x)[0] >= alone.objective(plans[sl])[0] - 1e-8
     state = iterate(solver, start)
     assert state.status == Status.CONVERGED and state.k <= 15, (state.k, state.message)
     assert max(problem.best_response_gaps(state.z[: game.n]).values()) <= 1e-5
@@ -631,3 +642,26 @@ def test_the_decoupled_plans_are_only_a_cold_start_of_a_trajectory_game_far_from
     cfg = load_config(text=_fk("A.2", "x0 = 1").config_yaml)
     assert not make_solver(cfg, compile_game(cfg)).init().search.decouple
 
+
+
+def test_a_method_without_rows_solves_the_game_without_them() -> None:
+    """KKTSystem.without_rows: the globalized method with player 1's coupled row x1^2 + x2^2 <= r^2 left out (its
+    multiplier held at zero, its complementarity not in Phi) ends where the same game written without that row ends,
+    and away from the game's own solution, where the row is active."""
+    text = (CONFIGS / "nonlinear_gne.yaml").read_text()
+    cfg = load_config(text=text)
+    game = compile_game(cfg)
+    joint = game.pattern.joint_rows
+    assert joint.sum() == 1
+    newton = make_solver(cfg, game).newton
+    alone = hybrid.HybridNewton(newton.without_rows(joint))
+    left_out = iterate(alone, alone.init())
+    free_cfg = load_config(text=text.replace('      constraints: ["x1**2 + x2**2 <= r**2"]\n', ""))
+    free_game = compile_game(free_cfg)
+    assert free_game.m == game.m - 1
+    free = iterate(make_solver(free_cfg, free_game), make_solver(free_cfg, free_game).init())
+    full = solve(cfg)
+    assert left_out.converged and free.converged and full.status == "converged"
+    assert np.allclose(left_out.z[: game.n], free.z[: game.n], atol=1e-9)
+    assert np.all(left_out.z[game.n:][joint] == 0.0)
+    assert np.abs(full.a - free.z[: game.n]).max() > 1e-3

@@ -214,17 +214,14 @@ class OwnProblem:
     """Agent ``agent``'s own problem with the others fixed at ``a`` (and the state x), for a local solver that asks
     for the cost and for the rows at the same point separately (SciPy's SLSQP): one evaluation of
     :meth:`AgentFunctions.own_problem` per point, kept for the next call. The rows are the agent's
-    ``constraint_rows``, in that order; ``eq`` marks its equalities. ``keep`` (a mask over those rows): the rows the
-    problem has (the others are dropped: its constraints and violation leave them out)."""
+    ``constraint_rows``, in that order; ``eq`` marks its equalities."""
 
-    def __init__(self, game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | None,
-                 keep: np.ndarray | None = None) -> None:
+    def __init__(self, game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | None) -> None:
         self.game, self.agent, self.x = game, agent, x
         self.a = np.asarray(a, dtype=float)
         self.sl = game.agent_slices[agent]
         self.rows = game.agents.constraint_rows(agent)
         self.eq = game.equality_mask[self.rows]
-        self.keep = np.ones(len(self.rows), dtype=bool) if keep is None else np.asarray(keep, dtype=bool)
         self._key: bytes | None = None
         self._values: tuple = ()
 
@@ -248,7 +245,7 @@ class OwnProblem:
 
     def constraints(self) -> list[dict]:
         """SLSQP's constraints: c_i <= 0 as -c_i >= 0, and the equalities."""
-        ineq, eq = ~self.eq & self.keep, self.eq & self.keep
+        ineq, eq = ~self.eq, self.eq
         out = []
         if ineq.any():
             out.append({"type": "ineq", "fun": lambda ai: -self.at(ai)[2][ineq],
@@ -260,5 +257,4 @@ class OwnProblem:
     def violation(self, ai: np.ndarray) -> float:
         """The largest violation of the rows at ``ai`` (0 where every row holds)."""
         c = self.at(ai)[2]
-        ineq, eq = ~self.eq & self.keep, self.eq & self.keep
-        return max(float(np.max(c[ineq], initial=0.0)), float(np.max(np.abs(c[eq]), initial=0.0)))
+        return max(float(np.max(c[~self.eq], initial=0.0)), float(np.max(np.abs(c[self.eq]), initial=0.0)))

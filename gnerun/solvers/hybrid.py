@@ -13,16 +13,17 @@ first, judged by a nonmonotone watchdog; a more robust method when it fails; res
    phase goes on from there, or from z^0 where DAQP finds no solution (an LQ plain GNE without a variational
    equilibrium, FK A.8).
    **The players' decoupled plans** (nonlinear trajectory games of several players with rows that couple them,
-   cold-started and unperturbed, where ||Phi(z^0)|| > ``DECOUPLE_ABOVE``): the first iteration is each player's plan
-   as if it were alone, its best answer to the others' start plans on its own problem without the rows that other
-   players' decisions reach (collision rows, shared resources), by SLSQP from its own start plan
-   (:func:`~gnerun.solvers.response_round.decoupled_plans`), multipliers zero. It is taken as the new z^0 where
-   ||Phi|| there is at most ``DECOUPLED_GAIN`` times ||Phi(z^0)||. Where a later iterate's ||Phi|| exceeds the
-   configured z^0's, or the first interior start from the new z^0 fails, the configured z^0 takes that iterate's
-   place and the solve goes on from it as it would have (the overtaking game's cars planned alone drive through
-   each other). On ALGAMES's merges the plans alone are near the equilibrium (||Phi|| 60-90 times lower than at
-   zero inputs): the median solve takes 12 iterations instead of 18; the intersections' start plans are near
-   stationary already (||Phi(z^0)|| < 1) and are left alone (measured: benchmarks/results/solver-design.md).
+   cold-started and unperturbed, where ||Phi(z^0)|| > ``DECOUPLE_ABOVE``): the first iteration is the players' plans
+   as if each were alone, the equilibrium of the decoupled game (the rows that two or more players' decisions reach,
+   collision rows and shared resources, left out: ``KKTSystem.without_rows``), solved by this method itself from
+   z^0 (its interior phase first; at most ``ALONE_STEPS`` iterations, on the game's own compiled system), multipliers
+   zero. It is taken as the new z^0 where ||Phi|| there is at most ``DECOUPLED_GAIN`` times ||Phi(z^0)||. Where a
+   later iterate's ||Phi|| exceeds the configured z^0's, or the first interior start from the new z^0 fails, the
+   configured z^0 takes that iterate's place and the solve goes on from it as it would have (the overtaking game's
+   cars planned alone drive through each other). On ALGAMES's merges the plans alone are near the equilibrium
+   (||Phi|| 60-110 times lower than at zero inputs): the median solve takes 12 iterations instead of 18, the p90 14
+   instead of 33; the intersections' start plans are near stationary already (||Phi(z^0)|| < 1) and are left alone
+   (measured: benchmarks/results/solver-design.md).
 1. **Newton phase.** The semismooth Newton step (min map or Fischer-Burmeister, with the configured perturbation)
    is taken unless it multiplies ||Phi|| by more than ``BLOWUP`` over a nonmonotone reference (the largest of its
    last ``MEMORY`` values), as PATH's watchdog does: the local method's own path may climb before it converges.
@@ -96,11 +97,12 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .avi import AffineVI
+from .driver import iterate
 from .interior_point import STARTS, InteriorIterate, InteriorPoint
 from .josephy_newton import kkt_lcp_point
 from .linalg import norm
 from .line_search_newton import LineSearchNewton
-from .response_round import decoupled_plans, response_round
+from .response_round import response_round
 from .ssn import SemismoothNewton
 from .status import FAILURES, SSNState, Status
 
@@ -135,6 +137,7 @@ LATER_STEP = 5.0
 # ||Phi|| there is at most DECOUPLED_GAIN times ||Phi(z^0)|| (benchmarks/results/solver-design.md)
 DECOUPLE_ABOVE = 1.0
 DECOUPLED_GAIN = 0.1
+ALONE_STEPS = 50  # the decoupled game's solve: at most this many iterations (unconverged: no decoupled plans)
 
 
 @dataclass(slots=True, frozen=True, kw_only=True)
@@ -297,17 +300,22 @@ class HybridNewton:
         return candidate
 
     def _decoupled(self, state: SSNState, memory: Memory) -> SSNState | None:
-        """The players' decoupled plans (:func:`~gnerun.solvers.response_round.decoupled_plans`, multipliers zero)
-        as the first iterate and the new z^0, where ||Phi|| there is at most ``DECOUPLED_GAIN`` times ||Phi(z^0)||
-        (judged on the residual alone); None otherwise (a linear-quadratic game's AVI step, or the Newton step, is
-        taken instead). The configured z^0 stays the start whose plans the last round of best responses answers."""
+        """The players' decoupled plans (the decoupled game's equilibrium from z^0, :attr:`_alone`; multipliers zero)
+        as the first iterate and the new z^0, where that solve converges within ``ALONE_STEPS`` iterations and ||Phi||
+        there is at most ``DECOUPLED_GAIN`` times ||Phi(z^0)|| (judged on the residual alone); None otherwise (a
+        linear-quadratic game's AVI step, or the Newton step, is taken instead). The configured z^0 stays the start
+        whose plans the last round of best responses answers."""
         if self._affine():
             return None
         n = self.game.n
-        a = decoupled_plans(self.game, state.z[:n], state.x)
-        if a is None:
+        alone = self._alone
+        start = alone.init(state.z, state.x)
+        if start.status not in FAILURES:  # the interior phase at once: Newton steps from zero inputs wander (LM steps)
+            start = alone._start_interior(start, 0, k=0)
+        solved = iterate(alone, start, ALONE_STEPS)
+        if not solved.converged:
             return None
-        z = np.concatenate([a, np.zeros(self.game.m)])
+        z = np.concatenate([solved.z[:n], np.zeros(self.game.m)])
         L, c = self.newton.kkt_residual(z, state.x)
         phi, _ = self.newton.phi(L, c, z)
         if not norm(phi) <= DECOUPLED_GAIN * state.residual_norm:
@@ -321,6 +329,14 @@ class HybridNewton:
                                   handover=threshold, origin=candidate.z, handover0=threshold, start=memory.origin,
                                   abandon=state.residual_norm)
         return candidate
+
+    @functools.cached_property
+    def _alone(self) -> HybridNewton:
+        """This method on the decoupled game (the rows that couple the players left out: ``Pattern.joint_rows``),
+        without rounds of best responses, the line-search phase or decoupled plans of its own."""
+        alone = HybridNewton(self.newton.without_rows(self.game.pattern.joint_rows))
+        alone.answers = alone.decouples = alone.searches = False
+        return alone
 
     def _abandoned(self, state: SSNState, memory: Memory) -> SSNState:
         """The configured z^0 again as iterate k (``state``'s place), with the Newton phase from there as ``init``

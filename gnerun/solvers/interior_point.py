@@ -110,7 +110,7 @@ class InteriorPoint:
         self.newton = newton
         game = newton.game
         self.n = game.n
-        fixed = game.pattern.zero_gradient_rows
+        fixed = newton._fixed  # rows no decision reaches (and rows a method leaves out: KKTSystem.without_rows)
         eq = game.equality_mask
         self.I = np.flatnonzero(~eq & ~fixed)
         self.E = np.flatnonzero(eq & ~fixed)

@@ -22,6 +22,7 @@ held at zero, and a violated one ends the solve as ``infeasible_stage_constraint
 
 from __future__ import annotations
 
+import copy
 import math
 from dataclasses import replace
 from typing import TYPE_CHECKING
@@ -55,6 +56,7 @@ class KKTSystem:
         # rows no decision reaches: multipliers held at zero, never g-branch rows (checked at init)
         self._fixed = game.pattern.zero_gradient_rows
         self._fixed_rows = np.flatnonzero(self._fixed)
+        self._stage_rows = self._fixed_rows  # of those, the rows that must hold at the plant state (all of them)
         self._z_start = game.z_start()
         d = self.disturbance
         self._noisy = d.kind in ("jacobian_noise", "residual")
@@ -166,16 +168,30 @@ class KKTSystem:
                          active_prev=None, status=Status.RUNNING, message="", rng=rng)
         return self._check_stage_rows(self._check_finite(state))
 
+    def without_rows(self, rows: np.ndarray) -> KKTSystem:
+        """This method on the game with the constraint rows ``rows`` (a mask) left out: their multipliers held at zero
+        and their complementarity not part of Phi, as the rows no decision reaches are (but not checked at init). A
+        shallow copy: what it keeps per game (the sparse system, its layouts per set of rows) is shared."""
+        other = copy.copy(self)
+        other._fixed = self._fixed | rows
+        other._fixed_rows = np.flatnonzero(other._fixed)
+        other._affine = False
+        for name in ("_lq", "_lq_inline"):  # the LQ paths keep what they factorise per active set of every row
+            if hasattr(other, name):
+                setattr(other, name, False)
+        return other
+
     def _check_stage_rows(self, state: SSNState) -> SSNState:
         """A row that no decision reaches must hold at the plant state as it is; otherwise nothing can be done."""
-        if not self._fixed_rows.size or state.status != Status.RUNNING:
+        stage = self._stage_rows
+        if not stage.size or state.status != Status.RUNNING:
             return state
-        c = state.parts.c[self._fixed_rows]
+        c = state.parts.c[stage]
         tol = max(self.options.tol, 1e-9)
-        bad = np.where(self._eq[self._fixed_rows], np.abs(c) > tol, c > tol)
+        bad = np.where(self._eq[stage], np.abs(c) > tol, c > tol)
         if not bad.any():
             return state
-        rows = self._fixed_rows[bad]
+        rows = stage[bad]
         labels = "; ".join(f"{describe_row(self.game, self.game.n + r)} (violated by {c[bad][i]:.3g})"
                            for i, r in enumerate(rows[:3]))
         more = f" and {rows.size - 3} more" if rows.size > 3 else ""

@@ -34,11 +34,11 @@ MAX_ITER = 100  # SLSQP iterations per start (a start that ends feasible without
 
 
 def best_answer(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | None,
-                starts: list[np.ndarray], keep: np.ndarray | None = None) -> tuple[float, np.ndarray] | None:
+                starts: list[np.ndarray]) -> tuple[float, np.ndarray] | None:
     """Player ``agent``'s lowest cost, and its decisions, over the feasible end points of SLSQP on its own problem
-    (its cost, its own rows and the shared ones, or those of them ``keep`` marks; the others fixed at ``a``) from
-    ``starts``; None if none is feasible."""
-    problem = OwnProblem(game, agent, a, x, keep)
+    (its cost, its own rows and the shared ones; the others fixed at ``a``) from ``starts``; None if none is
+    feasible."""
+    problem = OwnProblem(game, agent, a, x)
     objective, constraints = problem.objective, problem.constraints()
     from scipy.optimize import minimize  # (loaded when a round of best responses runs: a fallback, 0.2 s of import)
 
@@ -85,23 +85,6 @@ def response_round(game: CompiledGame, a: np.ndarray, x: np.ndarray | None) -> n
     moved = False
     for i, sl in enumerate(game.agent_slices):
         found = best_answer(game, i, a, x, answer_starts(game, i, a))
-        if found is not None:
-            out[sl] = found[1]
-            moved = True
-    return out if moved else None
-
-
-def decoupled_plans(game: CompiledGame, a: np.ndarray, x: np.ndarray | None) -> np.ndarray | None:
-    """The players' decoupled plans: each player's answer (:func:`best_answer`, from its own plan in ``a`` alone) to
-    the others' plans in ``a`` on its problem without the rows that other players' decisions reach
-    (``Pattern.joint_rows``: collision rows, shared resources), as if it were alone on the road; a player without a
-    feasible answer keeps its plan. None if no player has one."""
-    a = np.asarray(a, dtype=float)
-    joint = game.pattern.joint_rows
-    out = a.copy()
-    moved = False
-    for i, sl in enumerate(game.agent_slices):
-        found = best_answer(game, i, a, x, [a[sl].copy()], ~joint[game.agents.constraint_rows(i)])
         if found is not None:
             out[sl] = found[1]
             moved = True
