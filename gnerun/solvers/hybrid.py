@@ -13,17 +13,18 @@ first, judged by a nonmonotone watchdog; a more robust method when it fails; res
    phase goes on from there, or from z^0 where DAQP finds no solution (an LQ plain GNE without a variational
    equilibrium, FK A.8).
    **The players' decoupled plans** (nonlinear trajectory games of several players with rows that couple them,
-   cold-started and unperturbed, where ||Phi(z^0)|| > ``DECOUPLE_ABOVE``): the first iteration is the players' plans
-   as if each were alone, the equilibrium of the decoupled game (the rows that two or more players' decisions reach,
-   collision rows and shared resources, left out: ``KKTSystem.without_rows``), solved by this method itself from
-   z^0 (its interior phase first; at most ``ALONE_STEPS`` iterations, on the game's own compiled system), multipliers
-   zero. It is taken as the new z^0 where ||Phi|| there is at most ``DECOUPLED_GAIN`` times ||Phi(z^0)||. Where a
-   later iterate's ||Phi|| exceeds the configured z^0's, or the first interior start from the new z^0 fails, the
-   configured z^0 takes that iterate's place and the solve goes on from it as it would have (the overtaking game's
-   cars planned alone drive through each other). On ALGAMES's merges the plans alone are near the equilibrium
-   (||Phi|| 60-110 times lower than at zero inputs): the median solve takes 12 iterations instead of 18, the p90 14
-   instead of 33; the intersections' start plans are near stationary already (||Phi(z^0)|| < 1) and are left alone
-   (measured: benchmarks/results/solver-design.md).
+   cold-started and unperturbed, where ||Phi(z^0)|| > ``DECOUPLE_ABOVE``): the first iteration is the players' plans as
+   if each were alone, the equilibrium of the decoupled game (the rows that two or more players' decisions reach,
+   collision rows and shared resources, left out: ``KKTSystem.without_rows``), solved by this method itself from z^0 to
+   ||Phi|| <= ``ALONE_TOL`` (its interior phase first; at most ``ALONE_STEPS`` iterations, on the game's own compiled
+   system: nothing is built per player), multipliers zero. It is taken as the new z^0 where ||Phi|| there is at most
+   ``DECOUPLED_GAIN`` times ||Phi(z^0)||. Where a later iterate's ||Phi|| exceeds the configured z^0's, or the first
+   interior start from the new z^0 fails, the configured z^0 takes that iterate's place and the solve goes on from it as
+   it would have (the overtaking game's cars planned alone drive through each other). On ALGAMES's merges the plans
+   alone are near the equilibrium (||Phi|| 60-110 times lower than at zero inputs): the median solve takes 12 iterations
+   instead of 18, the p90 14 instead of 33 (19 and 22 counting the decoupled solve's own 8), the slowest 23 instead of
+   71; the intersections' start plans are near stationary already (||Phi(z^0)|| < 1) and are left alone (measured:
+   benchmarks/results/solver-design.md).
 1. **Newton phase.** The semismooth Newton step (min map or Fischer-Burmeister, with the configured perturbation)
    is taken unless it multiplies ||Phi|| by more than ``BLOWUP`` over a nonmonotone reference (the largest of its
    last ``MEMORY`` values), as PATH's watchdog does: the local method's own path may climb before it converges.
@@ -137,6 +138,7 @@ LATER_STEP = 5.0
 # ||Phi|| there is at most DECOUPLED_GAIN times ||Phi(z^0)|| (benchmarks/results/solver-design.md)
 DECOUPLE_ABOVE = 1.0
 DECOUPLED_GAIN = 0.1
+ALONE_TOL = 1e-3  # ... to this ||Phi|| of the decoupled game: a start, not a solution (its last Newton steps spared)
 ALONE_STEPS = 50  # the decoupled game's solve: at most this many iterations (unconverged: no decoupled plans)
 
 
@@ -165,6 +167,7 @@ class Memory:
     warm: bool = False  # z^0 is a closed loop's warm start (the first-step rule does not apply)
     decouple: bool = False  # the first step is to be the players' decoupled plans (gnerun.solvers.response_round)
     abandon: float = math.inf  # ||Phi|| at the configured z^0, while z^0 is the decoupled plans: above it, back there
+    alone: int = 0  # the iterations of the decoupled game's solve inside the first iteration (0: none)
 
 
 class HybridNewton:
@@ -327,14 +330,17 @@ class HybridNewton:
         threshold = self._threshold(merit)
         candidate.search = Memory(phase="newton", merits=(merit,), best=merit, stalls=0, interior=None,
                                   handover=threshold, origin=candidate.z, handover0=threshold, start=memory.origin,
-                                  abandon=state.residual_norm)
+                                  abandon=state.residual_norm, alone=solved.k)
         return candidate
 
     @functools.cached_property
     def _alone(self) -> HybridNewton:
         """This method on the decoupled game (the rows that couple the players left out: ``Pattern.joint_rows``),
         without rounds of best responses, the line-search phase or decoupled plans of its own."""
-        alone = HybridNewton(self.newton.without_rows(self.game.pattern.joint_rows))
+        newton = self.newton.without_rows(self.game.pattern.joint_rows)
+        if ALONE_TOL:
+            newton.options = newton.options.model_copy(update={"tol": ALONE_TOL})
+        alone = HybridNewton(newton)
         alone.answers = alone.decouples = alone.searches = False
         return alone
 
@@ -345,7 +351,7 @@ class HybridNewton:
         merit = fresh.residual_norm
         threshold = self._threshold(merit)
         fresh.search = Memory(phase="newton", merits=(merit,), best=merit, stalls=0, interior=None, handover=threshold,
-                              origin=fresh.z, handover0=threshold)
+                              origin=fresh.z, handover0=threshold, alone=memory.alone)
         return fresh
 
     def _newton_step(self, state: SSNState, memory: Memory) -> SSNState:
