@@ -165,7 +165,7 @@ class Memory:
     inner: SSNState | None = None  # the line-search phase's own state (its Phi is the Fischer-Burmeister one)
     steps: int = 0  # iterations of the line-search phase so far
     warm: bool = False  # z^0 is a closed loop's warm start (the first-step rule does not apply)
-    decouple: bool = False  # the first step is to be the players' decoupled plans (gnerun.solvers.response_round)
+    decouple: bool = False  # the first step is to be the players' decoupled plans (HybridNewton._decoupled)
     abandon: float = math.inf  # ||Phi|| at the configured z^0, while z^0 is the decoupled plans: above it, back there
     alone: int = 0  # the iterations of the decoupled game's solve inside the first iteration (0: none)
 
@@ -224,11 +224,8 @@ class HybridNewton:
         if state.status in FAILURES:
             return state
         merit = state.residual_norm
-        threshold = self._threshold(merit)
         decouple = self.decouples and not warm and merit > DECOUPLE_ABOVE  # (NaN: not)
-        memory = Memory(phase="newton", merits=(merit,), best=merit, stalls=0, interior=None, handover=threshold,
-                        origin=state.z, handover0=threshold, crash=self.avi is not None, warm=warm, decouple=decouple)
-        state.search = memory  # a new state, held by nothing else yet
+        state.search = self._from(state, crash=self.avi is not None, warm=warm, decouple=decouple)  # a new state
         if not self.handover:  # the interior phase alone: its start point is z^0
             return self._start_interior(state, 0, k=0)
         return state
@@ -326,11 +323,7 @@ class HybridNewton:
         candidate = self.newton.advance(state, z)
         if candidate.status != Status.RUNNING:
             return None
-        merit = candidate.residual_norm
-        threshold = self._threshold(merit)
-        candidate.search = Memory(phase="newton", merits=(merit,), best=merit, stalls=0, interior=None,
-                                  handover=threshold, origin=candidate.z, handover0=threshold, start=memory.origin,
-                                  abandon=state.residual_norm, alone=solved.k)
+        candidate.search = self._from(candidate, start=memory.origin, abandon=state.residual_norm, alone=solved.k)
         return candidate
 
     @functools.cached_property
@@ -348,11 +341,16 @@ class HybridNewton:
         """The configured z^0 again as iterate k (``state``'s place), with the Newton phase from there as ``init``
         begins it: the decoupled plans' solve climbed above ||Phi(z^0)||, or its interior starts failed."""
         fresh = self.newton.advance(state, memory.start, k=state.k)
-        merit = fresh.residual_norm
-        threshold = self._threshold(merit)
-        fresh.search = Memory(phase="newton", merits=(merit,), best=merit, stalls=0, interior=None, handover=threshold,
-                              origin=fresh.z, handover0=threshold, alone=memory.alone)
+        fresh.search = self._from(fresh, alone=memory.alone)
         return fresh
+
+    def _from(self, state: SSNState, **more) -> Memory:
+        """The memory of a Newton phase that begins at ``state`` as z^0 (its merit the reference, the hand-over
+        threshold from it), with ``more`` of its fields."""
+        merit = state.residual_norm
+        threshold = self._threshold(merit)
+        return Memory(phase="newton", merits=(merit,), best=merit, stalls=0, interior=None, handover=threshold,
+                      origin=state.z, handover0=threshold, **more)
 
     def _newton_step(self, state: SSNState, memory: Memory) -> SSNState:
         if memory.decouple:
