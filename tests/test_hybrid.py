@@ -3,6 +3,8 @@ contract across every globalization."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -666,3 +668,31 @@ def test_a_method_without_rows_solves_the_game_without_them() -> None:
     assert np.allclose(left_out.z[: game.n], free.z[: game.n], atol=1e-9)
     assert np.all(left_out.z[game.n:][joint] == 0.0)
     assert np.abs(full.a - free.z[: game.n]).max() > 1e-3
+
+
+def test_a_newton_step_kept_on_its_result_makes_no_condition_estimate() -> None:
+    """The Newton phase's steps on a nonlinear game's sparse system: a step that halves ||Phi|| and moves z by little
+    (hybrid._taken) is kept without the estimate (rcond NaN), with the iterate the estimated step makes; any other
+    is estimated, with the number the eager estimate gives, and refused as singular below solver.min_rcond."""
+    problem, cfg, game, solver = _merge_draw(0)
+    states: list = []
+    iterate(solver, solver.init(None, np.asarray(cfg.game.x0)), on_iterate=states.append)
+    state = next(s for s in states if s.search.phase == "newton" and 1e-9 < s.residual_norm < 1e-2)
+    newton = solver.newton
+    z, rcond = newton.newton_point(state)
+    assert z is not None and rcond >= cfg.solver.min_rcond
+    eager = newton.iteration(state)
+    kept = newton.iteration(state, taken=hybrid._taken)
+    assert hybrid._taken(state, kept) and np.isnan(kept.rcond)
+    np.testing.assert_array_equal(kept.z, eager.z)
+    assert newton.iteration(state, taken=lambda s, new: False).rcond == rcond
+    # refused on its result: judged by the estimate, as a step without the rule is
+    assert not hybrid._taken(state, replace(kept, residual_norm=0.6 * state.residual_norm))
+    long = kept.z.copy()
+    long[0] = state.z[0] + 2.0 * max(np.abs(state.z).max(), 1.0)
+    assert not hybrid._taken(state, replace(kept, z=long))
+    strict = make_solver(cfg.model_copy(update={"solver": cfg.solver.model_copy(update={"min_rcond": 2 * rcond})}),
+                         game).newton
+    assert strict.iteration(state, taken=lambda s, new: False).status == Status.SINGULAR_JACOBIAN
+    assert strict.iteration(state, taken=hybrid._taken).status == Status.RUNNING
+    assert strict.step(state).status == Status.SINGULAR_JACOBIAN  # the plain method estimates every step

@@ -371,6 +371,29 @@ def test_banded_and_superlu_factors_solve_the_reduced_and_interior_systems() -> 
             assert exact * (1 - 1e-9) <= rcond <= 3 * exact
 
 
+def test_a_condition_estimate_left_out_is_made_later_from_the_same_factors(monkeypatch: pytest.MonkeyPatch) -> None:
+    """factor_kept without its estimate (NaN) gives the factors whose estimate rcond_kept then makes: the number
+    factor_kept returns with it, to the bit, for the banded LU and SuperLU, with and without additions to the
+    diagonal."""
+    game, solver, state = _merge_system()
+    system = solver.newton.system
+    J, n, lam0 = state.parts.J, game.n, system.size - game.m
+    A = np.flatnonzero(state.z[n:] > 1e-3)
+    everything = np.arange(system.size)
+    at = np.concatenate([np.arange(n), lam0 + np.arange(game.m)])
+    add = np.concatenate([np.full(n, 1e-3), np.full(game.m, -1.0)])
+    for banded in (True, False):
+        monkeypatch.setattr(system.stage_order, "banded", banded)
+        system.stage_order.layouts.clear()
+        for keep, where, extra in ((system.kept(A), None, None), (everything, at, add)):
+            assert system.layout(keep, where).banded == banded
+            _, rcond = system.factor_kept("newton", J, keep, where, extra)
+            factors, left_out = system.factor_kept("newton", J, keep, where, extra, estimate=False)
+            assert np.isnan(left_out) and 0.0 < rcond < 1.0
+            assert system.rcond_kept(factors, J, keep, where, extra) == rcond
+    system.stage_order.layouts.clear()
+
+
 def test_the_inverse_norm_estimate_is_lapacks() -> None:
     """Hager's and Higham's estimate of ||A^-1||_1 from solves: the one LAPACK's dgecon computes (same algorithm),
     on matrices where it is exact and where it is not."""

@@ -154,6 +154,14 @@ class SparseKKT:
         lu, rcond = self.orderings[kind].factor(layout.csc(data, add), estimate)
         return layout.eliminated(lu, data, add), rcond
 
+    def rcond_kept(self, factors, data: np.ndarray, keep: np.ndarray, at: np.ndarray | None = None,
+                   add: np.ndarray | None = None, eliminate: np.ndarray | None = None) -> float:
+        """The condition estimate :meth:`factor_kept` returns with ``estimate``, from the factors it made without."""
+        layout = self.layout(keep, at, eliminate)
+        if layout.banded:
+            return layout.rcond(factors, data, add)
+        return _rcond(layout.csc(data, add), getattr(factors, "factors", factors))
+
     @staticmethod
     def rhs(parts: SparseParts) -> np.ndarray:
         """The right-hand side -F(a, xi, 0, 0): F is linear in (p, lambda), so with their current values
@@ -824,11 +832,26 @@ class KeptLayout:
         factors = BandLU(self, lu, piv)
         if not estimate:
             return self.eliminated(factors, data, add), math.nan
+        return self.eliminated(factors, data, add), self._rcond(factors, norm)
+
+    def rcond(self, factors: BandLU | EliminatedLU, data: np.ndarray, add: np.ndarray | None) -> float:
+        """The estimate :meth:`factor` returns with ``estimate``, from the factors it made without (the band filled
+        again for its norm: the same number)."""
+        if not self.size:
+            return 1.0
+        ab = self.band(data, add)
+        norm = banded.one_norm(ab)
+        if norm is None:
+            norm = float(np.abs(ab).sum(axis=0).max())
+        return self._rcond(getattr(factors, "factors", factors), norm)
+
+    def _rcond(self, factors: BandLU, norm: float) -> float:
+        """1 / (||M||_1 times the estimate of ||M^-1||_1 from the factors), 0 where that estimate is not positive."""
+        lu, piv = factors.lu, factors.piv
         inverse = banded.lu_inverse_norm(lu, self.lower, self.upper, piv)  # the same estimate, all in C
         if inverse is None:
             inverse = inverse_norm(factors.solve_band, lambda b: factors.solve_band(b, 1), self.size)
-        rcond = 1.0 / (norm * inverse) if np.isfinite(inverse) and inverse > 0 else 0.0
-        return self.eliminated(factors, data, add), rcond
+        return 1.0 / (norm * inverse) if np.isfinite(inverse) and inverse > 0 else 0.0
 
     def eliminated(self, factors, data: np.ndarray, add: np.ndarray | None):
         """``factors`` of the matrix stored, as factors of the kept matrix (the same without an elimination)."""

@@ -14,6 +14,8 @@ reciprocal condition number is the one checked.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from scipy.linalg import lapack
 
@@ -67,9 +69,10 @@ class DenseReduced:
         self.n = n
         self.min_rcond = min_rcond
 
-    def point(self, state, A: np.ndarray) -> tuple[np.ndarray | None, float]:
+    def point(self, state, A: np.ndarray, estimate: bool = True) -> tuple[np.ndarray | None, float]:
         """The min-map Newton step for the rows A, and the reciprocal condition number of the matrix factorised
-        (``None`` for the point when it is singular or ill-conditioned)."""
+        (``None`` for the point when it is singular or ill-conditioned). Made whatever ``estimate`` says: next to a
+        dense factorisation it is cheap."""
         n, parts, z = self.n, state.parts, state.z
         lu, piv, info, rcond = factor(reduced_matrix(parts.dL_dz, parts.dc_da, A))
         if info != 0 or not rcond >= self.min_rcond:
@@ -104,13 +107,16 @@ class SparseReduced:
         self.min_rcond = min_rcond
         self._J = system.evaluate(game.z_start(), game.x0).J if system.affine else None
         self._lus = FactorCache(64)  # LQ games: (factors or None, rcond) per active set
+        self._unestimated: tuple | None = None  # the last factors made without their estimate (last_rcond)
 
     def forget(self) -> None:
         """Drop the factorisations kept per active set."""
         self._lus.clear()
 
-    def point(self, state, A: np.ndarray) -> tuple[np.ndarray | None, float]:
-        """The min-map Newton step for the rows A, and the reciprocal condition estimate."""
+    def point(self, state, A: np.ndarray, estimate: bool = True) -> tuple[np.ndarray | None, float]:
+        """The min-map Newton step for the rows A, and the reciprocal condition estimate; without ``estimate``, NaN
+        for a nonlinear game's matrix (its estimate costs about as much as its banded factorisation), whose estimate
+        :meth:`last_rcond` then makes from the same factors."""
         system, parts, z = self.system, state.parts, state.z
         keep = system.kept(A)
         if self._J is not None:  # LQ: a constant matrix, one factorisation per active set
@@ -119,12 +125,19 @@ class SparseReduced:
             if entry is None:
                 entry = self._lus.keep(key, system.factor_kept("newton", self._J, keep))
         else:
-            entry = system.factor_kept("newton", parts.J, keep)
+            entry = system.factor_kept("newton", parts.J, keep, estimate=estimate)
+            self._unestimated = None if estimate else (entry[0], parts.J, keep)
         lu, rcond = entry
-        if lu is None or not rcond >= self.min_rcond:
+        if lu is None or not (rcond >= self.min_rcond or math.isnan(rcond) and not estimate):
             return None, rcond
         sol = lu.solve(system.rhs(parts)[keep])
         return system.new_iterate(z, sol, A), rcond
+
+    def last_rcond(self) -> float:
+        """The condition estimate of the last matrix :meth:`point` factorised without it (the same number it would
+        have returned)."""
+        lu, J, keep = self._unestimated
+        return self.system.rcond_kept(lu, J, keep)
 
     def regularized(self, state, A: np.ndarray, mu: float) -> np.ndarray | None:
         """The condensed method's Levenberg-Marquardt step, in the full space: y = (da, dxi, p^+, dlambda_A)

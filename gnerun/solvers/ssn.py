@@ -24,6 +24,7 @@ Shape (see STYLE.md; the loop is :func:`gnerun.solvers.driver.iterate`): ``init(
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import replace
 
 import numpy as np
@@ -72,23 +73,35 @@ class SemismoothNewton(KKTSystem):
             return state
         return self.iteration(state)
 
-    def iteration(self, state: SSNState) -> SSNState:
+    def iteration(self, state: SSNState, taken: Callable[[SSNState, SSNState], bool] | None = None) -> SSNState:
         """One semismooth Newton iteration from ``state``, also at a solution (a failed state is returned
-        unchanged)."""
+        unchanged). With ``taken``, the condition estimate of a nonlinear game's sparse matrix (about as costly as
+        its banded factorisation) is made only where ``taken(state, new)`` is false for the iterate ``new`` the
+        step makes: a step so judged on its result is kept whatever the estimate would have said (``new.rcond`` is
+        then NaN), as the interior phase keeps its steps."""
         if state.status in FAILURES:
             return state
         if self._lq_inline:
             return self._lq_step(state)
-        z_new, rcond = self.newton_point(state)
+        z_new, rcond = self.newton_point(state, estimate=taken is None)
         if z_new is None:
             return self.singular(state, rcond)
-        return self.advance(state, z_new, rcond=rcond)
+        new = self.advance(state, z_new, rcond=rcond)
+        if not math.isnan(rcond) or taken(state, new):
+            return new
+        rcond = self.reduced_system.last_rcond()
+        if not rcond >= self.options.min_rcond:
+            return self.singular(state, rcond)
+        new.rcond = rcond
+        return new
 
-    def newton_point(self, state: SSNState) -> tuple[np.ndarray | None, float]:
+    def newton_point(self, state: SSNState, estimate: bool = True) -> tuple[np.ndarray | None, float]:
         """The end point z^k + dz of the (perturbed) Newton step from ``state``, and the reciprocal condition
-        number of the matrix factorised; ``None`` for the point when that matrix is singular or ill-conditioned."""
+        number of the matrix factorised; ``None`` for the point when that matrix is singular or ill-conditioned.
+        Without ``estimate``, the sparse reduced system of a nonlinear game leaves its estimate out (NaN; then
+        ``reduced_system.last_rcond()``)."""
         if self.reduced:
-            return self._reduced_point(state)
+            return self._reduced_point(state, estimate)
         J = self.jacobian(state.parts, state.z, state.active)
         rhs = -state.phi
         d = self.disturbance
@@ -130,12 +143,12 @@ class SemismoothNewton(KKTSystem):
                     "solver.globalization: hybrid continues from such points)")
         return replace(state, status=Status.SINGULAR_JACOBIAN, message=msg, rcond=float(rcond))
 
-    def _reduced_point(self, state: SSNState) -> tuple[np.ndarray | None, float]:
+    def _reduced_point(self, state: SSNState, estimate: bool = True) -> tuple[np.ndarray | None, float]:
         """The min-map Newton step through the reduced system (:mod:`gnerun.solvers.reduced`), for LQ games from
         what is kept per active set."""
         if self._lq:
             return self.lq.point(state.active, state.x)
-        return self.reduced_system.point(state, self.active_rows(state.active))
+        return self.reduced_system.point(state, self.active_rows(state.active), estimate)
 
     def _lq_step(self, state: SSNState) -> SSNState:
         """:meth:`_reduced_point` then :meth:`advance` for an LQ game without equalities or line search, in one
