@@ -696,3 +696,31 @@ def test_a_newton_step_kept_on_its_result_makes_no_condition_estimate() -> None:
     assert strict.iteration(state, taken=lambda s, new: False).status == Status.SINGULAR_JACOBIAN
     assert strict.iteration(state, taken=hybrid._taken).status == Status.RUNNING
     assert strict.step(state).status == Status.SINGULAR_JACOBIAN  # the plain method estimates every step
+
+
+def test_a_hand_over_kept_on_its_result_makes_no_condition_estimate() -> None:
+    """The hand-over from the interior phase follows the same rule: its Newton points, judged on the residual, are
+    estimated where refused and kept without the estimate where they halve ||Phi|| with a short step; the point kept
+    is the estimated one (draw 0: the interior guess and its first correction refused, the second kept)."""
+    problem, cfg, game, solver = _merge_draw(0)
+    calls: list = []
+    judged = solver._judged_point
+
+    def recorded(state, active):
+        out = judged(state, active)
+        calls.append((state, active, out))
+        return out
+
+    solver._judged_point = recorded
+    solved = iterate(solver, solver.init(None, np.asarray(cfg.game.x0)))
+    assert solved.status == Status.CONVERGED
+    *refused, (state, active, kept) = calls
+    assert refused and all(not out[2] and out[1] >= cfg.solver.min_rcond for _, _, out in refused)
+    z, left_out, halved, candidate, _ = kept
+    assert halved and np.isnan(left_out) and np.isnan(candidate.rcond)
+    z_eager, rcond = solver.newton.newton_point(replace(state, active=active))
+    np.testing.assert_array_equal(z, z_eager)
+    strict = make_solver(cfg.model_copy(update={"solver": cfg.solver.model_copy(update={"min_rcond": 2 * rcond})}),
+                         game)
+    assert strict.newton.newton_point(replace(state, active=active))[0] is None  # estimated: singular
+    assert strict._judged_point(state, active)[0] is not None

@@ -146,8 +146,12 @@ def _taken(state: SSNState, new: SSNState) -> bool:
     """Whether the Newton step from ``state`` to ``new`` is kept on its result alone (TAKEN_DECREASE)."""
     if new.status != Status.RUNNING or not new.residual_norm <= TAKEN_DECREASE * state.residual_norm:
         return False
-    z = state.z
-    return bool(np.abs(new.z - z).max(initial=0.0) <= max(np.abs(z).max(initial=0.0), 1.0))
+    return _short(state.z, new.z)
+
+
+def _short(z: np.ndarray, z_new: np.ndarray) -> bool:
+    """Whether the step from z to z_new moves no entry by more than max(||z||_inf, 1) (TAKEN_DECREASE)."""
+    return bool(np.abs(z_new - z).max(initial=0.0) <= max(np.abs(z).max(initial=0.0), 1.0))
 
 
 # a cold-started trajectory game whose ||Phi(z^0)|| is above this begins with the players' decoupled plans, kept where
@@ -448,13 +452,34 @@ class HybridNewton:
         ||Phi|| HANDOVER_DECREASE-fold: judged on the residual alone, so a refused step costs no derivatives. A
         refused min-map step is tried again on the active set it points to (``HANDOVER_ROUNDS`` times at most)."""
         newton = self.newton
-        z, rcond = newton.newton_point(state)
+        z, rcond, halved, candidate, c = self._judged_point(state, state.active)
         if z is None:
             z = newton.regularized_point(state, state.residual_norm)
-        if z is None:
-            return None
-        halved, candidate, c = self._judged(state, z, rcond)
+            if z is None:
+                return None
+            halved, candidate, c = self._judged(state, z, rcond)
         return candidate if halved else self._corrected(state, z, c)
+
+    def _judged_point(self, state: SSNState, active: np.ndarray,
+                      ) -> tuple[np.ndarray | None, float, bool, SSNState | None, np.ndarray | None]:
+        """The Newton point from ``state`` on the g-branch rows ``active`` (None where JPhi is singular or
+        ill-conditioned) and its reciprocal condition estimate (NaN where not made), judged as :meth:`_judged` judges
+        it: whether it halves ||Phi||, the iterate there, c(a). The
+        condition estimate is made only where the point is not kept on its result (a halving step that is short,
+        :data:`TAKEN_DECREASE`), after the residual there: the point first, the estimate from the same factors."""
+        newton = self.newton
+        z, rcond = newton.newton_point(state if active is state.active else replace(state, active=active),
+                                       estimate=False)
+        if z is None:
+            return None, rcond, False, None, None
+        halved, candidate, c = self._judged(state, z, rcond)
+        if math.isnan(rcond) and not (halved and _short(state.z, z)):
+            rcond = newton.reduced_system.last_rcond()
+            if not rcond >= newton.options.min_rcond:
+                return None, rcond, False, None, None
+            if candidate is not None:
+                candidate.rcond = rcond
+        return z, rcond, halved, candidate, c
 
     def _judged(self, state: SSNState, z: np.ndarray, rcond: float) -> tuple[bool, SSNState | None, np.ndarray]:
         """Whether the point z reduces ||Phi|| HANDOVER_DECREASE-fold from ``state`` (judged on the residual alone,
@@ -483,10 +508,9 @@ class HybridNewton:
             if np.array_equal(corrected, active):
                 return None
             active = corrected
-            z, rcond = newton.newton_point(replace(state, active=active))
+            z, _, halved, candidate, c = self._judged_point(state, active)
             if z is None:
                 return None
-            halved, candidate, c = self._judged(state, z, rcond)
             if halved:
                 return candidate
         return None
