@@ -150,7 +150,7 @@ def _taken(state: SSNState, new: SSNState) -> bool:
 
 
 def _short(z: np.ndarray, z_new: np.ndarray) -> bool:
-    """Whether the step from z to z_new moves no entry by more than max(||z||_inf, 1) (TAKEN_DECREASE)."""
+    """Whether the step from z to z_new moves no entry by more than max(||z||_inf, 1) (see TAKEN_DECREASE)."""
     return bool(np.abs(z_new - z).max(initial=0.0) <= max(np.abs(z).max(initial=0.0), 1.0))
 
 
@@ -464,9 +464,9 @@ class HybridNewton:
                       ) -> tuple[np.ndarray | None, float, bool, SSNState | None, np.ndarray | None]:
         """The Newton point from ``state`` on the g-branch rows ``active`` (None where JPhi is singular or
         ill-conditioned) and its reciprocal condition estimate (NaN where not made), judged as :meth:`_judged` judges
-        it: whether it halves ||Phi||, the iterate there, c(a). The
-        condition estimate is made only where the point is not kept on its result (a halving step that is short,
-        :data:`TAKEN_DECREASE`), after the residual there: the point first, the estimate from the same factors."""
+        it: whether it halves ||Phi||, the iterate there, c(a). The estimate is made only where the point is not kept
+        on its result (a halving step that is short, see TAKEN_DECREASE): after the residual there, from the same
+        factors."""
         newton = self.newton
         z, rcond = newton.newton_point(state if active is state.active else replace(state, active=active),
                                        estimate=False)
