@@ -101,7 +101,7 @@ from .avi import AffineVI
 from .driver import iterate
 from .interior_point import STARTS, InteriorIterate, InteriorPoint
 from .josephy_newton import kkt_lcp_point
-from .linalg import norm
+from .linalg import largest, norm
 from .line_search_newton import LineSearchNewton
 from .response_round import response_round
 from .ssn import SemismoothNewton
@@ -151,7 +151,7 @@ def _taken(state: SSNState, new: SSNState) -> bool:
 
 def _short(z: np.ndarray, z_new: np.ndarray) -> bool:
     """Whether the step from z to z_new moves no entry by more than max(||z||_inf, 1) (see TAKEN_DECREASE)."""
-    return bool(np.abs(z_new - z).max(initial=0.0) <= max(np.abs(z).max(initial=0.0), 1.0))
+    return largest(z_new - z) <= max(largest(z), 1.0)
 
 
 # a cold-started trajectory game whose ||Phi(z^0)|| is above this begins with the players' decoupled plans, kept where
@@ -351,8 +351,7 @@ class HybridNewton:
         """This method on the decoupled game (the rows that couple the players left out: ``Pattern.joint_rows``),
         without rounds of best responses, the line-search phase or decoupled plans of its own."""
         newton = self.newton.without_rows(self.game.pattern.joint_rows)
-        if ALONE_TOL:
-            newton.options = newton.options.model_copy(update={"tol": ALONE_TOL})
+        newton.options = newton.options.model_copy(update={"tol": ALONE_TOL})
         alone = HybridNewton(newton)
         alone.answers = alone.decouples = alone.searches = False
         return alone

@@ -70,7 +70,7 @@ import numpy as np
 from scipy.linalg import lapack
 
 from ..game import banded
-from .linalg import factor
+from .linalg import factor, largest
 
 BOUNDARY = 0.995  # a step goes at most this fraction of the way to the boundary lambda_I = 0 or w = 0
 SHRINK = 0.2  # eps shrinks by this factor ...
@@ -148,7 +148,7 @@ class InteriorPoint:
         Mehrotra's steps are taken from it (see :meth:`step`)."""
         I, E = self.I, self.E
         lw = z[self.n + I] * w
-        err = max(_largest(L), _largest(c[I] + w), _largest(c[E]), _largest(lw - eps))
+        err = max(largest(L), largest(c[I] + w), largest(c[E]), largest(lw - eps))
         return InteriorIterate(z, w, L, c, eps * SHRINK if err <= KAPPA * eps else eps, t, predict)
 
     def convex_at(self, it: InteriorIterate, parts) -> bool:
@@ -251,12 +251,6 @@ def _to_boundary(v: np.ndarray, dv: np.ndarray, fraction: float = BOUNDARY) -> f
     if not neg.any():
         return 1.0
     return min(1.0, fraction * float((-v[neg] / dv[neg]).min()))
-
-
-def _largest(v: np.ndarray) -> float:
-    """max |v_i| (0 for an empty v; NaN where v has one): ``np.max(np.abs(v), initial=0.0)``, by the array's own
-    methods (a third of the time on the short vectors of a step)."""
-    return float(np.abs(v).max()) if v.size else 0.0
 
 
 class DenseBarrier:

