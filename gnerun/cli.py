@@ -251,13 +251,20 @@ class _IterateTable:
 
 
 def _wall_s() -> float:
-    """Seconds since this process started (Linux: /proc; elsewhere since the CLI was imported)."""
+    """Seconds since this process started (Linux: /proc; elsewhere since the CLI was imported).
+
+    A shell runs the last command of ``bash -c '...; gnerun solve ...'`` in its own process (exec): /proc then dates
+    gnerun from the shell's start, and every command before it (a venv made, a pip install) would count as startup.
+    Such a process has waited for children (their CPU time is counted in its own, fields 16 and 17), which an
+    interpreter starting gnerun has not: then the time since the CLI was imported is taken, as elsewhere."""
     try:
         stat = Path("/proc/self/stat").read_text().rsplit(")", 1)[1].split()  # fields 3.. (the name may hold spaces)
-        uptime = float(Path("/proc/uptime").read_text().split()[0])
-        return uptime - int(stat[19]) / os.sysconf("SC_CLK_TCK")  # field 22: the start, in clock ticks since boot
+        if int(stat[13]) + int(stat[14]) == 0:  # fields 16, 17: no child waited for before
+            uptime = float(Path("/proc/uptime").read_text().split()[0])
+            return uptime - int(stat[19]) / os.sysconf("SC_CLK_TCK")  # field 22: the start, in clock ticks since boot
     except (OSError, ValueError, IndexError, AttributeError):
-        return time.perf_counter() - IMPORTED
+        pass
+    return time.perf_counter() - IMPORTED
 
 
 class _Clock:

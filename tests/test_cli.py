@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import json
 import re
+import shlex
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -11,7 +14,7 @@ import pytest
 
 from gnerun.log.mcap_log import read_messages
 
-from .conftest import CONFIGS, run_cli
+from .conftest import CONFIGS, gnerun_command, run_cli
 
 POSITION = re.compile(r"^error: (?P<file>[^:\s]+):(?P<line>\d+):(?P<col>\d+): ")
 
@@ -364,6 +367,20 @@ def test_solve_ends_with_where_the_wall_time_went(tmp_path: Path) -> None:
         assert parts[name] == pytest.approx(summary[key], abs=0.006)
     assert proc.stdout.splitlines()[-2] == f"run directory: {tmp_path / 's'}"
     assert run_cli("solve", str(CONFIGS / "paper_study1.yaml"), "--out", str(tmp_path / "q"), "-q").stdout == ""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the process's start is read from /proc")
+def test_startup_is_not_what_a_shell_ran_before_it_became_gnerun(tmp_path: Path) -> None:
+    """`bash -c '...; exec gnerun solve ...'`: the shell's process becomes gnerun, and /proc dates it from the shell's
+    start. The commands before it (0.3 s of CPU in a child, then one second of sleep) are not gnerun's startup."""
+    burn = "python3 -c 'import time\nt = time.process_time()\nwhile time.process_time() - t < 0.3: pass'"
+    solve = shlex.join([*gnerun_command(), "solve", str(CONFIGS / "paper_study1.yaml"), "--out", str(tmp_path / "s")])
+    proc = subprocess.run(["bash", "-c", f"{burn} && sleep 1 && exec {solve}"], capture_output=True, text=True,
+                          timeout=120, stdin=subprocess.DEVNULL)
+    assert proc.returncode == 0, proc.stderr
+    wall, parts = _timing(proc.stdout)
+    assert parts["startup"] < 1.0 and wall < parts["startup"] + 60
+    _assert_sums_to_wall(wall, parts)
 
 
 def test_simulate_reports_t0_apart_and_ends_with_its_timing(tmp_path: Path) -> None:
