@@ -3,6 +3,7 @@ out by hand (the same compiled functions, the same solution), and hostile templa
 
 from __future__ import annotations
 
+import re
 import subprocess
 import sys
 
@@ -579,3 +580,90 @@ def test_a_negative_count_is_refused_and_an_empty_family_allowed(n: int, line: i
     assert f"fk_a01.yaml:{line}:" in proc.stderr and "negative count" in proc.stderr and f"N = {n}" in proc.stderr
     one = load_config(CONFIGS / "fk_a01.yaml", {"game.parameters.N": 1})
     assert [a.name for a in one.game.agents] == ["p1"]
+
+
+# names that would change what an expression means: refused, never silently replaced ------------------------------
+
+DYNAMIC = """
+game:
+  kind: dynamic
+  horizon: 2
+  states: [x1]
+  dynamics: {x1: "x1 + u1"}
+  x0: [0]
+  agents:
+    - name: a1
+      inputs: [u1]
+      stage_cost: "(u1 - 1)**2"
+"""
+
+
+@pytest.mark.parametrize(("change", "expected"), [
+    # the horizon is T in {T} and in ranges: a parameter T would be another number in the same expression
+    (("  x0: [0]\n", "  x0: [0]\n  parameters: {T: 5}\n"), r":8:16: .*parameter 'T' is the name of the horizon"),
+    (("  x0: [0]\n", "  x0: [0]\n  runtime: {T: 5.0}\n"), r":8:13: .*runtime parameter 'T' is the name of the horizon"),
+    # t is a stage's time in a dynamic game
+    (("  x0: [0]\n", "  x0: [0]\n  runtime: {t: 5.0}\n"),
+     r":8:13: .*runtime parameter 't' is the name of a stage's time"),
+    (("  x0: [0]\n", "  x0: [0]\n  parameters: {t: 5.0}\n"), r":8:16: .*parameter 't' is the name of a stage's time"),
+    (("inputs: [u1]", "inputs: [u1, t]"), r":10:\d+: .*input 't' is the name of a stage's time"),
+    (("  x0: [0]\n", "  x0: [0]\n  definitions: {t: u1}\n"), r":8:17: definition 't' has the name of the time t"),
+    (('"(u1 - 1)**2"', '"sum(t*u1 for t in 1..2)"'), r":11:20: index 't' has the name of the time t"),
+    # an index takes no name that its scope's expressions already use
+    (('"(u1 - 1)**2"\n', '"(u1 - 1)**2"\n      constraints: [{for: {tau: 1..2}, expr: "u1 <= tau"}]\n'),
+     r":12:27: index 'tau' has the name of the stage index tau"),
+    (('"(u1 - 1)**2"\n', '"(u1 - 1)**2"\n      constraints: [{for: {u1: 1..2}, expr: "x1 <= u1"}]\n'),
+     r":12:27: index 'u1' has the name of an input of 'a1'"),
+    (('"(u1 - 1)**2"\n', '"(u1 - 1)**2"\n      constraints: [{for: {x1: 1..2}, expr: "u1 <= x1"}]\n'),
+     r":12:27: index 'x1' has the name of a state"),
+    (('"(u1 - 1)**2"', '"sum(pi*u1 for pi in 1..2)"'), r":11:20: index 'pi' has the name of a constant"),
+    (('"(u1 - 1)**2"', '"sum(sin*u1 for sin in 1..2)"'), r":11:20: index 'sin' has the name of a function"),
+    (("  x0: [0]\n", "  x0: [0]\n  parameters: {c: 1.5}\n"), None),  # (the parameter itself is fine)
+])
+def test_a_name_that_would_change_an_expression_is_refused(change: tuple[str, str], expected: str | None) -> None:
+    text = DYNAMIC.replace(*change, 1)
+    assert text != DYNAMIC
+    if expected is None:
+        load_config(text=text)
+        with pytest.raises(ConfigError, match=r":12:20: index 'c' has the name of a parameter"):
+            load_config(text=text.replace('"(u1 - 1)**2"', '"sum(c*u1 for c in 1..2)"'))
+        return
+    with pytest.raises(ConfigError) as err:
+        load_config(text=text)
+    assert re.search(expected, str(err.value)), str(err.value)
+
+
+def test_a_static_game_may_name_a_variable_t_and_a_parameter_T() -> None:
+    """t and T mean nothing of their own in a static game: its names."""
+    cfg = load_config(text="""
+game:
+  kind: static
+  parameters: {T: 3}
+  agents:
+    - name: p
+      variables: {t: {start: 0}}
+      cost: "(t - T)**2"
+""")
+    assert solve(cfg, out=None).z[0] == pytest.approx(3.0, abs=1e-12)
+
+
+def test_a_vector_parameter_is_used_through_its_entries() -> None:
+    """A vector parameter that no expression uses is accepted; one used without an index is refused at the use; an
+    entry written as 1e-3 (text to YAML 1.1) is that number."""
+    text = """
+game:
+  kind: static
+  parameters: {c: [1e-3, 2], d: 1e-3}
+  agents:
+    - name: p
+      variables: {x: {start: 0}}
+      cost: "x**2 + X"
+"""
+    assert solve(load_config(text=text.replace("X", "d*x")), out=None).z[0] == pytest.approx(-0.0005, abs=1e-15)
+    # argmin of x^2 + c[1] x is -c[1] / 2
+    assert solve(load_config(text=text.replace("X", "c[1]*x")), out=None).z[0] == pytest.approx(-0.0005, abs=1e-15)
+    with pytest.raises(ConfigError, match=r":8:21: 'c' is a vector parameter: an expression uses one of its entries, "
+                                          r"c\[i\]"):
+        load_config(text=text.replace("X", "c*x"))
+    with pytest.raises(ConfigError, match=r"must be finite numbers, not 'inf'"):
+        load_config(text=text.replace("1e-3, 2", "1e-3, inf").replace("X", "d*x"))

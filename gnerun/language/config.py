@@ -914,6 +914,12 @@ class _SemanticChecks:
             self.report(path, f"{what} {name!r} is the name of a constant", key=key)
         elif name == "tau" and not self.static:
             self.report(path, f"{what} 'tau' is the name of the stage index", key=key)
+        elif name == "t" and not self.static:
+            self.report(path, f"{what} 't' is the name of a stage's time in a dynamic game (t_k + tau * dt: "
+                              "no clock state is needed)", key=key)
+        elif name == "T" and not self.static:
+            self.report(path, f"{what} 'T' is the name of the horizon (game.horizon), which {{T}} and ranges "
+                              "such as 1..T read", key=key)
         elif name == "dt" and self.ode and what != "parameter":
             self.report(path, f"{what} 'dt' is the name of the sampling time (dynamics.dt) in a game with an ode",
                         key=key)
@@ -1110,8 +1116,8 @@ class _SemanticChecks:
         """Costs, constraints, x0 and dynamics, and the shared constraints."""
         g, static = self.g, self.static
         params = set(g.parameters) | set(g.runtime)
-        if not static and "t" not in self.seen:
-            params.add("t")  # the absolute time of a stage
+        if not static:
+            params.add("t")  # the absolute time of a stage (no declared name is t: declare)
         decisions = {v for a in g.agents for v in (a.variables if static else a.inputs)}
         if static:
             scope = decisions | params
@@ -1131,7 +1137,7 @@ class _SemanticChecks:
                 for j, c in enumerate(agent.constraints):
                     self.check(c, ("game", "agents", i, "constraints", j), scope, True, taus)
             runtime = {n for n, what in self.seen.items() if what == "runtime parameter"}
-            self._dynamics(scope - runtime - ({"t"} if "t" not in self.seen else set()))
+            self._dynamics(scope - runtime - {"t"})
         for j, c in enumerate(g.shared_constraints):
             self.check(c, ("game", "shared_constraints", j), scope, True, None if static else taus)
         if not static:
@@ -1175,7 +1181,7 @@ class _SemanticChecks:
                 self.report(where + (s,), f"{s!r} is not a declared state (states: {', '.join(g.states)})", key=True)
             else:  # the dynamics are the same at every stage (no tau)
                 declared = {n for n, what in self.seen.items() if what == "runtime parameter"}
-                runtime = sorted(_names_of(text) & (declared | ({"t"} if "t" not in self.seen else set())))
+                runtime = sorted(_names_of(text) & (declared | {"t"}))
                 if runtime:
                     self.report(where + (s,), f"{runtime[0]!r} is a runtime value: the dynamics are compiled with "
                                               "constants (parameters), the same at every stage and sampling time")

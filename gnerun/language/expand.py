@@ -52,8 +52,10 @@ def expands(data: Any) -> bool:
     if not isinstance(game, dict):
         return False
     x0 = game.get("x0")
+    parameters = game.get("parameters")
     return (_uses(game) or (isinstance(x0, list) and any(isinstance(v, str | dict) for v in x0))
-            or _numbers_as_text(game))
+            or _numbers_as_text(game)
+            or isinstance(parameters, dict) and any(isinstance(v, list) for v in parameters.values()))
 
 
 def _numbers_as_text(game: dict) -> bool:
@@ -170,6 +172,7 @@ class Expander:
 
     def _game(self, game: dict) -> dict:
         kept, base = self.subst.parameters(game)
+        self.families.reserved = index_reserved(game, kept, self.vectors, self.subst.runtime)
         self._measure(game, base)
         scope = Scope(base)
         self._definitions(game, kept, scope)
@@ -191,6 +194,10 @@ class Expander:
             if name in declared:
                 raise Problem(("game", "definitions", name), f"definition {name!r} has the name of {declared[name]}; "
                                "a definition may not shadow a variable, state, input, parameter or constant", key=True)
+        for name, (path, column, bindings) in self.families.used.items():
+            if name in declared:
+                raise Problem(path, f"index {name!r} has the name of {declared[name]}, which it would replace in the "
+                                    "expressions of its scope; choose another name", bindings, column=column)
         return out
 
     def _definitions(self, game: dict, kept: dict[str, Any], scope: Scope) -> None:
@@ -202,7 +209,7 @@ class Expander:
             path = ("game", "definitions", name)
             if not isinstance(name, str) or NAME.fullmatch(name) is None:
                 raise Problem(path, f"a definition's name must be a name, not {name!r}")
-            shadowed = _reserved(name, kept, self.vectors, _has_ode(game))
+            shadowed = _reserved(name, kept, self.vectors, _has_ode(game), _is_dynamic(game))
             if shadowed:
                 raise Problem(path, f"definition {name!r} has the name of {shadowed}; a definition may not shadow a "
                                      "variable, state, input, parameter or constant", key=True)
@@ -369,7 +376,11 @@ def _has_ode(game: dict) -> bool:
     return isinstance(dynamics, dict) and "ode" in dynamics
 
 
-def _reserved(name: str, parameters: dict, vectors: dict, ode: bool = False) -> str | None:
+def _is_dynamic(game: dict) -> bool:
+    return game.get("kind") == "dynamic" or "horizon" in game
+
+
+def _reserved(name: str, parameters: dict, vectors: dict, ode: bool = False, dynamic: bool = False) -> str | None:
     """What a definition named ``name`` would shadow among the names known before the game is expanded."""
     if name in FUNCTIONS or name in AGGREGATES:
         return "a function"
@@ -383,7 +394,23 @@ def _reserved(name: str, parameters: dict, vectors: dict, ode: bool = False) -> 
         return "a parameter"
     if name == "dt" and ode:
         return "the sampling time dt"
+    if name == "t" and dynamic:
+        return "the time t"
     return None
+
+
+def index_reserved(game: dict, parameters: dict, vectors: dict, runtime: set[str]) -> dict[str, str]:
+    """The names an index of a family or an aggregate may not take, and what each is: in the expressions of its
+    scope the index would replace it (integer parameters, T and outer indices are refused as in use)."""
+    out = {name: "a function" for name in (*FUNCTIONS, *AGGREGATES)}
+    out.update((name, "a constant") for name in CONSTANTS)
+    out.update((name, "a parameter") for name in (*parameters, *vectors))
+    out.update((name, "a runtime parameter") for name in runtime)
+    if _is_dynamic(game):
+        out["tau"], out["t"] = "the stage index tau", "the time t"
+    if _has_ode(game):
+        out["dt"] = "the sampling time dt"
+    return out
 
 
 def _declared(game: dict) -> dict[str, str]:

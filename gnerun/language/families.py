@@ -43,6 +43,11 @@ class Families:
     def __init__(self, definitions: dict[str, Node]):
         self.definitions = definitions
         self.runtime: set[str] = set()  # runtime parameters: not integers known at expansion
+        # names an index may not take, and what each is (functions, constants, parameters, tau, t, dt: see
+        # expand.index_reserved); the names of variables, inputs and states are only known once expanded: ``used``
+        # holds where each index name was first taken, for the expander to check against them
+        self.reserved: dict[str, str] = {}
+        self.used: dict[str, tuple[PathKey, int | None, dict[str, int]]] = {}
         self.items = 0
         self.integers: dict[str, Any] = {}  # integer expressions, parsed once per text
         self.ticks = 0
@@ -73,6 +78,7 @@ class Families:
                                scope.indices)
             if name in self.definitions:
                 raise Problem(path, f"index {name!r} is the name of a definition", scope.indices)
+            self.take(name, path, None, scope)
         scopes: list[Scope] = []
         described = "the family for: {" + ", ".join(f"{k}: {v}" for k, v in spec.items()) + "}"
 
@@ -91,6 +97,15 @@ class Families:
 
         nest(0, scope)
         return scopes
+
+    def take(self, name: str, path: PathKey, column: int | None, scope: Scope) -> None:
+        """An index named ``name`` is declared at ``path`` (``column``: of an aggregate in an expression): refused where
+        it has a reserved name, which inside its scope it would silently replace."""
+        what = self.reserved.get(name)
+        if what is not None:
+            raise Problem(path, f"index {name!r} has the name of {what}, which it would replace in the expressions of "
+                                "its scope; choose another name", scope.indices, column=column)
+        self.used.setdefault(name, (path, column, dict(scope.indices)))
 
     def count(self, n: int, path: PathKey, scope: Scope) -> None:
         self.items += n

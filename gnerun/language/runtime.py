@@ -86,11 +86,8 @@ class SymbolTable:
 
 
 def uses_time(g: Any) -> bool:
-    """Whether a dynamic game's costs or constraints use the absolute time ``t`` (and nothing declares that name)."""
+    """Whether a dynamic game's costs or constraints use the absolute time ``t`` (no name of a dynamic game is t)."""
     if getattr(g, "kind", None) != "dynamic":
-        return False
-    declared = set(g.parameters) | set(g.runtime) | set(g.states) | {u for a in g.agents for u in a.inputs}
-    if "t" in declared:
         return False
     texts: list[str] = []
     for a in g.agents:

@@ -33,6 +33,7 @@ from .templates import Aggregate, Entry, Hole, Template, Word, parse_template
 from .yaml_source import PathKey
 
 _TEMPLATE = re.compile(r"\{([^{}]*)\}")
+_NUMBER = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?")  # a number literal, as text
 
 
 class Substitution:
@@ -175,10 +176,10 @@ class Substitution:
         if isinstance(n, Num):
             return n
         if isinstance(n, Name):
-            return self._name(n.id, n.column, sc)
+            return self._name(n.id, n.column, sc, path)
         self.changed = True
         if isinstance(n, Word):
-            return self._name(self._word(n, path, sc), n.column, sc)
+            return self._name(self._word(n, path, sc), n.column, sc, path)
         if isinstance(n, Hole):
             return Num(self.families.value(n.expr.tree, n.expr.text, path, sc, n.column + 1), n.column)
         if n.name in self.runtime:
@@ -220,6 +221,7 @@ class Substitution:
         if n.index in self.definitions:
             raise Problem(path, f"index {n.index!r} of {n.function}() is the name of a definition",
                            sc.indices, column=n.column)
+        self.families.take(n.index, path, n.column, sc)
         lo, hi = self.families.bounds(n.lo, n.hi, n.range_text, path, sc)
         count = max(0, hi - lo + 1)
         self.families.count(count, path, sc)
@@ -228,7 +230,7 @@ class Substitution:
                            column=n.column)
         return count, lo, hi
 
-    def _name(self, word: str, column: int, scope: Scope) -> Node:
+    def _name(self, word: str, column: int, scope: Scope, path: PathKey) -> Node:
         if word in scope.indices:
             self.changed = True
             return Num(scope.indices[word], column)
@@ -236,6 +238,11 @@ class Substitution:
         if tree is not None:
             self.changed = True
             return tree
+        if word in self.vectors:  # its entries are written in; the parameter itself is no number
+            shape = "vector" if all(not isinstance(v, list) for v in self.vectors[word]) else "matrix"
+            raise Problem(path, f"{word!r} is a {shape} parameter: an expression uses one of its entries, "
+                                f"{word}[i]" + ("" if shape == "vector" else "[j]") + " (indexed from 1)",
+                           scope.indices, column=column)
         return Name(word, column)
 
     def _word(self, word: Word, path: PathKey, scope: Scope) -> str:
@@ -273,17 +280,19 @@ class Substitution:
 
 
 def checked_vector(value: list, path: PathKey) -> list:
-    """A vector or matrix parameter, its shape and entries checked."""
-    def check(v: Any, depth: int) -> None:
+    """A vector or matrix parameter, its shape and entries checked; an entry written as a number that YAML reads as
+    text (``1e-3``: YAML 1.1's floats need a dot) is that number."""
+    def check(v: Any, depth: int) -> Any:
         if isinstance(v, list):
             if depth >= 2 or not v:
                 raise Problem(path, "a parameter is a number, a vector (list) or a matrix (list of lists)")
-            for x in v:
-                check(x, depth + 1)
-        elif isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+            return [check(x, depth + 1) for x in v]
+        if isinstance(v, str) and _NUMBER.fullmatch(v.strip()):
+            v = float(v)
+        if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
             raise Problem(path, f"the entries of a vector or matrix parameter must be finite numbers, not {v!r}")
-    check(value, 0)
-    return value
+        return v
+    return check(value, 0)
 
 
 def _written(lhs: Node, relation: str | None, rhs: Node | None, changed: bool, text: str) -> str:
