@@ -348,6 +348,35 @@ def test_a_convex_players_gap_is_its_exact_best_response(x2) -> None:
     assert cert["best_response_note"]["p1"].startswith("ok (convex")
 
 
+def test_a_player_curved_down_however_slightly_is_not_called_convex() -> None:
+    """1e6 (x - 0.3)^2 - 1e-5 y^2 + x x2 on |x| <= 10, |y| <= 1000: the Hessian diag(2e6, -2e-5) is indefinite,
+    though its least eigenvalue is 1e-11 of its largest. At the KKT point y = 0 the player gains 1e-5 1000^2 = 10 by
+    y = +-1000: the certificate finds that gain (not "global (convex)" with a zero gap), and the solve ends at y = +-1000,
+    certified."""
+    text = """
+game:
+  kind: static
+  agents:
+    - name: p1
+      variables: {x: {lower: -10, upper: 10, start: 0}, y: {lower: -1000, upper: 1000, start: 0}}
+      cost: "1e6*(x - 0.3)**2 - 1e-5*y**2 + x*x2"
+    - name: p2
+      variables: {x2: {lower: -1, upper: 1, start: 0}}
+      cost: "(x2 - 0.5)**2"
+"""
+    cfg = load_config(text=text)
+    game = compile_game(cfg)
+    x = 0.3 - 0.5 / 2e6  # p1's stationary x against x2 = 0.5
+    cert = certificate(game, _z(game, np.array([x, 0.0, 0.5])))
+    assert cert["best_response_kind"]["p1"] != "global (convex)"
+    assert cert["best_response_gap"]["p1"] == pytest.approx(1e-5 * 1000**2, rel=1e-9)
+    assert cert["best_response_kind"]["p2"] == "global (convex)"  # (x2 - 0.5)^2 is
+    res = solve(cfg, out=None)
+    assert res.status == "converged"
+    assert abs(res.solution["p1"]["y"]) == 1000.0 and res.solution["p1"]["x"] == pytest.approx(x, abs=1e-12)
+    assert res.certificate["best_response_kind"]["p1"] == "global on the box"
+
+
 def test_best_responses_gain_nothing_from_violating_a_priced_constraint() -> None:
     # FK A.10c at its equilibrium: SLSQP's best responses may break a consumer's budget by ~1e-8; at the candidate's
     # multipliers (~100) that looked like a gain of ~1e-6 before violations were charged

@@ -578,6 +578,7 @@ def check_player(game: CompiledGame, agent: int, z: np.ndarray, x: np.ndarray | 
 
 
 HESSIAN_BUILT_UP_TO = 100  # an LQ player with more decisions reads its Hessian from gradients
+PSD_ROUNDING = 8.0  # a player's Hessian is positive semidefinite where its least eigenvalue >= -this n eps ||H||
 
 
 def _convex_player(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | None) -> np.ndarray | None:
@@ -601,7 +602,11 @@ def _convex_player(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray 
         H = _hessian_from_gradients(game, agent, a, x)
     H = 0.5 * (H + H.T)
     w = np.linalg.eigvalsh(H)
-    return H if w.size == 0 or w[0] >= -1e-10 * max(1.0, float(np.max(np.abs(w)))) else None
+    # positive semidefinite as far as its eigenvalues can tell: eigvalsh's are exact for H + E with ||E|| of about
+    # n eps ||H||; a negative eigenvalue beyond that is negative curvature however small beside the largest (1e6 x^2 -
+    # 1e-5 y^2 falls by 10 at y = 1000), and the general path decides
+    rounding = PSD_ROUNDING * w.size * np.finfo(float).eps * float(np.max(np.abs(w), initial=0.0))
+    return H if w.size == 0 or w[0] >= -rounding else None
 
 
 def _convex_response(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | None, H: np.ndarray,
