@@ -351,8 +351,8 @@ def test_a_convex_players_gap_is_its_exact_best_response(x2) -> None:
 def test_a_player_curved_down_however_slightly_is_not_called_convex() -> None:
     """1e6 (x - 0.3)^2 - 1e-5 y^2 + x x2 on |x| <= 10, |y| <= 1000: the Hessian diag(2e6, -2e-5) is indefinite,
     though its least eigenvalue is 1e-11 of its largest. At the KKT point y = 0 the player gains 1e-5 1000^2 = 10 by
-    y = +-1000: the certificate finds that gain (not "global (convex)" with a zero gap), and the solve ends at y = +-1000,
-    certified."""
+    y = +-1000: the certificate finds that gain (not "global (convex)" with a zero gap), and the solve ends at
+    y = +-1000, certified."""
     text = """
 game:
   kind: static
