@@ -377,6 +377,37 @@ game:
     assert res.certificate["best_response_kind"]["p1"] == "global on the box"
 
 
+def test_a_player_without_rows_beside_one_with_rows_is_certified() -> None:
+    """A dynamic game whose first player has no constraint and whose second has one (inactive at the solution): the
+    certificate builds the first player's own problem with no multipliers (it raised CasADi's error on an empty
+    substitution). The equilibrium is the stationary point of both players' costs in closed form."""
+    cfg = load_config(text="""
+game:
+  kind: dynamic
+  horizon: 0
+  states: [x1]
+  dynamics: {x1: "x1 + 0.4*u1 + 0.6*u2"}
+  x0: [-1.47]
+  agents:
+    - name: p1
+      inputs: {u1: {start: 0}}
+      stage_cost: "(x1 + 0.58)**2 + 0.01*u1**2"
+    - name: p2
+      inputs: {u2: {start: 0}}
+      stage_cost: "(x1 + 0.5)**2 + 0.01*u2**2"
+      constraints: ["x1**2 <= 0.45"]
+""")
+    res = solve(cfg, out=None)
+    # 2 b_i (x1 - r_i) + 0.02 u_i = 0 with x1 = -1.47 + 0.4 u1 + 0.6 u2, b = (0.4, 0.6), r = (-0.58, -0.5)
+    b, r = np.array([0.4, 0.6]), np.array([-0.58, -0.5])
+    A = 2 * np.outer(b, b) + 0.02 * np.eye(2)
+    u = np.linalg.solve(A, -2 * b * (-1.47 - r))
+    assert res.status == "converged"
+    assert [res.solution["p1"]["u1"][0], res.solution["p2"]["u2"][0]] == pytest.approx(u, abs=1e-10)
+    assert (-1.47 + b @ u) ** 2 < 0.45  # the row is inactive
+    assert all(abs(g) <= 1e-12 for g in res.certificate["best_response_gap"].values())
+
+
 def test_best_responses_gain_nothing_from_violating_a_priced_constraint() -> None:
     # FK A.10c at its equilibrium: SLSQP's best responses may break a consumer's budget by ~1e-8; at the candidate's
     # multipliers (~100) that looked like a gain of ~1e-6 before violations were charged

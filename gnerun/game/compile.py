@@ -928,7 +928,9 @@ def derivatives_from_game(problem: CompiledGame, game: CompiledGame, agent: int)
     own = list(range(sl.start, sl.stop))
     rows = [int(r) for r in rows]
     sym = problem._symbolic
-    dL_i = ca.substitute(dL[own, own + [game.n + r for r in rows]], game._symbolic.lam[rows], sym.lam)
+    dL_i = dL[own, own + [game.n + r for r in rows]]
+    if rows:  # (a player without rows has no multipliers to replace: CasADi refuses an empty substitution's shapes)
+        dL_i = ca.substitute(dL_i, game._symbolic.lam[rows], sym.lam)
     dc_i = dc[rows, own] if rows else ca.SX(0, len(own))
     if ca.depends_on(ca.vec(ca.vertcat(ca.vec(dL_i), ca.vec(dc_i))), game._symbolic.lam):
         return False  # another player's multipliers in its block: not this problem's derivatives
