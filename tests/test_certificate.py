@@ -527,9 +527,28 @@ def test_a_better_basin_is_found_and_certified_on_the_box() -> None:
 
     best, arg = _grid_min(j, -50, 50)
     assert x1 == pytest.approx(arg, abs=1e-4) and x1 > 3  # the deep well: p1's global best response
-    assert res.certificate["best_response_kind"] == {"p1": "global on the box", "p2": "global on the box"}
+    # x1 and x2 have no bounds: the box searched is 100 times the point's size around it, and says so
+    assert res.certificate["best_response_kind"] == {"p1": "global on the search box", "p2": "global on the search box"}
+    box = res.certificate["best_response_box"]["p1"]
+    assert box["lower"][0] <= x1 - 100 * abs(x1) and box["upper"][0] >= x1 + 100 * abs(x1)
     assert res.certificate["best_response_gap"]["p1"] <= 1e-9
     assert j(np.array([x1]))[0] - best <= 1e-9
+
+
+def test_a_box_searched_around_an_unbounded_decision_is_called_a_search_box() -> None:
+    """min(x^2, 0.001 (x - 500)^2 - 1) on x >= -1: the candidate x = 0 is the best point of the box searched around it
+    (100 times its size), but x = 500, outside it, is cheaper. The claim says it covers the search box only; with the
+    bound x <= 1000 the box is the player's own, the branch and bound finds the far well and the solve ends there."""
+    text = _static([("p1", "x1", "min(x1**2, 0.001*(x1 - 500)**2 - 1) + 0*x2", "start: 0, lower: -1"),
+                    ("p2", "x2", "(x2 - 0.5)**2", "start: 0, lower: -1, upper: 1")])
+    res = solve(load_config(text=text), out=None)
+    assert res.certificate["best_response_kind"]["p1"] == "global on the search box"
+    assert res.certificate["best_response_kind"]["p2"] == "global on the box"
+    assert res.certificate["best_response_box"]["p1"]["upper"][0] < 500  # (the far well lies outside it)
+    bounded = solve(load_config(text=text.replace("start: 0, lower: -1}", "start: 0, lower: -1, upper: 1000}", 1)),
+                    out=None)
+    assert bounded.status == "converged" and bounded.certificate["best_response_kind"]["p1"] == "global on the box"
+    assert bounded.solution["p1"]["x1"] == pytest.approx(500.0, abs=1e-6)  # the global minimum, cost -1
 
 
 def test_the_starts_spread_with_the_size_of_the_decision() -> None:

@@ -32,7 +32,7 @@ def test_an_equilibrium_at_a_kink_is_reached_and_certified() -> None:
     assert res.status == "converged" and res.message.startswith("converged by smoothing")
     assert res.solution["p1"]["x1"] == pytest.approx(0.7, abs=1e-6)
     assert res.solution["p2"]["x2"] == pytest.approx(0.38, abs=1e-6)
-    assert set(res.certificate["best_response_kind"].values()) == {"global on the box"}
+    assert set(res.certificate["best_response_kind"].values()) == {"global on the search box"}  # (unbounded)
     assert max(res.certificate["best_response_gap"].values()) <= 1e-6
 
 

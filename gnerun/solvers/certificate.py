@@ -9,9 +9,10 @@ with the other agents fixed at a_-i, and gap_i = J_i(a) - (best value found) is 
 statement it is (``best_response_kind``):
 
 - **global on the box**: for a player with at most three decisions, an interval branch and bound over its box
-  (its bounds; where a decision is unbounded, a box of radius ``BOX_RADIUS`` times the point's size around the
-  candidate) proves that no feasible point of the box has a cost below J_i(a) - tol, or finds one that has
-  (:mod:`gnerun.solvers.global_response`);
+  (its bounds) proves that no feasible point of the box has a cost below J_i(a) - tol, or finds one that has
+  (:mod:`gnerun.solvers.global_response`); **global on the search box** where a decision is unbounded: the box is
+  then of radius ``BOX_RADIUS`` times the point's size around the candidate in that decision, and a cheaper point
+  farther away is not excluded (the rays below look along lines only);
 - **global (convex)**: in an LQ game, a player whose own Hessian block is positive semidefinite has a
   convex problem (its rows are affine), whose KKT points are its minima: the candidate, a KKT point, is its best
   response, and the local solves confirm the gap;
@@ -444,7 +445,7 @@ class PlayerCheck:
 
     gap: float | None  # J_i(a) - the best value found (None: nothing feasible was found, or the cost is not finite)
     decision: np.ndarray | None  # the best response found
-    kind: str  # "global on the box" | "over N starts" | "not checked"
+    kind: str  # "global on the box" | "global on the search box" | "global (convex)" | "over N starts" | "not checked"
     note: str
     box: tuple[list[float], list[float]] | None = None  # the box of a global statement
     bound: float | None = None  # a proven upper bound on the gap (global on the box)
@@ -558,7 +559,10 @@ def check_player(game: CompiledGame, agent: int, z: np.ndarray, x: np.ndarray | 
 
     gap = None if best_x is None else J0 - best_val
     if box_result is not None and box_result.complete and gap is not None:
-        kind = "global on the box"  # no feasible point of the box is cheaper than the best one found by more than tol
+        # no feasible point of the box is cheaper than the best one found by more than tol; where a decision has no
+        # bound, the box is a radius around the point (search_box), not the player's own range
+        bounded = bool(np.all(np.isfinite(game.a_lower[sl])) and np.all(np.isfinite(game.a_upper[sl])))
+        kind = "global on the box" if bounded else "global on the search box"
         bound = gap + tol
     elif gap is not None and gap <= tol and convex:
         kind = "global (convex)"  # the candidate is a KKT point of the player's own convex problem
@@ -734,7 +738,7 @@ def certificate(game: CompiledGame, z: np.ndarray, x: np.ndarray | None = None,
         notes[name] = pc.note
         kinds[name] = pc.kind
         bounds[name] = pc.bound
-        if pc.box is not None and pc.kind == "global on the box":
+        if pc.box is not None and pc.kind.startswith("global on the"):
             boxes[name] = {"lower": pc.box[0], "upper": pc.box[1]}
         if pc.ray is not None:
             rays[name] = {"direction": pc.ray.direction.tolist(), "steps": pc.ray.steps.tolist(),
