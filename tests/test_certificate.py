@@ -551,6 +551,22 @@ def test_a_box_searched_around_an_unbounded_decision_is_called_a_search_box() ->
     assert bounded.solution["p1"]["x1"] == pytest.approx(500.0, abs=1e-6)  # the global minimum, cost -1
 
 
+def test_a_row_broken_by_rounding_at_the_candidate_does_not_empty_the_box() -> None:
+    """p2's row 0.1 x1 <= 0.03 is p1's decision alone; at x1 = 0.3 + 2.4e-12 (a point a solve accepts) it is +2.4e-13.
+    p2 gains 0.7296 in its narrow well at y2 = -2.2 (0.01 5.2^2 - 1 against 0 at y2 = 3): the box search finds it
+    instead of discarding the box on that row."""
+    text = _static([("p1", "x1", "(x1 - 1)**2", "start: 0, lower: 0, upper: 1"),
+                    ("p2", "y2", "0.01*(y2 - 3)**2 - exp(-1e6*(y2 + 2.2)**2) + 0*x1", "start: 3, lower: -5, upper: 5")],
+                   '  shared_constraints: ["0.1*x1 <= 0.03"]\n  equilibrium: generalized\n')
+    game = compile_game(load_config(text=text))
+    z = np.zeros(game.size)
+    z[:2] = [0.3 + 2.4e-12, 3.0]
+    assert game.constraint_values(z[:2], None)[0].max() > 0  # the row, broken by rounding
+    cert = certificate(game, z)
+    assert cert["best_response_kind"]["p2"] == "global on the box"
+    assert cert["best_response_gap"]["p2"] == pytest.approx(1 - 0.01 * 5.2**2, rel=1e-6)
+
+
 def test_the_starts_spread_with_the_size_of_the_decision() -> None:
     """A one-dimensional, unbounded player with wells near x1 = -30 and +30, the left one lower by about 120: at the
     KKT point in the right well, starts perturbed by N(0, 1) (not by the decision's size) stay in that well; the

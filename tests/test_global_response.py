@@ -88,3 +88,21 @@ def test_a_search_out_of_budget_gives_a_valid_lower_bound(budget: int) -> None:
     out = box_search(J, None, None, np.zeros(0, dtype=bool), lo, hi, _embed, true_min - 1e-6, max_pieces=budget)
     assert not out.complete and out.witness is None
     assert out.lower_bound <= true_min
+
+
+def test_a_row_the_candidate_breaks_by_rounding_is_held_to_what_it_has_there() -> None:
+    """A row of the others' decisions alone is a constant for this player; at an accepted point it may be +2e-13.
+    Held to exactly zero it discards the whole box and the search ends complete with nothing found; held to the
+    candidate's own value, the search finds the better well (WELLS' left one) below the threshold."""
+    J, dJ, c = _tapes(WELLS, ca.vertcat(0 * y[0] + 2e-13))
+    lo, hi = np.array([-3.0, -3.0]), np.array([3.0, 3.0])
+    threshold = _global_min() + 1e-3  # only the better well is below it
+    vacuous = box_search(J, dJ, c, np.zeros(1, dtype=bool), lo, hi, _embed, threshold)
+    assert vacuous.complete and vacuous.witness is None  # what the search says of a row held to zero
+    out = box_search(J, dJ, c, np.zeros(1, dtype=bool), lo, hi, _embed, threshold, candidate=np.array([0.97, 0.5]))
+    assert out.witness is not None and out.witness[0] == pytest.approx(-1.03, abs=0.05)
+    assert out.witness_value < threshold
+    # a row the candidate satisfies exactly keeps its meaning: y1 >= 0.5 still cuts the better well off
+    J, dJ, c = _tapes(WELLS, ca.vertcat(0.5 - y[0]))
+    out = box_search(J, dJ, c, np.zeros(1, dtype=bool), lo, hi, _embed, threshold, candidate=np.array([0.97, 0.5]))
+    assert out.complete and out.witness is None

@@ -698,7 +698,7 @@ def _box_search(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | N
         return [Al, xv], [Ah, xv]
 
     result = global_response.box_search(tapes[0], tapes[1], tapes[2] if rows.size else None, eq, lo, hi, embed,
-                                        threshold, tol=tol)
+                                        threshold, tol=tol, candidate=a[sl])
     return result, (lo.tolist(), hi.tolist())
 
 

@@ -46,7 +46,7 @@ class BoxSearch:
 
 def box_search(cost: Tape, gradient: Tape | None, rows: Tape | None, equality: np.ndarray, lower: np.ndarray,
                upper: np.ndarray, embed, threshold: float, *, tol: float | None = None,
-               max_pieces: int = MAX_PIECES) -> BoxSearch:
+               max_pieces: int = MAX_PIECES, candidate: np.ndarray | None = None) -> BoxSearch:
     """Search the box [lower, upper] of the player's own decisions for a feasible point below ``threshold``.
 
     ``cost``, ``gradient`` and ``rows`` are tapes of functions of (a, x) (J_i, grad_{a_i} J_i, the player's rows);
@@ -54,13 +54,24 @@ def box_search(cost: Tape, gradient: Tape | None, rows: Tape | None, equality: n
     (lists for :meth:`Tape.bounds`: the others' decisions and the state as degenerate intervals). With ``tol``, a
     witness does not end the search: the threshold drops to the witness's value minus ``tol`` and the search goes on,
     so that a complete search returns a witness within ``tol`` of the cheapest feasible point of the box (a best
-    response, not just a better point)."""
+    response, not just a better point).
+
+    ``candidate`` (the point being certified, in the player's decisions): a row counts as holding where it is no
+    worse than there. A point accepted as a solution may break a row by rounding (a row of the others' decisions
+    alone, a constant for this player, at +2e-13); held to exactly zero, that row would discard every piece, and
+    the search would end complete with nothing found, whatever the player could gain."""
     d = lower.size
     lo = lower.reshape(d, 1).astype(float)
     hi = upper.reshape(d, 1).astype(float)
     width0 = np.maximum(upper - lower, 1e-300).reshape(d, 1)
     pieces = 0
     witness, witness_value = None, None
+    slack = np.zeros((equality.size, 1))  # what each row may be, as the candidate has it (0: none beyond exact)
+    if rows is not None and equality.size and candidate is not None:
+        y = np.asarray(candidate, dtype=float).reshape(d, 1)
+        (yl,), (yh,) = rows.bounds(*embed(y, y))
+        worst = np.where(equality.reshape(-1, 1), np.maximum(np.abs(yl), np.abs(yh)), yh)
+        slack = np.where(np.isfinite(worst), np.maximum(worst, 0.0), 0.0)
     while lo.shape[1]:
         pieces += lo.shape[1]
         mid = 0.5 * (lo + hi)
@@ -82,11 +93,12 @@ def box_search(cost: Tape, gradient: Tape | None, rows: Tape | None, equality: n
         if rows is not None and equality.size:
             (cl,), (ch,) = rows.bounds(*embed(lo, hi))
             ineq = ~equality
-            impossible = (cl[ineq] > 0).any(axis=0) | (cl[equality] > 0).any(axis=0) | (ch[equality] < 0).any(axis=0)
+            impossible = ((cl[ineq] > slack[ineq]).any(axis=0) | (cl[equality] > slack[equality]).any(axis=0)
+                          | (ch[equality] < -slack[equality]).any(axis=0))
             keep &= ~impossible
             (pl,), (ph,) = rows.bounds(*embed(mid, mid))
             # a centre counts only where every row provably holds there (equality rows cannot: they need a solve)
-            centre_ok &= (ph[ineq] <= 0).all(axis=0) & ~equality.any()
+            centre_ok &= (ph[ineq] <= slack[ineq]).all(axis=0) & ~equality.any()
         # a centre provably feasible and provably below the threshold is a witness; with tol, the best one so far
         hit = np.flatnonzero(keep & centre_ok & (mh[0] < threshold))
         if hit.size:
