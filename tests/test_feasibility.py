@@ -107,3 +107,31 @@ def test_a_dynamic_game_whose_inputs_cannot_reach_a_shared_row_ends_infeasible()
     ok = solve(load_config(text=DYNAMIC, overrides={"game.x0": [1.0, 0.5]}))
     assert ok.status == "converged"
     assert np.isfinite(ok.z).all()
+
+
+def test_nonlinear_rows_satisfied_by_a_plain_plan_are_not_called_infeasible() -> None:
+    """Only p3 has rows, sin(3 u3) <= 0.28 and x1 <= 0.72 from stage 1 on, with x0 = -0.46: the zero plan satisfies
+    every row (sin 0 = 0, x1 stays -0.46), but a local search from the start values (u3 = 0.55, where sin(3 u3) is
+    near its maximum and its derivative near zero) stalled at a violation of 0.105 and called the game infeasible.
+    The design screened before the searches finds a point that satisfies every row."""
+    cfg = load_config(text="""
+game:
+  kind: dynamic
+  horizon: 3
+  states: [x1]
+  dynamics: {x1: "x1 + sin(0.34*u1 + 0.81*u2 + 0.43*u3)"}
+  x0: [-0.46]
+  agents:
+    - {name: p1, inputs: {u1: {lower: -1.04, upper: 1.9, start: -0.07}}, stage_cost: "(u1 - 1)**2"}
+    - {name: p2, inputs: {u2: {lower: -1.53, upper: 0.56, start: -1.45}}, stage_cost: "(u2 + 1)**2"}
+    - name: p3
+      inputs: {u3: {lower: -0.98, upper: 0.81, start: 0.55}}
+      stage_cost: "(u3 - 0.5)**2"
+      constraints: ["sin(3*u3) <= 0.28", {expr: "x1 <= 0.72", stages: 1..T}]
+""")
+    game = compile_game(cfg)
+    x = np.asarray(cfg.game.x0, dtype=float)
+    assert game.constraint_values(np.zeros(game.n), x)[0].max() <= 0  # the zero plan is feasible
+    out = phase_one(game, x)
+    assert not out.infeasible and not out.proven
+    assert game.constraint_values(out.point, x)[0].max() <= 0

@@ -8,8 +8,12 @@ directly: the smallest t such that every row holds within t,
 
 at the given plant state x. Where every row is affine in a (bounds, budgets, the rows of LQ dynamic games) this is a
 linear program, solved by HiGHS (scipy.optimize.linprog): its optimum t* > 0 proves that no point satisfies every row
-within less than t*, and the rows binding at the optimum realise it. Otherwise it is a smooth nonlinear program
-solved locally by SLSQP from several starts: a positive t* is then what the searches found, not a proof.
+within less than t*, and the rows binding at the optimum realise it. Otherwise it is a smooth nonlinear program:
+``DESIGN`` points of a low-discrepancy design over the decisions' box are screened first (any of them, or a start,
+that satisfies every row ends the question), then SLSQP searches from the starts and from the ``SEARCHES`` least
+violated design points; a positive t* is then what the searches found, not a proof. (With two local searches from
+the solver's last iterate and the start values, 35 of about 700 random feasible games were called infeasible, one
+of them satisfied by its zero inputs.)
 """
 
 from __future__ import annotations
@@ -23,6 +27,9 @@ import numpy as np
 from ..game.compile import CompiledGame
 
 TOL = 1e-7  # a smallest violation above this (relative to the rows' size) is infeasibility
+DESIGN = 512  # nonlinear rows: design points screened for a feasible point before the local searches
+SEARCHES = 6  # ... and the least violated of them that the local searches start from (after the given starts)
+SPREAD = 10.0  # an unbounded decision's range in the design: this times max(1, |start|) on each open side
 
 
 @dataclass(frozen=True)
@@ -59,7 +66,39 @@ def phase_one(game: CompiledGame, x: np.ndarray | None = None, starts: list[np.n
         return None
     if game.lq.linear_rows[rows].all():
         return _linear(game, x, rows)
-    return _nonlinear(game, x, rows, list(starts) + [game.a_start])
+    starts = [np.asarray(s, dtype=float) for s in [*starts, game.a_start]]
+    starts = [s for s in starts if s.size == game.n and np.all(np.isfinite(s))]
+    found, design = _screened(game, x, rows, starts)
+    if found is not None:
+        return found
+    return _nonlinear(game, x, rows, starts + design)
+
+
+def _screened(game: CompiledGame, x: np.ndarray | None, rows: np.ndarray,
+              starts: list[np.ndarray]) -> tuple[PhaseOne | None, list[np.ndarray]]:
+    """The starts and ``DESIGN`` design points over the decisions' box (an open side ``SPREAD`` times the start's
+    size), evaluated at once: a point that satisfies every row (then the game is feasible), or the ``SEARCHES``
+    least violated design points."""
+    from .certificate import kronecker
+
+    lo, hi, s = game.a_lower, game.a_upper, game.a_start
+    r = SPREAD * np.maximum(1.0, np.abs(s))
+    low = np.where(np.isfinite(lo), lo, np.where(np.isfinite(hi), np.minimum(hi, s) - r, s - r))
+    high = np.where(np.isfinite(hi), hi, np.where(np.isfinite(lo), np.maximum(lo, s) + r, s + r))
+    design = low + kronecker(game.n, DESIGN, np.random.default_rng(0)) * (high - low)
+    points = np.vstack([*starts, np.clip(np.zeros(game.n), lo, hi), design]) if starts else \
+        np.vstack([np.clip(np.zeros(game.n), lo, hi), design])
+    _, C = game.agents.evaluate_many(points, x)
+    c = C[:, rows]
+    eq = game.equality_mask[rows]
+    with np.errstate(invalid="ignore"):
+        viol = np.max(np.where(eq, np.abs(c), np.maximum(c, 0.0)), axis=1, initial=0.0)
+    viol = np.where(np.isfinite(viol), viol, np.inf)
+    k = int(np.argmin(viol))
+    if viol[k] <= TOL:
+        return PhaseOne(float(viol[k]), [], points[k], False, "a point of a design over the box"), []
+    order = np.argsort(viol[len(points) - DESIGN:], kind="stable")[:SEARCHES]
+    return None, [design[j] for j in order if np.isfinite(viol[len(points) - DESIGN + j])]
 
 
 def _linear(game: CompiledGame, x: np.ndarray | None, rows: np.ndarray) -> PhaseOne:
