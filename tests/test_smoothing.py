@@ -97,3 +97,28 @@ def test_an_l1_input_cost_in_a_dynamic_game_matches_its_epigraph_form() -> None:
     np.testing.assert_allclose(res.solution["a1"]["v1"], ref.solution["a1"]["v1"], atol=1e-6)
     np.testing.assert_allclose(res.solution["a2"]["v2"], ref.solution["a2"]["v2"], atol=1e-6)
     assert min(abs(v - 0.3) for v in res.solution["a1"]["v1"]) <= 1e-6  # an input held at its reference: the kink
+
+
+def test_a_kink_equilibrium_that_restarts_end_short_of_is_reached_by_smoothing() -> None:
+    """p1 minimises 2.1 |sin(3.01 x1)| - 0.29 exp(0.7 x1) + 0.19 min(x1, -0.66) on [-3.8, -1.8], alone (p2's
+    decision adds a constant): its best response is the kink x1 = -3 pi / 3.01, where the smooth stationary points
+    the restarts reach are not minima; p2's cost falls with x22 on [-0.5, 2] (x21 is free to be anything). The
+    unsmoothed solve ended not_an_equilibrium; the smoothing homotopy, tried after it, ends certified at the kink."""
+    res = solve(load_config(text="""
+game:
+  kind: static
+  agents:
+    - name: p1
+      variables: {x11: {lower: -3.8, upper: -1.8, start: -1.8}}
+      cost: "2.1*abs(sin(3.01*x11)) - 0.29*exp(0.7*x11) + 0.19*min(x11, -0.66) - 1.95*x22**2"
+    - name: p2
+      variables: {x21: {lower: -2.5, upper: -1.5, start: -1.5}, x22: {lower: -0.5, upper: 2.0, start: 0.0}}
+      cost: "-1.27*min(x22, -1.45) - 1.9*x22 + 1.45*abs(x11)"
+run: {reference: none}
+"""), out=None)
+    g = np.linspace(-3.8, -1.8, 2_000_001)
+    j1 = 2.1 * np.abs(np.sin(3.01 * g)) - 0.29 * np.exp(0.7 * g) + 0.19 * np.minimum(g, -0.66)
+    assert g[np.argmin(j1)] == pytest.approx(-3 * np.pi / 3.01, abs=1e-5)  # the best response is the kink
+    assert res.status == "converged" and res.message.startswith("converged by smoothing")
+    assert res.solution["p1"]["x11"] == pytest.approx(-3 * np.pi / 3.01, abs=1e-6)
+    assert res.solution["p2"]["x22"] == pytest.approx(2.0, abs=1e-9)

@@ -276,7 +276,7 @@ def conclude(game: CompiledGame, out: Certified, x: np.ndarray | None = None, ce
 def _smoothable(cfg: Config, game: CompiledGame, outcome: Certified) -> bool:
     """A failed solve of a game with abs, min or max of its decisions, by the default method, whose answer can be
     certified: the smoothing homotopy (gnerun.runs.smoothing) is tried."""
-    failed = Status(outcome.status) in FAILURES or outcome.status == Status.MAX_ITER
+    failed = Status(outcome.status) in FAILURES or outcome.status in (Status.MAX_ITER, Status.NOT_AN_EQUILIBRIUM)
     return (failed and outcome.status not in (Status.INFEASIBLE, Status.INFEASIBLE_STAGE_CONSTRAINT)
             and game.piecewise and cfg.solver.kind == "ssn" and resolve(cfg.solver) == "hybrid" and cfg.run.certificate)
 
