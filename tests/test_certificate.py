@@ -352,7 +352,7 @@ def test_a_player_curved_down_however_slightly_is_not_called_convex() -> None:
     """1e6 (x - 0.3)^2 - 1e-5 y^2 + x x2 on |x| <= 10, |y| <= 1000: the Hessian diag(2e6, -2e-5) is indefinite,
     though its least eigenvalue is 1e-11 of its largest. At the KKT point y = 0 the player gains 1e-5 1000^2 = 10 by
     y = +-1000: the certificate finds that gain (not "global (convex)" with a zero gap), and the solve ends at
-    y = +-1000, certified."""
+    y = +-1000, certified by the stationary points of its faces."""
     text = """
 game:
   kind: static
@@ -374,7 +374,7 @@ game:
     res = solve(cfg, out=None)
     assert res.status == "converged"
     assert abs(res.solution["p1"]["y"]) == 1000.0 and res.solution["p1"]["x"] == pytest.approx(x, abs=1e-12)
-    assert res.certificate["best_response_kind"]["p1"] == "global on the box"
+    assert res.certificate["best_response_kind"]["p1"] == "global (QP faces)"  # (an LQ player, not convex)
 
 
 def test_a_player_without_rows_beside_one_with_rows_is_certified() -> None:
@@ -406,6 +406,42 @@ game:
     assert [res.solution["p1"]["u1"][0], res.solution["p2"]["u2"][0]] == pytest.approx(u, abs=1e-10)
     assert (-1.47 + b @ u) ** 2 < 0.45  # the row is inactive
     assert all(abs(g) <= 1e-12 for g in res.certificate["best_response_gap"].values())
+
+
+def test_a_small_nonconvex_lq_player_is_answered_by_its_faces() -> None:
+    """p1: -(y1^2 + y2^2) + y3^2 + y4^2 - 0.5 y1 + 0.3 y2 + x2 y3 on [-1, 1]^4, concave in y1 and y2 (four decisions:
+    past the box search). At its stationary point (-0.25, 0.15, -0.25, 0) it is at a maximum in y1 and y2; its best
+    response against x2 = 0.5 is (1, -1, -0.25, 0), cost -1.5 - 1.3 - 0.0625 = -2.8625, a corner of the faces y1 = 1,
+    y2 = -1: the certificate enumerates its faces and gives that gap exactly; the solve ends there, certified."""
+    text = _static([("p1", "y1", "-(y1**2 + y2**2) + y3**2 + y4**2 - 0.5*y1 + 0.3*y2 + x2*y3",
+                     "start: 0, lower: -1, upper: 1}, y2: {start: 0, lower: -1, upper: 1}, y3: {start: 0, lower: -1, "
+                     "upper: 1}, y4: {start: 0, lower: -1, upper: 1"),
+                    ("p2", "x2", "(x2 - 0.5)**2", "start: 0, lower: -1, upper: 1")])
+    cfg = load_config(text=text)
+    game = compile_game(cfg)
+    y = np.array([-0.25, 0.15, -0.25, 0.0])
+    J = -(y[0] ** 2 + y[1] ** 2) + y[2] ** 2 + y[3] ** 2 - 0.5 * y[0] + 0.3 * y[1] + 0.5 * y[2]
+    cert = certificate(game, _z(game, np.r_[y, 0.5]))
+    assert cert["best_response_kind"]["p1"] == "global (QP faces)"
+    assert cert["best_response_gap"]["p1"] == pytest.approx(J - (-2.8625), abs=1e-12)
+    res = solve(cfg, out=None)
+    assert res.status == "converged" and res.certificate["best_response_kind"]["p1"] == "global (QP faces)"
+    assert [res.solution["p1"][v] for v in ("y1", "y2", "y3", "y4")] == pytest.approx([1, -1, -0.25, 0], abs=1e-9)
+
+
+def test_a_nonconvex_lq_player_with_an_unbounded_decision_gets_no_faces_proof() -> None:
+    """The same player with y4 unbounded: a quadratic need not be bounded below on an unbounded polyhedron, so its
+    faces' stationary points are only starts; the gap (the same closed form) is a statement about the starts."""
+    text = _static([("p1", "y1", "-(y1**2 + y2**2) + y3**2 + y4**2 - 0.5*y1 + 0.3*y2 + x2*y3",
+                     "start: 0, lower: -1, upper: 1}, y2: {start: 0, lower: -1, upper: 1}, y3: {start: 0, lower: -1, "
+                     "upper: 1}, y4: {start: 0"),
+                    ("p2", "x2", "(x2 - 0.5)**2", "start: 0, lower: -1, upper: 1")])
+    game = compile_game(load_config(text=text))
+    y = np.array([-0.25, 0.15, -0.25, 0.0])
+    J = -(y[0] ** 2 + y[1] ** 2) + y[2] ** 2 + y[3] ** 2 - 0.5 * y[0] + 0.3 * y[1] + 0.5 * y[2]
+    cert = certificate(game, _z(game, np.r_[y, 0.5]))
+    assert cert["best_response_kind"]["p1"].startswith("over ")
+    assert cert["best_response_gap"]["p1"] == pytest.approx(J - (-2.8625), abs=1e-9)
 
 
 def test_best_responses_gain_nothing_from_violating_a_priced_constraint() -> None:

@@ -16,6 +16,8 @@ statement it is (``best_response_kind``):
 - **global (convex)**: in an LQ game, a player whose own Hessian block is positive semidefinite has a
   convex problem (its rows are affine), whose KKT points are its minima: the candidate, a KKT point, is its best
   response, and the local solves confirm the gap;
+- **global (QP faces)**: in an LQ game, a small player whose block is not positive semidefinite, every decision
+  bounded: the stationary points of its cost on every face of its polytope (:func:`_qp_faces`) hold its minimum;
 - **over N starts**: otherwise, the best of local solves from the starts below, a statement about those starts.
 
 Every start is first compared as it is, before any local solve (a start better than the candidate is a proof
@@ -44,6 +46,7 @@ Three more things make a point fail the certificate, whatever the gaps:
 
 from __future__ import annotations
 
+import itertools
 import math
 import warnings
 import zlib
@@ -445,7 +448,8 @@ class PlayerCheck:
 
     gap: float | None  # J_i(a) - the best value found (None: nothing feasible was found, or the cost is not finite)
     decision: np.ndarray | None  # the best response found
-    kind: str  # "global on the box" | "global on the search box" | "global (convex)" | "over N starts" | "not checked"
+    kind: str  # "global on the box" | "global on the search box" | "global (convex)" | "global (QP faces)" |
+    # "over N starts" | "not checked"
     note: str
     box: tuple[list[float], list[float]] | None = None  # the box of a global statement
     bound: float | None = None  # a proven upper bound on the gap (global on the box)
@@ -487,7 +491,17 @@ def check_player(game: CompiledGame, agent: int, z: np.ndarray, x: np.ndarray | 
                 gap = J0 - float(val[0])
                 return PlayerCheck(gap, answer, "global (convex)",  # the exact gap, whatever its size
                                    "ok (convex: one QP solve on the candidate's active set)")
+    faces = None if convex else _qp_faces(game, agent, a, x, grad)  # a small nonconvex LQ player
+    if faces is not None and np.all(np.isfinite(game.a_lower[sl])) and np.all(np.isfinite(game.a_upper[sl])):
+        vals, ok = _values(game, agent, a, x, [y, *faces], prices)  # bounded: the cheapest is its best response
+        vals = np.where(ok & np.isfinite(vals), vals, np.inf)
+        k = int(np.argmin(vals))
+        if math.isfinite(vals[k]):
+            return PlayerCheck(J0 - float(vals[k]), [y, *faces][k], "global (QP faces)",
+                               f"ok (nonconvex QP: the stationary points of its faces, {len(faces)} of them)")
     starts = response_starts(game, agent, a, x)
+    if faces:  # an unbounded decision: its faces' stationary points are starts (it may be unbounded below)
+        starts = Starts(starts.compare + faces, starts.local, starts.kinks)
     best_val, best_x = math.inf, None
 
     def consider(points: list[np.ndarray], strict: bool) -> None:
@@ -582,12 +596,28 @@ def check_player(game: CompiledGame, agent: int, z: np.ndarray, x: np.ndarray | 
 
 
 HESSIAN_BUILT_UP_TO = 100  # an LQ player with more decisions reads its Hessian from gradients
+QP_FACES_UP_TO = 8  # a nonconvex LQ player with at most this many decisions, all bounded, ...
+QP_FACES = 4096  # ... and at most this many faces (sets of active rows) has them all enumerated
 PSD_ROUNDING = 8.0  # a player's Hessian is positive semidefinite where its least eigenvalue >= -this n eps ||H||
 
 
 def _convex_player(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | None) -> np.ndarray | None:
     """The agent's own Hessian block where its problem is convex for certain: an LQ game (constant derivatives,
     affine rows) whose agent's block is positive semidefinite (its KKT points are its minima); None otherwise."""
+    H = _lq_hessian(game, agent, a, x)
+    if H is None:
+        return None
+    w = np.linalg.eigvalsh(H)
+    # positive semidefinite as far as its eigenvalues can tell: eigvalsh's are exact for H + E with ||E|| of about
+    # n eps ||H||; a negative eigenvalue beyond that is negative curvature however small beside the largest (1e6 x^2 -
+    # 1e-5 y^2 falls by 10 at y = 1000), and the general path decides
+    rounding = PSD_ROUNDING * w.size * np.finfo(float).eps * float(np.max(np.abs(w), initial=0.0))
+    return H if w.size == 0 or w[0] >= -rounding else None
+
+
+def _lq_hessian(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | None) -> np.ndarray | None:
+    """The agent's own Hessian block (symmetric) where the game is LQ (constant derivatives, affine rows); None
+    otherwise."""
     # whether the game is LQ, where that is known without building its condensed derivatives (a game solved in the
     # sparse formulation has not built them, and at long horizons they cost more than the solve)
     if "_derivatives" in game.__dict__ or game.kind == "static":
@@ -604,13 +634,49 @@ def _convex_player(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray 
         # J_i is quadratic: its gradient's differences are the Hessian's columns (building the Hessian's own
         # function grows like T^3.7 at horizon T in a condensed dynamic game: 6 s at T = 400)
         H = _hessian_from_gradients(game, agent, a, x)
-    H = 0.5 * (H + H.T)
-    w = np.linalg.eigvalsh(H)
-    # positive semidefinite as far as its eigenvalues can tell: eigvalsh's are exact for H + E with ||E|| of about
-    # n eps ||H||; a negative eigenvalue beyond that is negative curvature however small beside the largest (1e6 x^2 -
-    # 1e-5 y^2 falls by 10 at y = 1000), and the general path decides
-    rounding = PSD_ROUNDING * w.size * np.finfo(float).eps * float(np.max(np.abs(w), initial=0.0))
-    return H if w.size == 0 or w[0] >= -rounding else None
+    return 0.5 * (H + H.T)
+
+
+def _qp_faces(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | None,
+              grad: np.ndarray) -> list[np.ndarray] | None:
+    """The stationary points of the faces of a small LQ player's problem (a quadratic cost, affine rows) that is not
+    convex: for every set W of at most n_i inequality rows (with the equalities), the KKT system [H A_W'; A_W 0] of
+    that face, solved where it is nonsingular. A quadratic bounded below on a polyhedron attains its minimum (Frank and
+    Wolfe), at a stationary point of its restriction to the relative interior of some face (a vertex included; a face
+    whose system is singular, or whose cost is not convex on it, has its minimum on a smaller face, which is
+    enumerated too): the cheapest feasible one of these points is the player's best response wherever its problem is
+    bounded below, which every bounded decision guarantees. None past ``QP_FACES_UP_TO`` decisions or ``QP_FACES``
+    faces, or where the game is not LQ."""
+    sl = game.agent_slices[agent]
+    ni = sl.stop - sl.start
+    if ni > QP_FACES_UP_TO:
+        return None
+    H = _lq_hessian(game, agent, a, x)
+    if H is None:
+        return None
+    rows = game.agents.constraint_rows(agent)
+    c_all, dc = game.constraint_values(a, x)
+    c0, C = c_all[rows], dc[rows][:, sl]
+    eq = game.equality_mask[rows]
+    E, I = np.flatnonzero(eq), np.flatnonzero(~eq)
+    free = ni - E.size
+    if free < 0 or sum(math.comb(I.size, k) for k in range(free + 1)) > QP_FACES:
+        return None
+    y = a[sl]
+    points = []
+    for k in range(free + 1):
+        for W in itertools.combinations(I, k):
+            A = np.concatenate([E, np.asarray(W, dtype=int)])
+            K = np.block([[H, C[A].T], [C[A], np.zeros((A.size, A.size))]])
+            rhs = np.concatenate([-grad, -c0[A]])
+            try:
+                sol = np.linalg.solve(K, rhs)
+            except np.linalg.LinAlgError:
+                continue
+            if np.all(np.isfinite(sol)) and np.max(np.abs(K @ sol - rhs), initial=0.0) <= 1e-9 * max(
+                    1.0, float(np.max(np.abs(rhs), initial=0.0))):
+                points.append(y + sol[:ni])
+    return points
 
 
 def _convex_response(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | None, H: np.ndarray,

@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..game.compile import CompiledGame
+from .certificate import kronecker
 
 TOL = 1e-7  # a smallest violation above this (relative to the rows' size) is infeasibility
 DESIGN = 512  # nonlinear rows: design points screened for a feasible point before the local searches
@@ -79,8 +80,6 @@ def _screened(game: CompiledGame, x: np.ndarray | None, rows: np.ndarray,
     """The starts and ``DESIGN`` design points over the decisions' box (an open side ``SPREAD`` times the start's
     size), evaluated at once: a point that satisfies every row (then the game is feasible), or the ``SEARCHES``
     least violated design points."""
-    from .certificate import kronecker
-
     lo, hi, s = game.a_lower, game.a_upper, game.a_start
     r = SPREAD * np.maximum(1.0, np.abs(s))
     low = np.where(np.isfinite(lo), lo, np.where(np.isfinite(hi), np.minimum(hi, s) - r, s - r))
