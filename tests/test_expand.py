@@ -667,3 +667,10 @@ game:
         load_config(text=text.replace("X", "c*x"))
     with pytest.raises(ConfigError, match=r"must be finite numbers, not 'inf'"):
         load_config(text=text.replace("1e-3, 2", "1e-3, inf").replace("X", "d*x"))
+
+
+def test_a_range_bound_past_two_to_the_53_is_not_shown_with_digits_it_does_not_have() -> None:
+    """N = 2**53 + 1 is evaluated as a double, 2**53: the message says about how large, not a wrong last digit."""
+    with pytest.raises(ConfigError, match=r":6:19: 'N' = about 9.0072e\+15 is out of range"):
+        load_config(text=BASE.replace("N: 3", "N: 9007199254740993") + (
+            '    - for: {i: 1..N}\n      name: "p{i}"\n      variables: {"x{i}": {}}\n      cost: "x{i}**2"\n'))

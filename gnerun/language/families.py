@@ -182,7 +182,8 @@ class Families:
             raise Problem(path, f"in the integer expression {text.strip()!r}: {e.message}", scope.indices,
                           column=column(e.column)) from None
         if abs(value) > 10**12:
-            raise Problem(path, f"{text.strip()!r} = {value:.0f} is out of range", scope.indices, column=column(1))
+            shown = f"{value:.0f}" if abs(value) < 2**53 else f"about {value:.6g}"  # (a double past 2**53 is not exact)
+            raise Problem(path, f"{text.strip()!r} = {shown} is out of range", scope.indices, column=column(1))
         return int(value)
 
 
