@@ -106,3 +106,15 @@ def test_a_row_the_candidate_breaks_by_rounding_is_held_to_what_it_has_there() -
     J, dJ, c = _tapes(WELLS, ca.vertcat(0.5 - y[0]))
     out = box_search(J, dJ, c, np.zeros(1, dtype=bool), lo, hi, _embed, threshold, candidate=np.array([0.97, 0.5]))
     assert out.complete and out.witness is None
+
+
+def test_a_narrow_well_behind_a_jump_is_found_not_bounded_away() -> None:
+    """atan2((y1 - 0.3)^2 - 1e-10, -1) is near pi except on |y1 - 0.3| < 1e-5, where it jumps to near -pi (the cut).
+    Its gradient's enclosure is finite there, so a mean-value bound would discard that piece as if the cost were
+    continuous and the search would end complete with nothing found; bounded by its values alone, the piece is split
+    down to the well and its centre is the witness."""
+    J, dJ, _ = _tapes(ca.atan2((y[0] - 0.3) ** 2 - 1e-10, -1) + 0 * y[1])
+    at_one = float(np.arctan2(0.49 - 1e-10, -1))  # the candidate y1 = 1: the least value outside the well
+    out = box_search(J, dJ, None, np.zeros(0, dtype=bool), np.array([0.0, 0.0]), np.array([1.0, 0.0]), _embed,
+                     at_one - 1e-9)
+    assert out.witness is not None and abs(out.witness[0] - 0.3) < 1e-5 and out.witness_value < -3.14

@@ -63,6 +63,19 @@ def test_enclosures_are_tight_on_monotone_pieces() -> None:
     assert L[0, 0] <= 1 + np.sin(0.1) and H[0, 0] >= np.e + np.sin(1.0)  # rounded outwards
 
 
+def test_atan2_is_bounded_by_its_corners_away_from_its_cut() -> None:
+    """atan2(y, x) on a box that holds neither the origin nor its cut (y = 0, x < 0) is continuous there, its range
+    spanned by the corners' angles; a box across the cut gets [-pi, pi], and a tape with atan2 says it may jump."""
+    f = ca.Function("f", [y, p], [ca.atan2(y[0], y[1])])
+    tape = Tape(f)
+    (L,), (H,) = tape.bounds([np.array([[1.0, -1.0], [-2.0, -2.0]]), np.zeros(1)],
+                             [np.array([[2.0, 1.0], [-1.0, -1.0]]), np.zeros(1)])
+    corners = [np.arctan2(a, b) for a in (1.0, 2.0) for b in (-2.0, -1.0)]
+    assert L[0, 0] == pytest.approx(min(corners), abs=1e-14) and H[0, 0] == pytest.approx(max(corners), abs=1e-14)
+    assert (L[0, 1], H[0, 1]) == (-np.pi, np.pi)  # y in [-1, 1] with x < 0: across the cut
+    assert tape.jumps and not Tape(ca.Function("g", [y, p], [ca.fabs(y[0]) + ca.fmax(y[0], y[1])])).jumps
+
+
 def test_kinks_are_measured_where_the_branch_changes() -> None:
     f = ca.Function("f", [y, p], [ca.fabs(y[0] - 1) + ca.fmax(y[1], 2 * y[0]) + ca.fmax(p, 0)])
     tape = Tape(f)

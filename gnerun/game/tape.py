@@ -37,6 +37,10 @@ _UNARY = frozenset({"ASSIGN", "NEG", "TWICE", "SQ", "INV", "SQRT", "EXP", "LOG",
                     "ATAN", "SINH", "COSH", "TANH", "ASINH", "ACOSH", "ATANH", "FABS", "SIGN", "FLOOR", "CEIL", "NOT",
                     "ERF", "LOG1P", "EXPM1"})
 _INF = math.inf
+# instructions whose value may jump (not Lipschitz across a point of a box): a mean-value bound J(m) + [grad J] (y - m)
+# needs a continuous J, and the derivative's tape says nothing of a jump (atan2's cut: its gradient is finite there)
+_JUMPS = frozenset({"ATAN2", "SIGN", "FLOOR", "CEIL", "LT", "LE", "EQ", "NE", "AND", "OR", "NOT", "IF_ELSE_ZERO",
+                    "COPYSIGN", "FMOD", "REMAINDER"})
 
 
 class UnsupportedTape(ValueError):
@@ -59,6 +63,7 @@ class Tape:
                 raise UnsupportedTape(f"instruction {op} of {f.name()}")
             const = f.instruction_constant(k) if op == "CONST" else 0.0
             self.code.append((op, tuple(f.instruction_input(k)), tuple(f.instruction_output(k)), const))
+        self.jumps = any(op in _JUMPS for op, *_ in self.code)  # the function may be discontinuous (_JUMPS)
 
     # ---------------------------------------------------------------------------------------------- boxes
     def bounds(self, lo: list[np.ndarray], hi: list[np.ndarray]) -> tuple[list[np.ndarray], list[np.ndarray]]:
@@ -419,6 +424,18 @@ def _unary(op: str, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndar
     raise UnsupportedTape(op)
 
 
+def _atan2(yl, yh, xl, xh):
+    """atan2(y, x) over a box: continuous where the box holds neither the origin nor a point of its branch cut (y = 0,
+    x < 0), and then its extremes are at corners (its level sets are rays from the origin, and a ray that only touches
+    a box touches a corner); elsewhere [-pi, pi]."""
+    with np.errstate(all="ignore"):
+        corners = [np.arctan2(y, x) for y in (yl, yh) for x in (xl, xh)]
+    lo, hi = _out(np.minimum.reduce(corners), np.maximum.reduce(corners))
+    whole = (yl <= 0) & (yh >= 0) & (xl <= 0)  # the cut, or the origin (y = 0, x = 0): the angle may jump
+    whole |= np.isnan(yl) | np.isnan(yh) | np.isnan(xl) | np.isnan(xh)
+    return np.where(whole, -math.pi, np.maximum(lo, -math.pi)), np.where(whole, math.pi, np.minimum(hi, math.pi))
+
+
 def _binary(op: str, al, ah, bl, bh) -> tuple[np.ndarray, np.ndarray]:
     if op == "ADD":
         return _out(al + bl, ah + bh)
@@ -441,7 +458,7 @@ def _binary(op: str, al, ah, bl, bh) -> tuple[np.ndarray, np.ndarray]:
         low, high = _out(sl + tl, sh + th)
         return _increasing(np.sqrt, np.maximum(low, 0.0), high)
     if op == "ATAN2":
-        return np.full_like(al, -math.pi), np.full_like(ah, math.pi)
+        return _atan2(al, ah, bl, bh)
     if op in ("LT", "LE"):
         strict = op == "LT"
         true = (ah < bl) if strict else (ah <= bl)

@@ -5,7 +5,8 @@ feasible for the player's own constraints with the others fixed, whose cost is b
 that does not depend on where local solves start. The box is split in halves along its widest side; on each piece
 the cost is bounded below by interval arithmetic over the cost's instruction tape (gnerun.game.tape: every result
 rounded outwards), in two forms, the natural extension and the mean-value form J(m) + [grad J](box) (y - m) (tight
-near a minimum, where the gradient's enclosure straddles zero), and the constraint rows are bounded too. A piece
+near a minimum, where the gradient's enclosure straddles zero; not for a cost that may jump, such as atan2 across its
+cut, whose derivative's tape knows nothing of the jump), and the constraint rows are bounded too. A piece
 is discarded when its cost cannot go below the threshold or a constraint row cannot hold anywhere on it. A piece
 whose centre is provably feasible (every row's enclosure at the centre <= 0) and provably below the threshold is a
 witness: the player improves alone. When no piece remains, no point of the box improves by more than tol: a
@@ -79,7 +80,7 @@ def box_search(cost: Tape, gradient: Tape | None, rows: Tape | None, equality: n
         (jl,), _ = cost.bounds(*embed(lo, hi))
         bound = jl[0]
         (ml,), (mh,) = cost.bounds(*embed(mid, mid))
-        if gradient is not None:
+        if gradient is not None and not cost.jumps:  # (a cost that may jump has no mean-value bound)
             (gl,), (gh,) = gradient.bounds(*embed(lo, hi))
             with np.errstate(all="ignore"):
                 dl, dh = lo - mid, hi - mid
