@@ -135,3 +135,23 @@ game:
     out = phase_one(game, x)
     assert not out.infeasible and not out.proven
     assert game.constraint_values(out.point, x)[0].max() <= 0
+
+
+def test_a_violated_constant_row_is_named_before_an_unbounded_player() -> None:
+    """p1's row |x1 - x1| >= 0.71 is the constant 0 >= 0.71: no point satisfies it, whatever the players do. p2's cost
+    0.88 x2^3 falls without bound as x2 -> -inf as well; the status names the rows that cannot hold, and the message
+    the player without a best response."""
+    res = solve(load_config(text="""
+game:
+  kind: static
+  agents:
+    - name: p1
+      variables: {x1: {lower: -4, upper: 0.8, start: -3.7}}
+      cost: "0.11*(x1 + 0.45)**2"
+      constraints: ["abs(x1 - x1) >= 0.71"]
+    - name: p2
+      variables: {x2: {start: 0.54}}
+      cost: "0.27*(x2 - 0.74)**2 + 0.88*x2**3 - 0.78*x2*x1"
+"""), out=None)
+    assert res.status == "infeasible_stage_constraint"
+    assert "abs(x1 - x1) >= 0.71" in res.message

@@ -261,9 +261,11 @@ def conclude(game: CompiledGame, out: Certified, x: np.ndarray | None = None, ce
         if status != Status.INFEASIBLE and cert.get("unbounded"):
             verdict = assess(game, cert, state.z[: game.n], x)
             who = "; ".join(f"{name}: {why}" for name, why in verdict.unbounded.items())
-            status, message = Status.UNBOUNDED_PLAYER, (
-                f"at the last iterate, {', '.join(verdict.unbounded)} has no best response ({who}); the solver: "
-                f"{message}")
+            unbounded = f"at the last iterate, {', '.join(verdict.unbounded)} has no best response ({who})"
+            if status == Status.INFEASIBLE_STAGE_CONSTRAINT:  # no point satisfies the rows: that comes first
+                message += f"; also {unbounded}"
+            else:
+                status, message = Status.UNBOUNDED_PLAYER, f"{unbounded}; the solver: {message}"
         elif status not in (Status.INFEASIBLE, Status.INFEASIBLE_STAGE_CONSTRAINT) and game.piecewise:
             message += ("; the game has abs, min or max of the decisions, whose derivatives jump at their kinks, so "
                         "its KKT system is discontinuous there and Newton steps cannot converge to an equilibrium at "
