@@ -429,6 +429,20 @@ def test_a_small_nonconvex_lq_player_is_answered_by_its_faces() -> None:
     assert [res.solution["p1"][v] for v in ("y1", "y2", "y3", "y4")] == pytest.approx([1, -1, -0.25, 0], abs=1e-9)
 
 
+def test_dependent_equalities_make_no_faces_proof() -> None:
+    """p1: -(y1^2 + y2^2) + 0.1 y1 on [-1, 1]^2 with y1 + y2 = 0 written twice (and once doubled): every face's KKT
+    system is singular, so the faces enumerate nothing; the candidate, the maximum y1 = 0.025 on the line, gains
+    2.10125 at y1 = -1, which the general path finds (no proof by faces is claimed)."""
+    text = _static([("p1", "y1", "-(y1**2 + y2**2) + 0.1*y1 + 0*x2",
+                     "start: 0, lower: -1, upper: 1}, y2: {start: 0, lower: -1, upper: 1"),
+                    ("p2", "x2", "(x2 - 0.5)**2", "start: 0, lower: -1, upper: 1")])
+    text = text.replace('      cost: "-(y1', '      constraints: ["y1 + y2 == 0", "2*y1 + 2*y2 == 0"]\n      cost: "-(y1', 1)
+    game = compile_game(load_config(text=text))
+    cert = certificate(game, _z(game, np.array([0.025, -0.025, 0.5])))
+    assert cert["best_response_kind"]["p1"] != "global (QP faces)"
+    assert cert["best_response_gap"]["p1"] == pytest.approx(-2 * 0.025**2 + 0.1 * 0.025 + 2.1, abs=1e-8)
+
+
 def test_a_nonconvex_lq_player_with_an_unbounded_decision_gets_no_faces_proof() -> None:
     """The same player with y4 unbounded: a quadratic need not be bounded below on an unbounded polyhedron, so its
     faces' stationary points are only starts; the gap (the same closed form) is a statement about the starts."""

@@ -662,19 +662,19 @@ def _qp_faces(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | Non
     free = ni - E.size
     if free < 0 or sum(math.comb(I.size, k) for k in range(free + 1)) > QP_FACES:
         return None
+    if E.size and np.linalg.matrix_rank(C[E]) < E.size:
+        return None  # dependent equalities: every face's system is singular, and none would be enumerated
     y = a[sl]
     points = []
     for k in range(free + 1):
         for W in itertools.combinations(I, k):
             A = np.concatenate([E, np.asarray(W, dtype=int)])
             K = np.block([[H, C[A].T], [C[A], np.zeros((A.size, A.size))]])
-            rhs = np.concatenate([-grad, -c0[A]])
             try:
-                sol = np.linalg.solve(K, rhs)
-            except np.linalg.LinAlgError:
+                sol = np.linalg.solve(K, np.concatenate([-grad, -c0[A]]))
+            except np.linalg.LinAlgError:  # singular: its minimum lies on a smaller face
                 continue
-            if np.all(np.isfinite(sol)) and np.max(np.abs(K @ sol - rhs), initial=0.0) <= 1e-9 * max(
-                    1.0, float(np.max(np.abs(rhs), initial=0.0))):
+            if np.all(np.isfinite(sol)):  # (an ill-conditioned face's point is still a point: it is only compared)
                 points.append(y + sol[:ni])
     return points
 
