@@ -436,7 +436,8 @@ def test_dependent_equalities_make_no_faces_proof() -> None:
     text = _static([("p1", "y1", "-(y1**2 + y2**2) + 0.1*y1 + 0*x2",
                      "start: 0, lower: -1, upper: 1}, y2: {start: 0, lower: -1, upper: 1"),
                     ("p2", "x2", "(x2 - 0.5)**2", "start: 0, lower: -1, upper: 1")])
-    text = text.replace('      cost: "-(y1', '      constraints: ["y1 + y2 == 0", "2*y1 + 2*y2 == 0"]\n      cost: "-(y1', 1)
+    rows = '      constraints: ["y1 + y2 == 0", "2*y1 + 2*y2 == 0"]\n'
+    text = text.replace('      cost: "-(y1', rows + '      cost: "-(y1', 1)
     game = compile_game(load_config(text=text))
     cert = certificate(game, _z(game, np.array([0.025, -0.025, 0.5])))
     assert cert["best_response_kind"]["p1"] != "global (QP faces)"
