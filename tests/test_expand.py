@@ -674,3 +674,15 @@ def test_a_range_bound_past_two_to_the_53_is_not_shown_with_digits_it_does_not_h
     with pytest.raises(ConfigError, match=r":6:19: 'N' = about 9.0072e\+15 is out of range"):
         load_config(text=BASE.replace("N: 3", "N: 9007199254740993") + (
             '    - for: {i: 1..N}\n      name: "p{i}"\n      variables: {"x{i}": {}}\n      cost: "x{i}**2"\n'))
+
+
+def test_an_expression_too_long_once_written_out_is_refused_at_its_template() -> None:
+    """prod(1 + x/k**2 for k in 1..2000) is within the node count checked before expanding, but 30,899 characters
+    written out: refused at the template, without quoting the written-out text as if it were the config's."""
+    with pytest.raises(ConfigError) as err:
+        load_config(text=BASE + '    - name: p\n      variables: {x: {}}\n      cost: "x**2 + prod(1 + x/k**2 for k in '
+                                 '1..2000)"\n')
+    message = str(err.value)
+    assert re.search(r":8:13: game\.agents\.0\.cost: expression longer than 20000 characters \(\d+\) as the game "
+                     r"uses it", message), message
+    assert "x/1**2" not in message
