@@ -408,19 +408,25 @@ game:
     assert all(abs(g) <= 1e-12 for g in res.certificate["best_response_gap"].values())
 
 
+def _concave_in_two(y4_bounds: str):
+    """p1: -(y1^2 + y2^2) + y3^2 + y4^2 - 0.5 y1 + 0.3 y2 + x2 y3 with y1, y2, y3 in [-1, 1] (y4: ``y4_bounds``), and
+    p2: (x2 - 0.5)^2 on [-1, 1]; the config, the game, p1's stationary point against x2 = 0.5 and p1's cost there."""
+    cfg = load_config(text=_static([
+        ("p1", "y1", "-(y1**2 + y2**2) + y3**2 + y4**2 - 0.5*y1 + 0.3*y2 + x2*y3",
+         "start: 0, lower: -1, upper: 1}, y2: {start: 0, lower: -1, upper: 1}, y3: {start: 0, lower: -1, upper: 1}, "
+         "y4: {start: 0" + y4_bounds),
+        ("p2", "x2", "(x2 - 0.5)**2", "start: 0, lower: -1, upper: 1")]))
+    y = np.array([-0.25, 0.15, -0.25, 0.0])
+    J = -(y[0] ** 2 + y[1] ** 2) + y[2] ** 2 + y[3] ** 2 - 0.5 * y[0] + 0.3 * y[1] + 0.5 * y[2]
+    return cfg, compile_game(cfg), y, J
+
+
 def test_a_small_nonconvex_lq_player_is_answered_by_its_faces() -> None:
     """p1: -(y1^2 + y2^2) + y3^2 + y4^2 - 0.5 y1 + 0.3 y2 + x2 y3 on [-1, 1]^4, concave in y1 and y2 (four decisions:
     past the box search). At its stationary point (-0.25, 0.15, -0.25, 0) it is at a maximum in y1 and y2; its best
     response against x2 = 0.5 is (1, -1, -0.25, 0), cost -1.5 - 1.3 - 0.0625 = -2.8625, a corner of the faces y1 = 1,
     y2 = -1: the certificate enumerates its faces and gives that gap exactly; the solve ends there, certified."""
-    text = _static([("p1", "y1", "-(y1**2 + y2**2) + y3**2 + y4**2 - 0.5*y1 + 0.3*y2 + x2*y3",
-                     "start: 0, lower: -1, upper: 1}, y2: {start: 0, lower: -1, upper: 1}, y3: {start: 0, lower: -1, "
-                     "upper: 1}, y4: {start: 0, lower: -1, upper: 1"),
-                    ("p2", "x2", "(x2 - 0.5)**2", "start: 0, lower: -1, upper: 1")])
-    cfg = load_config(text=text)
-    game = compile_game(cfg)
-    y = np.array([-0.25, 0.15, -0.25, 0.0])
-    J = -(y[0] ** 2 + y[1] ** 2) + y[2] ** 2 + y[3] ** 2 - 0.5 * y[0] + 0.3 * y[1] + 0.5 * y[2]
+    cfg, game, y, J = _concave_in_two(", lower: -1, upper: 1")
     cert = certificate(game, _z(game, np.r_[y, 0.5]))
     assert cert["best_response_kind"]["p1"] == "global (QP faces)"
     assert cert["best_response_gap"]["p1"] == pytest.approx(J - (-2.8625), abs=1e-12)
@@ -447,13 +453,7 @@ def test_dependent_equalities_make_no_faces_proof() -> None:
 def test_a_nonconvex_lq_player_with_an_unbounded_decision_gets_no_faces_proof() -> None:
     """The same player with y4 unbounded: a quadratic need not be bounded below on an unbounded polyhedron, so its
     faces' stationary points are only starts; the gap (the same closed form) is a statement about the starts."""
-    text = _static([("p1", "y1", "-(y1**2 + y2**2) + y3**2 + y4**2 - 0.5*y1 + 0.3*y2 + x2*y3",
-                     "start: 0, lower: -1, upper: 1}, y2: {start: 0, lower: -1, upper: 1}, y3: {start: 0, lower: -1, "
-                     "upper: 1}, y4: {start: 0"),
-                    ("p2", "x2", "(x2 - 0.5)**2", "start: 0, lower: -1, upper: 1")])
-    game = compile_game(load_config(text=text))
-    y = np.array([-0.25, 0.15, -0.25, 0.0])
-    J = -(y[0] ** 2 + y[1] ** 2) + y[2] ** 2 + y[3] ** 2 - 0.5 * y[0] + 0.3 * y[1] + 0.5 * y[2]
+    _, game, y, J = _concave_in_two("")
     cert = certificate(game, _z(game, np.r_[y, 0.5]))
     assert cert["best_response_kind"]["p1"].startswith("over ")
     assert cert["best_response_gap"]["p1"] == pytest.approx(J - (-2.8625), abs=1e-9)

@@ -1107,7 +1107,7 @@ class _SemanticChecks:
                 raise ExpressionError(f"'{integer.op}' is integer arithmetic (indices, integer parameters, T): "
                                       f"{unparse(integer)!r} is not", text, integer.column)
         except ExpressionError as e:
-            if e.message.startswith("expression longer than"):  # its length as written out: no column of it to show
+            if e.whole:  # its length as written out: no column of it to show
                 self.report(path, e.message + " as the game uses it (its sums, products and definitions written out)")
             else:
                 self.report(path, e.message, column=e.column, text=text)

@@ -172,10 +172,13 @@ class Expander:
 
     def _game(self, game: dict) -> dict:
         kept, base = self.subst.parameters(game)
-        self.families.reserved = index_reserved(game, kept, self.vectors, self.subst.runtime)
+        taken = names_taken(game, kept, self.vectors)
+        # an index may not take these, nor a runtime parameter's name (the parameters in use, T and outer indices are
+        # refused as in use); a definition may not take these, tau or T
+        self.families.reserved = {**{name: "a runtime parameter" for name in self.subst.runtime}, **taken}
         self._measure(game, base)
         scope = Scope(base)
-        self._definitions(game, kept, scope)
+        self._definitions(game, {**taken, "tau": "the stage index tau", "T": "the horizon T"}, scope)
         out: dict[str, Any] = {}
         for key, value in game.items():
             if key == "definitions":
@@ -200,8 +203,9 @@ class Expander:
                                     "expressions of its scope; choose another name", bindings, column=column)
         return out
 
-    def _definitions(self, game: dict, kept: dict[str, Any], scope: Scope) -> None:
-        """The game's definitions expanded, in the order written (one may use those before it)."""
+    def _definitions(self, game: dict, reserved: dict[str, str], scope: Scope) -> None:
+        """The game's definitions expanded, in the order written (one may use those before it); ``reserved``: the
+        names a definition may not take, and what each is."""
         definitions = game.get("definitions", {})
         if definitions is not None and not isinstance(definitions, dict):
             raise Problem(("game", "definitions"), "definitions must be a mapping of names to expressions")
@@ -209,7 +213,7 @@ class Expander:
             path = ("game", "definitions", name)
             if not isinstance(name, str) or NAME.fullmatch(name) is None:
                 raise Problem(path, f"a definition's name must be a name, not {name!r}")
-            shadowed = _reserved(name, kept, self.vectors, _has_ode(game), _is_dynamic(game))
+            shadowed = reserved.get(name)
             if shadowed:
                 raise Problem(path, f"definition {name!r} has the name of {shadowed}; a definition may not shadow a "
                                      "variable, state, input, parameter or constant", key=True)
@@ -376,37 +380,14 @@ def _has_ode(game: dict) -> bool:
     return isinstance(dynamics, dict) and "ode" in dynamics
 
 
-def _is_dynamic(game: dict) -> bool:
-    return game.get("kind") == "dynamic" or "horizon" in game
-
-
-def _reserved(name: str, parameters: dict, vectors: dict, ode: bool = False, dynamic: bool = False) -> str | None:
-    """What a definition named ``name`` would shadow among the names known before the game is expanded."""
-    if name in FUNCTIONS or name in AGGREGATES:
-        return "a function"
-    if name in CONSTANTS:
-        return "a constant"
-    if name == "tau":
-        return "the stage index tau"
-    if name == "T":
-        return "the horizon T"
-    if name in parameters or name in vectors:
-        return "a parameter"
-    if name == "dt" and ode:
-        return "the sampling time dt"
-    if name == "t" and dynamic:
-        return "the time t"
-    return None
-
-
-def index_reserved(game: dict, parameters: dict, vectors: dict, runtime: set[str]) -> dict[str, str]:
-    """The names an index of a family or an aggregate may not take, and what each is: in the expressions of its
-    scope the index would replace it (integer parameters, T and outer indices are refused as in use)."""
+def names_taken(game: dict, parameters: dict, vectors: dict) -> dict[str, str]:
+    """The names that mean something of their own in the game's expressions, and what each is: the functions, the
+    constants, the parameters, and in a dynamic game the stage index tau and the time t, in one with an ode the
+    sampling time dt. A definition or an index with one of these names would silently replace it."""
     out = {name: "a function" for name in (*FUNCTIONS, *AGGREGATES)}
     out.update((name, "a constant") for name in CONSTANTS)
     out.update((name, "a parameter") for name in (*parameters, *vectors))
-    out.update((name, "a runtime parameter") for name in runtime)
-    if _is_dynamic(game):
+    if game.get("kind") == "dynamic" or "horizon" in game:
         out["tau"], out["t"] = "the stage index tau", "the time t"
     if _has_ode(game):
         out["dt"] = "the sampling time dt"

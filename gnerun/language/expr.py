@@ -52,12 +52,14 @@ INTEGER_OPERATORS = ("//", "%")  # integer arithmetic only (see the module docst
 
 
 class ExpressionError(ValueError):
-    """A malformed expression: ``message`` at 1-based ``column`` of ``expression``."""
+    """A malformed expression: ``message`` at 1-based ``column`` of ``expression`` (``whole``: a problem of the whole
+    text, its length, which no column of it shows)."""
 
-    def __init__(self, message: str, expression: str, column: int):
+    def __init__(self, message: str, expression: str, column: int, whole: bool = False):
         self.message = message
         self.expression = expression
         self.column = column
+        self.whole = whole
         super().__init__(self.describe())
 
     def describe(self) -> str:
@@ -392,7 +394,7 @@ def _check_text(text: object) -> str:
     if not isinstance(text, str):
         raise ExpressionError(f"expected an expression string, got {type(text).__name__}", str(text), 1)
     if len(text) > MAX_LENGTH:
-        raise ExpressionError(f"expression longer than {MAX_LENGTH} characters ({len(text)})", text, 1)
+        raise ExpressionError(f"expression longer than {MAX_LENGTH} characters ({len(text)})", text, 1, whole=True)
     if not text.strip():
         raise ExpressionError("empty expression", text, 1)
     return text

@@ -44,7 +44,7 @@ class Families:
         self.definitions = definitions
         self.runtime: set[str] = set()  # runtime parameters: not integers known at expansion
         # names an index may not take, and what each is (functions, constants, parameters, tau, t, dt: see
-        # expand.index_reserved); the names of variables, inputs and states are only known once expanded: ``used``
+        # expand.names_taken); the names of variables, inputs and states are only known once expanded: ``used``
         # holds where each index name was first taken, for the expander to check against them
         self.reserved: dict[str, str] = {}
         self.used: dict[str, tuple[PathKey, int | None, dict[str, int]]] = {}

@@ -374,7 +374,7 @@ def parse_template(text: str) -> Template:
     """Parse a template expression, or a template constraint ``lhs <= rhs`` (``>=``, ``==``); every mistake is an
     :class:`~gnerun.language.expr.ExpressionError` with its column."""
     if len(text) > MAX_LENGTH:
-        raise ExpressionError(f"expression longer than {MAX_LENGTH} characters ({len(text)})", text, 1)
+        raise ExpressionError(f"expression longer than {MAX_LENGTH} characters ({len(text)})", text, 1, whole=True)
     if not text.strip():
         raise ExpressionError("empty expression", text, 1)
     p = _Parser(text)

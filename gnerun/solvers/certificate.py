@@ -481,23 +481,24 @@ def check_player(game: CompiledGame, agent: int, z: np.ndarray, x: np.ndarray | 
                 "a log, sqrt, asin or acos in it is evaluated outside its domain")
         return PlayerCheck(None, None, "not checked", f"the cost is not finite at the point ({what})", finite=False)
     tol = GAP_TOL * max(1.0, abs(J0))
-    hessian = _convex_player(game, agent, a, x)  # then a local solve is global already: no box search
-    convex = hessian is not None
+    H = _lq_hessian(game, agent, a, x)  # an LQ player's own Hessian block (None: the game is not LQ)
+    convex = H is not None and _positive_semidefinite(H)  # then a local solve is global already: no box search
     if convex:  # one solve of its convex QP: a KKT point of a convex problem is its global minimum
-        answer = _convex_response(game, agent, a, x, hessian, grad, prices)
+        answer = _convex_response(game, agent, a, x, H, grad, prices)
         if answer is not None:
             val, ok = _values(game, agent, a, x, [answer], prices)
             if ok[0] and math.isfinite(val[0]):
                 gap = J0 - float(val[0])
                 return PlayerCheck(gap, answer, "global (convex)",  # the exact gap, whatever its size
                                    "ok (convex: one QP solve on the candidate's active set)")
-    faces = None if convex else _qp_faces(game, agent, a, x, grad)  # a small nonconvex LQ player
+    faces = _qp_faces(game, agent, a, x, H, grad) if H is not None and not convex else None  # small, nonconvex
     if faces is not None and np.all(np.isfinite(game.a_lower[sl])) and np.all(np.isfinite(game.a_upper[sl])):
-        vals, ok = _values(game, agent, a, x, [y, *faces], prices)  # bounded: the cheapest is its best response
+        points = [y, *faces]
+        vals, ok = _values(game, agent, a, x, points, prices)  # bounded: the cheapest is its best response
         vals = np.where(ok & np.isfinite(vals), vals, np.inf)
         k = int(np.argmin(vals))
         if math.isfinite(vals[k]):
-            return PlayerCheck(J0 - float(vals[k]), [y, *faces][k], "global (QP faces)",
+            return PlayerCheck(J0 - float(vals[k]), points[k], "global (QP faces)",
                                f"ok (nonconvex QP: the stationary points of its faces, {len(faces)} of them)")
     starts = response_starts(game, agent, a, x)
     if faces:  # an unbounded decision: its faces' stationary points are starts (it may be unbounded below)
@@ -601,18 +602,14 @@ QP_FACES = 4096  # ... and at most this many faces (sets of active rows) has the
 PSD_ROUNDING = 8.0  # a player's Hessian is positive semidefinite where its least eigenvalue >= -this n eps ||H||
 
 
-def _convex_player(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | None) -> np.ndarray | None:
-    """The agent's own Hessian block where its problem is convex for certain: an LQ game (constant derivatives,
-    affine rows) whose agent's block is positive semidefinite (its KKT points are its minima); None otherwise."""
-    H = _lq_hessian(game, agent, a, x)
-    if H is None:
-        return None
+def _positive_semidefinite(H: np.ndarray) -> bool:
+    """Whether an LQ player's Hessian block H is positive semidefinite, so that its problem is convex for certain (its
+    KKT points are its minima): as far as its eigenvalues can tell, which eigvalsh gives exactly for H + E with ||E||
+    of about n eps ||H||; a negative eigenvalue beyond that is negative curvature however small beside the largest
+    (1e6 x^2 - 1e-5 y^2 falls by 10 at y = 1000)."""
     w = np.linalg.eigvalsh(H)
-    # positive semidefinite as far as its eigenvalues can tell: eigvalsh's are exact for H + E with ||E|| of about
-    # n eps ||H||; a negative eigenvalue beyond that is negative curvature however small beside the largest (1e6 x^2 -
-    # 1e-5 y^2 falls by 10 at y = 1000), and the general path decides
     rounding = PSD_ROUNDING * w.size * np.finfo(float).eps * float(np.max(np.abs(w), initial=0.0))
-    return H if w.size == 0 or w[0] >= -rounding else None
+    return bool(w.size == 0 or w[0] >= -rounding)
 
 
 def _lq_hessian(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | None) -> np.ndarray | None:
@@ -637,7 +634,7 @@ def _lq_hessian(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | N
     return 0.5 * (H + H.T)
 
 
-def _qp_faces(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | None,
+def _qp_faces(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | None, H: np.ndarray,
               grad: np.ndarray) -> list[np.ndarray] | None:
     """The stationary points of the faces of a small LQ player's problem (a quadratic cost, affine rows) that is not
     convex: for every set W of at most n_i inequality rows (with the equalities), the KKT system [H A_W'; A_W 0] of
@@ -645,14 +642,11 @@ def _qp_faces(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | Non
     Wolfe), at a stationary point of its restriction to the relative interior of some face (a vertex included; a face
     whose system is singular, or whose cost is not convex on it, has its minimum on a smaller face, which is
     enumerated too): the cheapest feasible one of these points is the player's best response wherever its problem is
-    bounded below, which every bounded decision guarantees. None past ``QP_FACES_UP_TO`` decisions or ``QP_FACES``
-    faces, or where the game is not LQ."""
+    bounded below, which every bounded decision guarantees. ``H``: its Hessian block (:func:`_lq_hessian`). None past
+    ``QP_FACES_UP_TO`` decisions or ``QP_FACES`` faces."""
     sl = game.agent_slices[agent]
     ni = sl.stop - sl.start
     if ni > QP_FACES_UP_TO:
-        return None
-    H = _lq_hessian(game, agent, a, x)
-    if H is None:
         return None
     rows = game.agents.constraint_rows(agent)
     c_all, dc = game.constraint_values(a, x)
@@ -681,7 +675,7 @@ def _qp_faces(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | Non
 
 def _convex_response(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | None, H: np.ndarray,
                      grad: np.ndarray, prices: np.ndarray) -> np.ndarray | None:
-    """The best response of a player whose problem is a convex QP (:func:`_convex_player`), by one QP solve: an
+    """The best response of a player whose problem is a convex QP (:func:`_positive_semidefinite`), by one QP solve: an
     active-set method from the candidate's active set (its equalities, and the rows that hold with equality or carry a
     positive multiplier), each step the QP's KKT system on the working set (exact for a quadratic with affine rows),
     the most violated row added or the most negative multiplier dropped. Returned only where the answer satisfies the

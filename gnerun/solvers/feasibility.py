@@ -85,8 +85,7 @@ def _screened(game: CompiledGame, x: np.ndarray | None, rows: np.ndarray,
     low = np.where(np.isfinite(lo), lo, np.where(np.isfinite(hi), np.minimum(hi, s) - r, s - r))
     high = np.where(np.isfinite(hi), hi, np.where(np.isfinite(lo), np.maximum(lo, s) + r, s + r))
     design = low + kronecker(game.n, DESIGN, np.random.default_rng(0)) * (high - low)
-    points = np.vstack([*starts, np.clip(np.zeros(game.n), lo, hi), design]) if starts else \
-        np.vstack([np.clip(np.zeros(game.n), lo, hi), design])
+    points = np.vstack([*starts, np.clip(np.zeros(game.n), lo, hi), design])
     _, C = game.agents.evaluate_many(points, x)
     c = C[:, rows]
     eq = game.equality_mask[rows]

@@ -87,7 +87,7 @@ class SemismoothNewton(KKTSystem):
         if z_new is None:
             return self.singular(state, rcond)
         new = self.advance(state, z_new, rcond=rcond)
-        if not math.isnan(rcond) or taken(state, new):
+        if taken is None or not math.isnan(rcond) or taken(state, new):
             return new
         rcond = self.reduced_system.last_rcond()
         if not rcond >= self.options.min_rcond:
