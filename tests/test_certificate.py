@@ -562,6 +562,60 @@ def test_a_linear_player_without_a_best_response_is_named_not_diverged() -> None
     assert res.certificate["unbounded"]["p1"]["direction"] == [1.0]
 
 
+def test_a_pole_in_a_bounded_set_is_named_not_diverged() -> None:
+    """p1's cost log(x1) + x1 x2 on 0 <= x1 <= 1 falls like log(x1) as x1 -> 0 whatever x2 in [-1, 1] (x1 x2 is at
+    most x1 in size): it has no best response, and the game no equilibrium. No ray leaves the box; the certificate
+    approaches the pole at x1 = 0, where the cost falls by ln 2 per halving of the distance (exactly: log)."""
+    cfg = load_config(text=_static([("p1", "x1", "log(x1) + x1*x2", "lower: 0, upper: 1, start: 0.5"),
+                                    ("p2", "x2", "(x2 - x1)**2", "lower: -1, upper: 1, start: 0")]))
+    res = solve(cfg)
+    assert res.status == "unbounded_player"
+    pole = res.certificate["unbounded"]["p1"]
+    assert pole["pole"] == [0.0] and pole["direction"] == [-1.0]
+    np.testing.assert_allclose(-np.diff(pole["costs"][-10:]), np.log(2.0), rtol=1e-6)  # x1 x2 is negligible there
+    assert "p1 has no best response" in res.message and "approaching (x1 = 0), where it is not finite" in res.message
+
+
+def test_a_pole_inside_a_bounded_set_is_named() -> None:
+    """p1's cost -tan(x1) + x1 x2 on 0 <= x1 <= 3 falls without bound as x1 -> pi/2 from below: a KKT point the
+    solver reaches is no equilibrium, and the status says p1 has no best response there, at the pole."""
+    cfg = load_config(text=_static([("p1", "x1", "-tan(x1) + x1*x2", "lower: 0, upper: 3, start: 1"),
+                                    ("p2", "x2", "(x2 - x1)**2", "lower: -1, upper: 1, start: 0")]))
+    res = solve(cfg)
+    assert res.status == "unbounded_player"
+    pole = res.certificate["unbounded"]["p1"]
+    assert pole["unbounded_below"] and abs(pole["pole"][0] - np.pi / 2) < 1e-12 and pole["costs"][-1] < -1e15
+    assert "decreases without bound approaching (x1 = 1.5708)" in res.message
+
+
+def test_a_pole_at_the_edge_of_the_domain_is_not_certified_away() -> None:
+    """p1's cost (x1 - 1)^2 + y1^2 + 0.5 log(x1 + 1.5) + 0.1 x1 x2 has a local minimum at x1 ~ 0.87, where the solver
+    ends at a KKT point, but on -2 <= x1 <= 2 it falls like 0.5 log(x1 + 1.5) as x1 -> -1.5 (and is not defined
+    below): no best response. The gain appears only within 1e-5 of the edge, which no design point or local solve
+    reached ("converged" over 276 starts before); the segments along x1 from the point find the edge of the domain
+    and bisect it: the fall keeps its pace of 0.5 ln 10 per decade of the distance."""
+    j1 = "(x1 - 1)**2 + 0.5*log(x1 + 1.5) + 0.1*x1*x2"
+    cfg = load_config(text=_static([("p1", "x1", j1, "lower: -2, upper: 2, start: 0.5"),
+                                    ("p2", "x2", "(x2 - 0.5)**2", "lower: -1, upper: 1, start: 0")]))
+    res = solve(cfg)
+    assert res.status == "unbounded_player"
+    pole = res.certificate["unbounded"]["p1"]
+    assert pole["pole"][0] == pytest.approx(-1.5, abs=1e-15) and pole["direction"] == [-1.0]
+    d, c = np.log10(pole["steps"]), np.asarray(pole["costs"])
+    assert d[0] - d[-1] >= 8 and np.polyfit(d, c, 1)[0] == pytest.approx(0.5 * np.log(10.0), rel=0.05)
+
+
+def test_a_cost_that_ends_finite_at_its_domain_edge_keeps_its_equilibrium() -> None:
+    """p1's cost x1 log(x1) - x1 x2 tends to 0 at x1 = 0 (no pole, though log(0) is not finite): its best response
+    to x2 is exp(x2 - 1), and with p2's x2 = 0.5 x1 the equilibrium solves x1 = exp(0.5 x1 - 1), certified."""
+    cfg = load_config(text=_static([("p1", "x1", "x1*log(x1) - x1*x2", "lower: 0, upper: 2, start: 1"),
+                                    ("p2", "x2", "(x2 - 0.5*x1)**2", "start: 0")]))
+    res = solve(cfg)
+    assert res.status == "converged" and "unbounded" not in res.certificate
+    x1 = res.solution["p1"]["x1"]
+    assert x1 == pytest.approx(np.exp(0.5 * x1 - 1), rel=1e-9)
+
+
 def test_a_better_basin_is_found_and_certified_on_the_box() -> None:
     """p1 has a shallow well near x1 = -2 and a deep one near x1 = 4, coupled weakly to p2 (x2 = 0.3 x1). Started in
     the shallow well, the solver reaches its KKT point; the certificate finds the deep well (a design point there is

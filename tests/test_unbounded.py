@@ -13,6 +13,8 @@ from gnerun.solvers.unbounded import (
     free_directions,
     no_descent,
     nonnegative_least_squares,
+    pole_approach,
+    pole_segment,
     ray_points,
     recession_direction,
 )
@@ -138,3 +140,41 @@ def test_the_multipliers_of_every_row_can_prove_it() -> None:
     floor = 1e-12 * max(1.0, float(np.max(np.abs(g))))
     assert recession_direction(g, C, eq) is None  # the linear program: the cone is {0}
     assert no_descent(g, C, eq, given, floor)
+
+
+def _pole(f, start: float, target: float, lower: float, upper: float, feasible=lambda q: True):
+    """pole_approach on the 1-D segment from start through target to the edge of [lower, upper]."""
+    segment = pole_segment(np.array([start]), np.array([target]), np.array([lower]), np.array([upper]))
+
+    def values(points):
+        with np.errstate(all="ignore"):
+            costs = np.array([float(f(q[0])) for q in points])
+        return costs, np.array([bool(feasible(q[0])) for q in points])
+
+    return pole_approach(values, [segment])
+
+
+def test_poles_in_a_bounded_set_are_shown() -> None:
+    ray = _pole(np.log, 0.5, 1e-7, 0.0, 1.0)  # log(x) on [0, 1]: -inf at the bound, no minimiser
+    assert ray is not None and not ray.unbounded_below and ray.pole[0] == 0.0
+    assert np.allclose(-np.diff(ray.costs), np.log(2.0))  # ln 2 per halving of the distance, to the end
+    assert ray.costs[-1] < -70 and ray.steps[-1] < 1e-30
+    ray = _pole(lambda x: -np.tan(x), 1.0, 1.5, 0.0, 3.0)  # -tan(x) on [0, 3]: -inf below pi/2, +inf above
+    assert ray is not None and ray.unbounded_below and abs(ray.pole[0] - np.pi / 2) < 1e-12
+    ray = _pole(lambda x: -1.0 / (x - 0.25) ** 2, 1.0, 0.5, -1.0, 1.0)  # on a scanned point: -inf there
+    assert ray is not None and ray.unbounded_below and abs(ray.pole[0] - 0.25) < 1e-12
+    assert "decreases without bound approaching (x = 0.25)" in ray.describe(["x"])
+    ray = _pole(lambda x: -1.0 / (x - 0.2501) ** 2, 1.0, 0.5, -1.0, 1.0)  # between two: both neighbours higher
+    assert ray is not None and ray.unbounded_below and abs(ray.pole[0] - 0.2501) < 1e-12
+
+
+def test_finite_limits_jumps_and_edges_are_not_poles() -> None:
+    assert _pole(lambda x: x * np.log(x), 0.5, 0.1, 0.0, 1.0) is None  # tends to 0 (NaN at 0 itself)
+    assert _pole(np.sqrt, 0.5, 0.01, -1.0, 1.0) is None  # its domain ends at 0 with the value 0
+    assert _pole(lambda x: np.floor(4 * x) - 2 * x, 0.9, 0.6, 0.0, 1.0) is None  # jumps, bounded
+    assert _pole(lambda x: 1e6 * (x - 0.3) ** 2, 1.0, 0.3, -1.0, 1.0) is None  # a steep minimum
+    assert _pole(lambda x: np.arctan2(x - 0.5, -1.0), 0.9, 0.6, 0.0, 1.0) is None  # atan2's cut: a jump of 2 pi
+    assert _pole(lambda x: np.log(x), 0.5, 0.2, 0.0, 1.0, feasible=lambda x: x >= 0.1) is None  # a row before 0
+    deep = _pole(lambda x: -1e9 * np.exp(-1e4 * (x - 0.3) ** 2), 1.0, 0.5, 0.0, 1.0)  # a well 1e9 deep, 0.01 wide
+    assert deep is None
+    assert pole_segment(np.array([0.5]), np.array([0.5]), np.array([0.0]), np.array([1.0])) is None

@@ -572,6 +572,11 @@ def check_player(game: CompiledGame, agent: int, z: np.ndarray, x: np.ndarray | 
         ray = unbounded.descending_ray(directions, t, np.where(np.isfinite(vals), vals, np.nan), ok, J0, slopes)
         consider(list(points), strict=False)
 
+    if ray is None and not (box_result is not None and box_result.complete):
+        # a pole: a cost that falls without bound near a point of the player's set (log(x) at 0; a complete box
+        # search has bounded the cost below on the whole box, so it has none)
+        ray = _pole(game, agent, a, x, prices, y if best_x is None or best_val >= J0 else best_x)
+
     gap = None if best_x is None else J0 - best_val
     if box_result is not None and box_result.complete and gap is not None:
         # no feasible point of the box is cheaper than the best one found by more than tol; where a decision has no
@@ -594,6 +599,30 @@ def check_player(game: CompiledGame, agent: int, z: np.ndarray, x: np.ndarray | 
         note += "; " + ray.describe(game.variable_names[agent] if game.kind == "static" else
                                     [f"a[{k}]" for k in range(ni)])
     return PlayerCheck(gap, best_x, kind, note, box, bound, ray, True, starts.kinks)
+
+
+def _pole(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | None, prices: np.ndarray,
+          target: np.ndarray) -> Ray | None:
+    """A pole of the agent's cost (:func:`gnerun.solvers.unbounded.pole_approach`) on the segment from its start
+    values (or its search box's centre, where they are ``target``) through ``target``, the lowest point found (the
+    candidate, or the best response found), to the edge of its search box, and (a player with at most
+    COORDINATE_RAYS_UP_TO decisions) on the segments from ``target`` to the box's edge along each coordinate."""
+    sl = game.agent_slices[agent]
+    lower, upper = search_box(game, agent, a)
+    segments = []
+    for start in (np.clip(game.a_start[sl], lower, upper), 0.5 * (lower + upper)):
+        segment = unbounded.pole_segment(start, target, lower, upper)
+        if segment is not None:
+            segments.append(segment)
+            break
+    if target.size <= unbounded.COORDINATE_RAYS_UP_TO:
+        segments += unbounded.coordinate_segments(target, lower, upper)
+
+    def values(points: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+        with np.errstate(all="ignore"):
+            return _values(game, agent, a, x, points, prices)
+
+    return unbounded.pole_approach(values, segments)
 
 
 HESSIAN_BUILT_UP_TO = 100  # an LQ player with more decisions reads its Hessian from gradients
@@ -804,6 +833,8 @@ def certificate(game: CompiledGame, z: np.ndarray, x: np.ndarray | None = None,
             rays[name] = {"direction": pc.ray.direction.tolist(), "steps": pc.ray.steps.tolist(),
                           "costs": pc.ray.costs.tolist(), "cost_at_point": pc.ray.start_cost,
                           "unbounded_below": pc.ray.unbounded_below}
+            if pc.ray.pole is not None:  # steps: distances to this point
+                rays[name]["pole"] = pc.ray.pole.tolist()
         if pc.kinks:
             kinks[name] = pc.kinks
         if not pc.finite:

@@ -40,8 +40,16 @@ class Ray:
     costs: np.ndarray  # the cost at each
     start_cost: float  # the cost at the point the ray starts from
     unbounded_below: bool  # the cost fell by more than UNBOUNDED_DROP x max(1, |start cost|); else: not attained
+    pole: np.ndarray | None = None  # a pole (:func:`pole_approach`): the point approached; steps are distances to it
 
     def describe(self, names: list[str]) -> str:
+        if self.pole is not None:
+            at = ", ".join(f"{names[k]} = {v:.6g}" for k, v in enumerate(self.pole[:4]))
+            seen = ", ".join(f"{c:.3g} at distance {t:.0e}" for t, c in zip(self.steps[-3:], self.costs[-3:],
+                                                                          strict=True))
+            what = "decreases without bound" if self.unbounded_below else "keeps decreasing (like a logarithm)"
+            return (f"its cost {what} approaching ({at}{', ...' if self.pole.size > 4 else ''}), where it is not "
+                    f"finite or jumps, from {self.start_cost:.6g}: {seen}")
         d = self.direction
         big = np.flatnonzero(np.abs(d) >= 0.05 * np.max(np.abs(d)))[:4]
         along = " ".join(f"{'+' if d[k] > 0 else '-'}{abs(d[k]):.2g} {names[k]}" for k in big)
@@ -249,3 +257,159 @@ def descending_ray(directions: list[np.ndarray], t: np.ndarray, costs: np.ndarra
         if best is None or ray.costs[-1] < best.costs[-1]:
             best = ray
     return best
+
+
+# poles: a cost that falls without bound near a point of a bounded set (log(x) at x = 0, -tan(x) below pi/2, -1/x^2)
+POLE_SCAN = 64  # points evenly spaced on the segment searched, and ...
+POLE_NEAR_END = 14  # ... as many approaching its far end geometrically (1e-2 ... 1e-15 of its length from it)
+POLE_HALVINGS = 60  # bisection steps towards the pole (a bracket of length L ends at L 2^-60)
+POLE_DECADES = 8.0  # a fall that keeps its pace per decade of the distance over this many: log-like
+POLE_OUTLIER = 100.0  # a lowest scanned cost this many times (1 + |median|) below the scan's median
+POLE_TRIES = 4  # places narrowed (the lowest first, over all segments): each up to POLE_HALVINGS evaluations
+
+
+def pole_segment(start: np.ndarray, target: np.ndarray, lower: np.ndarray, upper: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray, float] | None:
+    """The segment from ``start`` through ``target`` to the box's edge: (start, its direction, its length), or None
+    where they coincide or the box has no edge that way."""
+    d = target - start
+    norm = float(np.linalg.norm(d))
+    if not norm > 0 or not math.isfinite(norm):
+        return None
+    d = d / norm
+    with np.errstate(divide="ignore", invalid="ignore"):
+        to_edge = np.where(d > 0, (upper - start) / d, np.where(d < 0, (lower - start) / d, np.inf))
+    t_max = float(np.min(to_edge))
+    if not (math.isfinite(t_max) and t_max >= norm):
+        return None
+    return start, d, t_max
+
+
+def coordinate_segments(point: np.ndarray, lower: np.ndarray, upper: np.ndarray
+                        ) -> list[tuple[np.ndarray, np.ndarray, float]]:
+    """The segments from ``point`` to the box's edge along each coordinate, both ways."""
+    out = []
+    for k in range(point.size):
+        for sign, length in ((1.0, upper[k] - point[k]), (-1.0, point[k] - lower[k])):
+            if length > 0 and math.isfinite(length):
+                d = np.zeros(point.size)
+                d[k] = sign
+                out.append((point, d, float(length)))
+    return out
+
+
+def pole_approach(values, segments: list[tuple[np.ndarray, np.ndarray, float]]) -> Ray | None:
+    """A pole of the cost on the segments (start, d, t_max): start + t d, 0 <= t <= t_max. ``values(points)`` gives
+    each point's cost and whether it is admissible (feasible; a NaN or infinite cost is never a value). Every segment
+    is scanned (all in one call). Where an admissible point borders one whose cost is not finite (log(0), the edge of
+    a domain), the border is bisected (in the points themselves, to their own resolution: x -> 0 goes on to 1e-300),
+    each step kept on the side of the lower cost; where a segment's lowest point lies between two finite ones and one
+    of them jumps up by more than its size plus one (past a pole of tan or 1/x), or it lies far below the scan's
+    median (a pole of -1/x^2 between two points), golden sections narrow it; the POLE_TRIES places of the lowest
+    costs, over all segments. What shows a pole: :func:`_approach`. Returns the lowest approach as a Ray (``pole``:
+    the point approached, ``steps``: distances to it), or None."""
+    scans = []
+    for start, d, t_max in segments:
+        end = start + t_max * d
+        points = [start + s * d for s in np.linspace(0.0, t_max, POLE_SCAN + 1)[:-1]]
+        points += [end - t_max * 10.0 ** -j * d for j in np.arange(2.0, 2.0 + POLE_NEAR_END)] + [end]
+        scans.append(points)
+    if not scans:
+        return None
+    costs, ok = values([p for points in scans for p in points])
+    tasks = []  # (the cost where the narrowing starts, narrowing, its arguments)
+    for (_, d, _), points, c, k in zip(segments, scans, np.split(costs, len(scans)), np.split(ok, len(scans)),
+                                       strict=True):
+        if k[0] and math.isfinite(c[0]):  # the cost at the segment's start: what a fall is measured from
+            tasks += _suspects(points, c, k, d, float(c[0]))
+    rays = [narrow(values, *args) for _, narrow, args in sorted(tasks, key=lambda task: task[0])[:POLE_TRIES]]
+    rays = [r for r in rays if r is not None]
+    return min(rays, key=lambda r: r.costs[-1]) if rays else None
+
+
+def _suspects(points: list[np.ndarray], costs: np.ndarray, ok: np.ndarray, d: np.ndarray, start_cost: float
+              ) -> list[tuple]:
+    """:func:`pole_approach`'s places to narrow on one scanned segment."""
+    good = ok & np.isfinite(costs)
+    low = int(np.flatnonzero(good)[np.argmin(costs[good])])
+    typical = float(np.median(costs[good]))
+    outlier = costs[low] < typical - POLE_OUTLIER * (abs(typical) + 1.0)  # far below the rest: near a pole
+    tasks = []
+    # every edge of the cost's domain (an admissible point beside one whose cost is not finite; an infeasible one is a
+    # row's edge, no pole): log(x + 1.5) at -1.5 may fall below the rest only 1e-5 from its edge
+    edge = good[:-1] & ~good[1:] & ~(~ok[1:] & np.isfinite(costs[1:]))  # (i, i + 1)
+    back = good[1:] & ~good[:-1] & ~(~ok[:-1] & np.isfinite(costs[:-1]))  # (i + 1, i)
+    for i, j in [(i, i + 1) for i in np.flatnonzero(edge)] + [(i + 1, i) for i in np.flatnonzero(back)]:
+        tasks.append((float(costs[i]), _bisect, (points[i], points[j], float(costs[i]), d, start_cost)))
+    if 0 < low < len(points) - 1 and good[low - 1] and good[low + 1] and (outlier or max(
+            costs[low - 1], costs[low + 1]) > costs[low] + abs(costs[low]) + 1.0):
+        tasks.append((float(costs[low]), _narrow,
+                      (points[low - 1], points[low], points[low + 1], float(costs[low]), d, start_cost)))
+    return tasks
+
+
+def _bisect(values, lo: np.ndarray, hi: np.ndarray, c_lo: float, d: np.ndarray, start_cost: float) -> Ray | None:
+    """:func:`pole_approach`'s bisection of the segment [lo, hi] (the lowest point at lo)."""
+    distances, seen = [], []
+    for _ in range(POLE_HALVINGS):
+        mid = 0.5 * (lo + hi)
+        if np.array_equal(mid, lo) or np.array_equal(mid, hi):
+            break
+        cost, ok = values([mid])
+        if ok[0] and math.isfinite(cost[0]) and cost[0] < c_lo:
+            lo, c_lo = mid, float(cost[0])
+            distances.append(float(np.linalg.norm(hi - lo)))
+            seen.append(c_lo)
+        else:
+            hi = mid
+    return _approach(distances, seen, d, start_cost, hi, edge=True)
+
+
+def _narrow(values, a: np.ndarray, b: np.ndarray, c: np.ndarray, fb: float, d: np.ndarray,
+            start_cost: float) -> Ray | None:
+    """:func:`pole_approach`'s golden-section search in the bracket a, b, c (the lowest point b between two higher
+    ones): towards a minimum, or a pole where the cost falls without bound."""
+    distances, seen = [], []
+    for _ in range(2 * POLE_HALVINGS):
+        right = np.linalg.norm(c - b) > np.linalg.norm(b - a)
+        m = b + GOLDEN * (c - b) if right else b - GOLDEN * (b - a)
+        if np.array_equal(m, b) or np.array_equal(m, a) or np.array_equal(m, c):
+            break
+        cost, ok = values([m])
+        if ok[0] and math.isfinite(cost[0]) and cost[0] < fb:
+            a, c = (b, c) if right else (a, b)
+            b, fb = m, float(cost[0])
+            distances.append(float(np.linalg.norm(c - a)))
+            seen.append(fb)
+        elif right:
+            c = m
+        else:
+            a = m
+    return _approach(distances, seen, d, start_cost, b, edge=False)
+
+
+GOLDEN = 0.5 * (3.0 - math.sqrt(5.0))
+
+
+def _approach(distances: list[float], seen: list[float], d: np.ndarray, start_cost: float, point: np.ndarray,
+              edge: bool) -> Ray | None:
+    """The approach of a point by ever lower costs ``seen`` at ``distances`` from it, as a Ray where it shows a pole:
+    a fall that keeps its pace per decade of the distance over at least POLE_DECADES decades (the last third of the
+    decades falls at least a quarter as much as the first: log(x), 1/x; a finite limit's fall fades with the
+    distance, x log(x) or sqrt(x) at 0, a minimum however deep), or at the ``edge`` of the domain (the point itself
+    not finite) a fall of more than UNBOUNDED_DROP max(1, |start cost|) (an overflow to -inf)."""
+    if len(seen) < 3:
+        return None
+    cost = np.asarray(seen)
+    unbounded_below = bool(cost[-1] < start_cost - UNBOUNDED_DROP * max(1.0, abs(start_cost)))
+    steady = False
+    with np.errstate(divide="ignore"):
+        u = np.log10(np.asarray(distances))
+    if np.all(np.isfinite(u)) and u[0] - u[-1] >= POLE_DECADES:
+        third = (u[0] - u[-1]) / 3.0
+        first = cost[0] - cost[np.flatnonzero(u <= u[0] - third)[0]]
+        last = cost[np.flatnonzero(u <= u[-1] + third)[0]] - cost[-1]
+        steady = bool(last >= 0.25 * first and last > 1e-9 * max(1.0, abs(cost[-1])))
+    if not (steady or edge and unbounded_below):
+        return None
+    return Ray(d, np.asarray(distances), cost, start_cost, unbounded_below, pole=point.copy())
