@@ -166,6 +166,8 @@ def test_poles_in_a_bounded_set_are_shown() -> None:
     assert "decreases without bound approaching (x = 0.25)" in ray.describe(["x"])
     ray = _pole(lambda x: -1.0 / (x - 0.2501) ** 2, 1.0, 0.5, -1.0, 1.0)  # between two: both neighbours higher
     assert ray is not None and ray.unbounded_below and abs(ray.pole[0] - 0.2501) < 1e-12
+    ray = _pole(lambda x: -np.exp(x), 0.0, 10.0, -1.0, 1000.0)  # overflows to -inf beyond x = 709.78: no minimum
+    assert ray is not None and ray.unbounded_below and ray.costs[-1] < -1e308 and 709 < ray.pole[0] < 710
 
 
 def test_finite_limits_jumps_and_edges_are_not_poles() -> None:
@@ -177,4 +179,5 @@ def test_finite_limits_jumps_and_edges_are_not_poles() -> None:
     assert _pole(lambda x: np.log(x), 0.5, 0.2, 0.0, 1.0, feasible=lambda x: x >= 0.1) is None  # a row before 0
     deep = _pole(lambda x: -1e9 * np.exp(-1e4 * (x - 0.3) ** 2), 1.0, 0.5, 0.0, 1.0)  # a well 1e9 deep, 0.01 wide
     assert deep is None
+    assert _pole(lambda x: -1e7 + np.sqrt(x), 0.5, 0.1, -1.0, 1.0) is None  # deep, but attained at its domain's edge
     assert pole_segment(np.array([0.5]), np.array([0.5]), np.array([0.0]), np.array([1.0])) is None
