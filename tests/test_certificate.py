@@ -605,6 +605,37 @@ def test_a_pole_at_the_edge_of_the_domain_is_not_certified_away() -> None:
     assert d[0] - d[-1] >= 8 and np.polyfit(d, c, 1)[0] == pytest.approx(0.5 * np.log(10.0), rel=0.05)
 
 
+def test_a_pole_is_named_when_the_solve_stalls_outside_the_domain() -> None:
+    """p1's cost 0.1 exp(x1/2) + 1.29 log(x1 - 0.195) + 0.2 x1 x2 on -2.29 <= x1 <= 1.86, started at -1.21 where
+    log is not defined: the solve stalls outside the domain, where no best response can be checked. The pole at
+    0.195 (the cost falls like 1.29 log of the distance) is sought from the lowest point of a design where the cost
+    is defined: the status says p1 has no best response, instead of "stalled"."""
+    j1 = "0.1*exp(0.5*x1) + 1.29*log(x1 - 0.195) + 0.2*x1*x2"
+    cfg = load_config(text=_static([("p1", "x1", j1, "lower: -2.29, upper: 1.86, start: -1.21"),
+                                    ("p2", "x2", "(x2 - 0.3*x1)**2", "lower: -2, upper: 2, start: 0")]))
+    res = solve(cfg)
+    assert res.status == "unbounded_player"
+    pole = res.certificate["unbounded"]["p1"]
+    assert pole["pole"][0] == pytest.approx(0.195, abs=1e-15) and "p1" in res.certificate["not_finite"]
+    d, c = np.log10(pole["steps"]), np.asarray(pole["costs"])
+    assert np.polyfit(d, c, 1)[0] == pytest.approx(1.29 * np.log(10.0), rel=0.05)
+
+
+def test_a_best_response_found_at_a_two_sided_pole_is_a_pole() -> None:
+    """p1's cost 0.1 exp(x1/2) + 1.38 log|x1 + 0.504| + 0.2 x1 x2 falls without end on both sides of -0.504; a local
+    solve of its best response ends within rounding of it (cost about -50). Approached from there along its
+    coordinate, the cost keeps falling by 1.38 ln 10 per decade of the distance: a pole, not a best response."""
+    j1 = "0.1*exp(0.5*x1) + 1.38*log(abs(x1 + 0.504)) + 0.2*x1*x2"
+    cfg = load_config(text=_static([("p1", "x1", j1, "lower: -2.88, upper: 2.24, start: 0.24"),
+                                    ("p2", "x2", "(x2 - 0.3*x1)**2", "lower: -2, upper: 2, start: 0")]))
+    res = solve(cfg)
+    assert res.status == "unbounded_player"
+    pole = res.certificate["unbounded"]["p1"]
+    assert pole["pole"][0] == pytest.approx(-0.504, abs=1e-12)
+    d, c = np.log10(pole["steps"]), np.asarray(pole["costs"])
+    assert d[0] - d[-1] >= 8 and np.polyfit(d, c, 1)[0] == pytest.approx(1.38 * np.log(10.0), rel=0.05)
+
+
 def test_a_cost_that_ends_finite_at_its_domain_edge_keeps_its_equilibrium() -> None:
     """p1's cost x1 log(x1) - x1 x2 tends to 0 at x1 = 0 (no pole, though log(0) is not finite): its best response
     to x2 is exp(x2 - 1), and with p2's x2 = 0.5 x1 the equilibrium solves x1 = exp(0.5 x1 - 1), certified."""

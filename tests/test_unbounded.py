@@ -8,6 +8,7 @@ import pytest
 
 from gnerun.solvers.unbounded import (
     STEPS,
+    approach_point,
     descending_ray,
     flat_directions,
     free_directions,
@@ -181,3 +182,17 @@ def test_finite_limits_jumps_and_edges_are_not_poles() -> None:
     assert deep is None
     assert _pole(lambda x: -1e7 + np.sqrt(x), 0.5, 0.1, -1.0, 1.0) is None  # deep, but attained at its domain's edge
     assert pole_segment(np.array([0.5]), np.array([0.5]), np.array([0.0]), np.array([1.0])) is None
+
+
+def test_a_point_within_rounding_of_a_pole_is_one() -> None:
+    def values(f):
+        def v(points):
+            with np.errstate(all="ignore"):
+                return np.array([float(f(q[0])) for q in points]), np.ones(len(points), dtype=bool)
+        return v
+
+    e = [np.array([1.0]), np.array([-1.0])]
+    ray = approach_point(values(lambda x: np.log(abs(x - 0.3))), np.array([0.3 + 1e-17]), e, 2.0)
+    assert ray is not None and ray.pole[0] == 0.3 + 1e-17 and np.all(np.diff(ray.costs) < 0)
+    assert approach_point(values(lambda x: (x - 0.3) ** 2), np.array([0.3]), e, 2.0) is None  # a minimum
+    assert approach_point(values(lambda x: np.sqrt(abs(x - 0.3))), np.array([0.3]), e, 2.0) is None  # a cusp

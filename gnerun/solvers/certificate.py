@@ -479,7 +479,14 @@ def check_player(game: CompiledGame, agent: int, z: np.ndarray, x: np.ndarray | 
     if not math.isfinite(J0) or not np.all(np.isfinite(grad)) or undefined:
         what = (f"J = {J0}" if not math.isfinite(J0) else "its gradient is not finite" if not undefined else
                 "a log, sqrt, asin or acos in it is evaluated outside its domain")
-        return PlayerCheck(None, None, "not checked", f"the cost is not finite at the point ({what})", finite=False)
+        note = f"the cost is not finite at the point ({what})"
+        # a point outside the cost's domain (a solve that stalled there) says nothing of a pole: it is sought from
+        # the lowest point of a small design where the cost is defined
+        target = _lowest_defined(game, agent, a, x, prices)
+        ray = None if target is None else _pole(game, agent, a, x, prices, target)
+        if ray is not None:
+            note += "; " + ray.describe(_decision_names(game, agent))
+        return PlayerCheck(None, None, "not checked", note, ray=ray, finite=False)
     tol = GAP_TOL * max(1.0, abs(J0))
     H = _lq_hessian(game, agent, a, x)  # an LQ player's own Hessian block (None: the game is not LQ)
     convex = H is not None and _positive_semidefinite(H)  # then a local solve is global already: no box search
@@ -596,9 +603,30 @@ def check_player(game: CompiledGame, agent: int, z: np.ndarray, x: np.ndarray | 
     if starts.kinks:
         note += f"; at a kink of {', '.join(starts.kinks)}: the branches compared by probes around the point"
     if ray is not None:
-        note += "; " + ray.describe(game.variable_names[agent] if game.kind == "static" else
-                                    [f"a[{k}]" for k in range(ni)])
+        note += "; " + ray.describe(_decision_names(game, agent))
     return PlayerCheck(gap, best_x, kind, note, box, bound, ray, True, starts.kinks)
+
+
+def _lowest_defined(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | None,
+                    prices: np.ndarray) -> np.ndarray | None:
+    """The agent's lowest feasible point with a finite cost among its start values, its search box's centre and a
+    Kronecker design of DESIGN_LARGE points in the box (None: none)."""
+    sl = game.agent_slices[agent]
+    lower, upper = search_box(game, agent, a)
+    rng = np.random.default_rng(_seed(agent, a))
+    points = [np.clip(game.a_start[sl], lower, upper), 0.5 * (lower + upper)]
+    points += list(lower + (upper - lower) * kronecker(sl.stop - sl.start, DESIGN_LARGE, rng))
+    with np.errstate(all="ignore"):
+        vals, ok = _values(game, agent, a, x, points, prices)
+    vals = np.where(ok & np.isfinite(vals), vals, np.inf)
+    k = int(np.argmin(vals))
+    return points[k] if math.isfinite(vals[k]) else None
+
+
+def _decision_names(game: CompiledGame, agent: int) -> list[str]:
+    """The agent's decisions as a ray's description names them: its variables, or a[k] (dynamic games)."""
+    sl = game.agent_slices[agent]
+    return game.variable_names[agent] if game.kind == "static" else [f"a[{k}]" for k in range(sl.stop - sl.start)]
 
 
 def _pole(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | None, prices: np.ndarray,
@@ -606,7 +634,8 @@ def _pole(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | None, p
     """A pole of the agent's cost (:func:`gnerun.solvers.unbounded.pole_approach`) on the segment from its start
     values (or its search box's centre, where they are ``target``) through ``target``, the lowest point found (the
     candidate, or the best response found), to the edge of its search box, and (a player with at most
-    COORDINATE_RAYS_UP_TO decisions) on the segments from ``target`` to the box's edge along each coordinate."""
+    COORDINATE_RAYS_UP_TO decisions) on the segments from ``target`` to the box's edge along each coordinate; and at
+    ``target`` itself, approached along those directions (:func:`gnerun.solvers.unbounded.approach_point`)."""
     sl = game.agent_slices[agent]
     lower, upper = search_box(game, agent, a)
     segments = []
@@ -615,14 +644,20 @@ def _pole(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | None, p
         if segment is not None:
             segments.append(segment)
             break
-    if target.size <= unbounded.COORDINATE_RAYS_UP_TO:
-        segments += unbounded.coordinate_segments(target, lower, upper)
+    coordinates = unbounded.coordinate_segments(target, lower, upper) if target.size <= \
+        unbounded.COORDINATE_RAYS_UP_TO else []
 
     def values(points: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
         with np.errstate(all="ignore"):
             return _values(game, agent, a, x, points, prices)
 
-    return unbounded.pole_approach(values, segments)
+    # the target itself within rounding of a pole (a local solve's end next to log|x - p|'s), then the segments
+    directions = [s * d for _, d, _ in segments[:1] for s in (1.0, -1.0)] + [d for _, d, _ in coordinates]
+    length = float(np.max(upper - lower, initial=1.0))
+    rays = [unbounded.approach_point(values, target, directions, length),
+            unbounded.pole_approach(values, segments + coordinates)]
+    rays = [r for r in rays if r is not None]
+    return min(rays, key=lambda r: r.costs[-1]) if rays else None
 
 
 HESSIAN_BUILT_UP_TO = 100  # an LQ player with more decisions reads its Hessian from gradients

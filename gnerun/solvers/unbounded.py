@@ -298,6 +298,27 @@ def coordinate_segments(point: np.ndarray, lower: np.ndarray, upper: np.ndarray
     return out
 
 
+def approach_point(values, point: np.ndarray, directions: list[np.ndarray], length: float) -> Ray | None:
+    """A pole at ``point`` itself (a best response found within rounding of one, as a local solve finds log|x - p|'s):
+    the cost at point + 10^-k length d, k = 1..16, for each direction d (one call), read by :func:`_approach` from
+    the farthest point in as long as the cost keeps falling."""
+    k = np.arange(1.0, 17.0)
+    points = [point + 10.0 ** -j * length * d for d in directions for j in k]
+    if not points:
+        return None
+    costs, ok = values(points)
+    rays = []
+    for d, c, good in zip(directions, np.split(costs, len(directions)), np.split(ok, len(directions)), strict=True):
+        good = good & np.isfinite(c)
+        n = 1
+        while n < c.size and good[n] and c[n] < c[n - 1]:
+            n += 1
+        if good[0] and n >= 3:
+            rays.append(_approach(list(10.0 ** -k[:n] * length), list(c[:n]), d, float(c[0]), point, edge=False))
+    rays = [r for r in rays if r is not None]
+    return min(rays, key=lambda r: r.costs[-1]) if rays else None
+
+
 def pole_approach(values, segments: list[tuple[np.ndarray, np.ndarray, float]]) -> Ray | None:
     """A pole of the cost on the segments (start, d, t_max): start + t d, 0 <= t <= t_max. ``values(points)`` gives
     each point's cost and whether it is admissible (feasible; a NaN or infinite cost is never a value). Every segment
