@@ -565,14 +565,14 @@ def test_a_linear_player_without_a_best_response_is_named_not_diverged() -> None
 def test_a_pole_in_a_bounded_set_is_named_not_diverged() -> None:
     """p1's cost log(x1) + x1 x2 on 0 <= x1 <= 1 falls like log(x1) as x1 -> 0 whatever x2 in [-1, 1] (x1 x2 is at
     most x1 in size): it has no best response, and the game no equilibrium. No ray leaves the box; the certificate
-    approaches the pole at x1 = 0, where the cost falls by ln 2 per halving of the distance (exactly: log)."""
+    approaches the pole at x1 = 0, where the cost falls by ln 10 per decade of the distance (exactly: log)."""
     cfg = load_config(text=_static([("p1", "x1", "log(x1) + x1*x2", "lower: 0, upper: 1, start: 0.5"),
                                     ("p2", "x2", "(x2 - x1)**2", "lower: -1, upper: 1, start: 0")]))
     res = solve(cfg)
     assert res.status == "unbounded_player"
     pole = res.certificate["unbounded"]["p1"]
     assert pole["pole"] == [0.0] and pole["direction"] == [-1.0]
-    np.testing.assert_allclose(-np.diff(pole["costs"][-10:]), np.log(2.0), rtol=1e-6)  # x1 x2 is negligible there
+    np.testing.assert_allclose(-np.diff(pole["costs"][-10:]), np.log(10.0), rtol=1e-6)  # x1 x2 negligible there
     assert "p1 has no best response" in res.message and "approaching (x1 = 0), where it is not finite" in res.message
 
 

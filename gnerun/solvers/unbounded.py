@@ -263,7 +263,8 @@ def descending_ray(directions: list[np.ndarray], t: np.ndarray, costs: np.ndarra
 POLE_SCAN = 64  # points evenly spaced on the segment searched, and ...
 POLE_NEAR_END = 14  # ... as many approaching its far end geometrically (1e-2 ... 1e-15 of its length from it)
 POLE_HALVINGS = 60  # bisection steps towards the pole (a bracket of length L ends at L 2^-60)
-POLE_DECADES = 8.0  # a fall that keeps its pace per decade of the distance over this many: log-like
+POLE_DECADES = 8.0  # a fall that keeps its pace per decade of the distance over this many: log-like, ...
+POLE_WINDOW, POLE_PACE = 4.0, 0.85  # ... its last 4 decades falling at least 0.85 times as fast as 4 early ones
 POLE_OUTLIER = 100.0  # a lowest scanned cost this many times (1 + |median|) below the scan's median
 POLE_TRIES = 4  # places narrowed (the lowest first, over all segments): each up to POLE_HALVINGS evaluations
 
@@ -299,9 +300,11 @@ def coordinate_segments(point: np.ndarray, lower: np.ndarray, upper: np.ndarray
 
 
 def approach_point(values, point: np.ndarray, directions: list[np.ndarray], length: float) -> Ray | None:
-    """A pole at ``point`` itself (a best response found within rounding of one, as a local solve finds log|x - p|'s):
-    the cost at point + 10^-k length d, k = 1..16, for each direction d (one call), read by :func:`_approach` from
-    the farthest point in as long as the cost keeps falling."""
+    """A pole at ``point`` itself (a best response found within rounding of one, as a local solve finds log|x - p|'s;
+    the end of a bisection or golden-section search): the cost at point + 10^-k length d, k = 1..16, for each
+    direction d (one call), read by :func:`_approach` over the longest run of admissible points nearing the point
+    along which the cost keeps falling. The Ray's direction is that of the approach, -d; its steps are the distances
+    to the point."""
     k = np.arange(1.0, 17.0)
     points = [point + 10.0 ** -j * length * d for d in directions for j in k]
     if not points:
@@ -310,11 +313,18 @@ def approach_point(values, point: np.ndarray, directions: list[np.ndarray], leng
     rays = []
     for d, c, good in zip(directions, np.split(costs, len(directions)), np.split(ok, len(directions)), strict=True):
         good = good & np.isfinite(c)
-        n = 1
-        while n < c.size and good[n] and c[n] < c[n - 1]:
-            n += 1
-        if good[0] and n >= 3:
-            rays.append(_approach(list(10.0 ** -k[:n] * length), list(c[:n]), d, float(c[0]), point, edge=False))
+        best = (0, 0)  # the longest run [i, j) of admissible points with falling costs
+        i = 0
+        while i < c.size:
+            j = i + 1
+            while good[i] and j < c.size and good[j] and c[j] < c[j - 1]:
+                j += 1
+            if good[i] and j - i > best[1] - best[0]:
+                best = (i, j)
+            i = j
+        i, j = best
+        if j - i >= 3:
+            rays.append(_approach(list(10.0 ** -k[i:j] * length), list(c[i:j]), -d, float(c[i]), point))
     rays = [r for r in rays if r is not None]
     return min(rays, key=lambda r: r.costs[-1]) if rays else None
 
@@ -360,18 +370,22 @@ def _suspects(points: list[np.ndarray], costs: np.ndarray, ok: np.ndarray, d: np
     # row's edge, no pole): log(x + 1.5) at -1.5 may fall below the rest only 1e-5 from its edge
     edge = good[:-1] & ~good[1:] & ~(~ok[1:] & np.isfinite(costs[1:]))  # (i, i + 1)
     back = good[1:] & ~good[:-1] & ~(~ok[:-1] & np.isfinite(costs[:-1]))  # (i + 1, i)
+    length = float(np.linalg.norm(points[-1] - points[0]))
     for i, j in [(i, i + 1) for i in np.flatnonzero(edge)] + [(i + 1, i) for i in np.flatnonzero(back)]:
-        tasks.append((float(costs[i]), _bisect, (points[i], points[j], float(costs[i]), d, start_cost)))
+        tasks.append((float(costs[i]), _bisect, (points[i], points[j], float(costs[i]), d, start_cost, length)))
     if 0 < low < len(points) - 1 and good[low - 1] and good[low + 1] and (outlier or max(
             costs[low - 1], costs[low + 1]) > costs[low] + abs(costs[low]) + 1.0):
         tasks.append((float(costs[low]), _narrow,
-                      (points[low - 1], points[low], points[low + 1], float(costs[low]), d, start_cost)))
+                      (points[low - 1], points[low], points[low + 1], float(costs[low]), d, length)))
     return tasks
 
 
-def _bisect(values, lo: np.ndarray, hi: np.ndarray, c_lo: float, d: np.ndarray, start_cost: float) -> Ray | None:
-    """:func:`pole_approach`'s bisection of the segment [lo, hi] (the lowest point at lo)."""
-    distances, seen = [], []
+def _bisect(values, lo: np.ndarray, hi: np.ndarray, c_lo: float, d: np.ndarray, start_cost: float,
+            length: float) -> Ray | None:
+    """:func:`pole_approach`'s bisection of the segment [lo, hi] (the lowest point at lo, hi's cost not finite) to
+    the edge of the domain, approached from there (:func:`approach_point`); or an overflow: the cost at the edge
+    -inf after falling by more than UNBOUNDED_DROP max(1, |start cost|) (exp growing without bound)."""
+    moved, seen = [], []
     for _ in range(POLE_HALVINGS):
         mid = 0.5 * (lo + hi)
         if np.array_equal(mid, lo) or np.array_equal(mid, hi):
@@ -379,18 +393,22 @@ def _bisect(values, lo: np.ndarray, hi: np.ndarray, c_lo: float, d: np.ndarray, 
         cost, ok = values([mid])
         if ok[0] and math.isfinite(cost[0]) and cost[0] < c_lo:
             lo, c_lo = mid, float(cost[0])
-            distances.append(float(np.linalg.norm(hi - lo)))
+            moved.append(mid)
             seen.append(c_lo)
         else:
             hi = mid
-    return _approach(distances, seen, d, start_cost, hi, edge=True)
+    if len(seen) >= 3 and seen[-1] < start_cost - UNBOUNDED_DROP * max(1.0, abs(start_cost)):
+        return Ray(d, np.asarray([float(np.linalg.norm(q - hi)) for q in moved]), np.asarray(seen), start_cost, True,
+                   pole=hi.copy())
+    inward = lo - hi
+    norm = float(np.linalg.norm(inward))
+    return approach_point(values, hi, [inward / norm], length) if norm > 0 else None
 
 
 def _narrow(values, a: np.ndarray, b: np.ndarray, c: np.ndarray, fb: float, d: np.ndarray,
-            start_cost: float) -> Ray | None:
+            length: float) -> Ray | None:
     """:func:`pole_approach`'s golden-section search in the bracket a, b, c (the lowest point b between two higher
-    ones): towards a minimum, or a pole where the cost falls without bound."""
-    distances, seen = [], []
+    ones), towards a minimum or a pole, approached from both sides where it ends (:func:`approach_point`)."""
     for _ in range(2 * POLE_HALVINGS):
         right = np.linalg.norm(c - b) > np.linalg.norm(b - a)
         m = b + GOLDEN * (c - b) if right else b - GOLDEN * (b - a)
@@ -400,37 +418,39 @@ def _narrow(values, a: np.ndarray, b: np.ndarray, c: np.ndarray, fb: float, d: n
         if ok[0] and math.isfinite(cost[0]) and cost[0] < fb:
             a, c = (b, c) if right else (a, b)
             b, fb = m, float(cost[0])
-            distances.append(float(np.linalg.norm(c - a)))
-            seen.append(fb)
         elif right:
             c = m
         else:
             a = m
-    return _approach(distances, seen, d, start_cost, b, edge=False)
+    return approach_point(values, b, [d, -d], length)
 
 
 GOLDEN = 0.5 * (3.0 - math.sqrt(5.0))
 
 
-def _approach(distances: list[float], seen: list[float], d: np.ndarray, start_cost: float, point: np.ndarray,
-              edge: bool) -> Ray | None:
+def _approach(distances: list[float], seen: list[float], d: np.ndarray, start_cost: float,
+              point: np.ndarray) -> Ray | None:
     """The approach of a point by ever lower costs ``seen`` at ``distances`` from it, as a Ray where it shows a pole:
-    a fall that keeps its pace per decade of the distance over at least POLE_DECADES decades (the last third of the
-    decades falls at least a quarter as much as the first: log(x), 1/x; a finite limit's fall fades with the
-    distance, x log(x) or sqrt(x) at 0, a minimum however deep), or at the ``edge`` of the domain (the point itself
-    not finite) a fall of more than UNBOUNDED_DROP max(1, |start cost|) (an overflow to -inf)."""
+    a fall that keeps its pace per decade of the distance over at least POLE_DECADES decades (its last POLE_WINDOW
+    decades fall per decade at least POLE_PACE times as fast as POLE_WINDOW decades early on: log(x), 1/x; a finite
+    limit's fall fades with the distance: x log(x), sqrt(x), |x|^p for p >= 0.02, a minimum however deep). Distances
+    within 100 units in the last place of the point are left out (rounding, not the cost, decides there)."""
     if len(seen) < 3:
         return None
     cost = np.asarray(seen)
     unbounded_below = bool(cost[-1] < start_cost - UNBOUNDED_DROP * max(1.0, abs(start_cost)))
-    steady = False
+    keep = np.asarray(distances) >= 100.0 * np.spacing(float(np.max(np.abs(point), initial=0.0)))
     with np.errstate(divide="ignore"):
-        u = np.log10(np.asarray(distances))
-    if np.all(np.isfinite(u)) and u[0] - u[-1] >= POLE_DECADES:
-        third = (u[0] - u[-1]) / 3.0
-        first = cost[0] - cost[np.flatnonzero(u <= u[0] - third)[0]]
-        last = cost[np.flatnonzero(u <= u[-1] + third)[0]] - cost[-1]
-        steady = bool(last >= 0.25 * first and last > 1e-9 * max(1.0, abs(cost[-1])))
-    if not (steady or edge and unbounded_below):
+        u, fell = np.log10(np.asarray(distances)[keep]), cost[keep]
+    if u.size < 6 or not np.all(np.isfinite(u)) or u[0] - u[-1] < POLE_DECADES:
+        return None
+
+    def pace(top: float, bottom: float) -> float:  # the fall per decade over [bottom, top], by least squares
+        inside = (u <= top) & (u >= bottom)
+        return float(np.polyfit(u[inside], fell[inside], 1)[0]) if np.count_nonzero(inside) >= 3 else 0.0
+
+    # POLE_WINDOW decades after the first two (where the smooth part of the cost still counts), and the last ones
+    first, last = pace(u[0] - 2.0, u[0] - 2.0 - POLE_WINDOW), pace(u[-1] + POLE_WINDOW, u[-1])
+    if not (first > 0 and last >= POLE_PACE * first and last > 1e-9 * max(1.0, abs(fell[-1]))):
         return None
     return Ray(d, np.asarray(distances), cost, start_cost, unbounded_below, pole=point.copy())
