@@ -636,6 +636,27 @@ def test_a_best_response_found_at_a_two_sided_pole_is_a_pole() -> None:
     assert d[0] - d[-1] >= 8 and np.polyfit(d, c, 1)[0] == pytest.approx(1.38 * np.log(10.0), rel=0.05)
 
 
+def test_a_pole_in_a_dynamic_game_is_named() -> None:
+    """a1's stage cost 0.1 u1^2 + 0.2 log(x1) + 0.1 x1 x2 with x1(tau+1) = x1(tau) + u1(tau), x1(0) = 1 and
+    |u1| <= 0.5: two stages of u1 = -0.5 bring x1 to 0, where log falls without bound. a1 has no best response (the
+    solve stalled before), and the pole the certificate approaches is a plan whose x1 reaches 0 at some stage."""
+    cfg = load_config(text="""
+game:
+  kind: dynamic
+  horizon: 5
+  states: [x1, x2]
+  dynamics: {x1: "x1 + u1", x2: "x2 + u2"}
+  x0: [1.0, 1.0]
+  agents:
+    - {name: a1, inputs: {u1: {lower: -0.5, upper: 0.5, start: 0}}, stage_cost: "0.1*u1**2 + 0.2*log(x1) + 0.1*x1*x2"}
+    - {name: a2, inputs: {u2: {lower: -0.5, upper: 0.5, start: 0}}, stage_cost: "(x2 - 0.5)**2 + u2**2"}
+""")
+    res = solve(cfg)
+    assert res.status == "unbounded_player" and "a1 has no best response" in res.message
+    x1 = 1.0 + np.cumsum(res.certificate["unbounded"]["a1"]["pole"])  # x1(1..T+1) along the plan approached
+    assert np.min(np.abs(x1)) < 1e-12 and np.all(x1 >= -1e-12)
+
+
 def test_a_cost_that_ends_finite_at_its_domain_edge_keeps_its_equilibrium() -> None:
     """p1's cost x1 log(x1) - x1 x2 tends to 0 at x1 = 0 (no pole, though log(0) is not finite): its best response
     to x2 is exp(x2 - 1), and with p2's x2 = 0.5 x1 the equilibrium solves x1 = exp(0.5 x1 - 1), certified."""
