@@ -724,3 +724,43 @@ def test_a_hand_over_kept_on_its_result_makes_no_condition_estimate() -> None:
                          game)
     assert strict.newton.newton_point(replace(state, active=active))[0] is None  # estimated: singular
     assert strict._judged_point(state, active)[0] is not None
+
+
+# Costs undefined at their bound (x log x and log x at x = 0), from the start values 0 that a bound of 0 suggests.
+AT_THE_DOMAINS_EDGE = """
+name: domain-edge
+game:
+  kind: static
+  agents:
+    - name: p1
+      variables: {x1: {lower: 0, upper: 1}}
+      cost: "x1*log(x1) - 0.5*x1*x2"
+    - name: p2
+      variables: {x2: {lower: 0, upper: 5}}
+      cost: "-log(x2) + 0.5*x2 + 0.1*x1*x2"
+"""
+
+
+def test_a_start_outside_the_costs_domain_is_pushed_into_the_bounds() -> None:
+    """Phi is not finite at the start (0 log 0, -log 0): the local method stops there, the default starts its decisions
+    1e-2 inside their bounds (IPOPT's bound push) and solves the game. The equilibrium from the first-order conditions
+    (interior): log x1 + 1 = x2 / 2 and 1 / x2 = 0.5 + 0.1 x1 (x1 = 0.864), certified."""
+    cfg = load_config(text=AT_THE_DOMAINS_EDGE)
+    game = compile_game(cfg)
+    local = make_solver(cfg.model_copy(update={"solver": cfg.solver.model_copy(update={"globalization": "none"})}),
+                        game).init(None, None)
+    assert local.status == Status.NAN and "Phi(z^0) is not finite" in local.message
+    default = make_solver(cfg, game)
+    first = default.init(None, None)
+    np.testing.assert_array_equal(first.z[: game.n], [0.01, 0.01])  # 1e-2 of max(1, |bound|), at most of the width
+    res = solve(cfg)
+    assert res.status == "converged"
+    x1, x2 = res.solution["p1"]["x1"], res.solution["p2"]["x2"]
+    assert 0.8 < x1 < 0.9 and np.log(x1) + 1.0 == pytest.approx(0.5 * x2, abs=1e-10)  # ||Phi|| <= tol
+    assert 1.0 / x2 == pytest.approx(0.5 + 0.1 * x1, abs=1e-10)
+
+
+def test_a_cost_undefined_everywhere_is_still_nan() -> None:
+    text = AT_THE_DOMAINS_EDGE.replace("x1*log(x1) - 0.5*x1*x2", "sqrt(-1 - x1**2) + x1*x2")
+    res = solve(load_config(text=text))
+    assert res.status == "nan" and "Phi(z^0) is not finite" in res.message

@@ -12,6 +12,10 @@ first, judged by a nonmonotone watchdog; a more robust method when it fails; res
    active-set AVI solver in C (PATH's design: a pivotal method on the linearisation). One iteration; the Newton
    phase goes on from there, or from z^0 where DAQP finds no solution (an LQ plain GNE without a variational
    equilibrium, FK A.8).
+   **A start outside the costs' domain** (Phi(z^0) not finite: log(x) or x log(x) at a bound x = 0, as start values of
+   0 on such bounds give): the decisions pushed ``PUSH`` into their bounds, as IPOPT's bound_push does, else each
+   bounded one at its box's centre, else the design point of least finite ||Phi|| over the boxes; that is z^0 (the
+   local method stops at the configured start instead).
    **The players' decoupled plans** (nonlinear trajectory games of several players with rows that couple them,
    cold-started and unperturbed, where ||Phi(z^0)|| > ``DECOUPLE_ABOVE``): the first iteration is the players' plans as
    if each were alone, the equilibrium of the decoupled game (the rows that two or more players' decisions reach,
@@ -156,6 +160,8 @@ def _short(z: np.ndarray, z_new: np.ndarray) -> bool:
 
 # a cold-started trajectory game whose ||Phi(z^0)|| is above this begins with the players' decoupled plans, kept where
 # ||Phi|| there is at most DECOUPLED_GAIN times ||Phi(z^0)|| (benchmarks/results/solver-design.md)
+PUSH = 1e-2  # a start outside the costs' domain: its decisions pushed this far into their bounds (IPOPT's bound_push)
+DOMAIN_DESIGN = 32  # ... else the best of this many design points over the boxes where Phi is finite
 DECOUPLE_ABOVE = 1.0
 DECOUPLED_GAIN = 0.1
 ALONE_TOL = 1e-3  # ... to this ||Phi|| of the decoupled game: a start, not a solution (its last Newton steps spared)
@@ -241,6 +247,8 @@ class HybridNewton:
     def init(self, z0: np.ndarray | None = None, x: np.ndarray | None = None,
              rng: np.random.Generator | None = None, warm: bool = False) -> SSNState:
         state = self.newton.init(z0, x, rng)
+        if state.status == Status.NAN and not warm:
+            state = self._inside(state, x, rng)
         if state.status in FAILURES:
             return state
         merit = state.residual_norm
@@ -249,6 +257,40 @@ class HybridNewton:
         if not self.handover:  # the interior phase alone: its start point is z^0
             return self._start_interior(state, 0, k=0)
         return state
+
+    def _inside(self, state: SSNState, x: np.ndarray | None, rng: np.random.Generator | None) -> SSNState:
+        """A start whose Phi is not finite (log(x) or x log(x) at a bound x = 0, the configured start): its decisions
+        pushed into their bounds as IPOPT's bound_push does (``PUSH`` of the bound's size, at most ``PUSH`` of the
+        box's width), else each bounded on both sides at its box's centre, the first of these where Phi is finite;
+        else, of ``DOMAIN_DESIGN`` points of a Kronecker design over those boxes, the one of least finite ||Phi||; or
+        the state as it was."""
+        game, n = self.game, self.game.n
+        lo, hi, a = game.a_lower, game.a_upper, state.z[:n]
+        with np.errstate(invalid="ignore"):  # (inf - inf where a decision has no bounds: no push, no centre)
+            room = np.where(np.isfinite(hi - lo), PUSH * (hi - lo), np.inf)
+            pushed = np.maximum(a, lo + np.minimum(PUSH * np.maximum(1.0, np.abs(lo)), room))
+            pushed = np.minimum(pushed, hi - np.minimum(PUSH * np.maximum(1.0, np.abs(hi)), room))
+            centre = np.where(np.isfinite(lo) & np.isfinite(hi), 0.5 * (lo + hi), a)
+        for start in (pushed, centre):
+            if np.array_equal(start, a) or not np.all(np.isfinite(start)):
+                continue
+            moved = self.newton.init(np.concatenate([start, state.z[n:]]), x, rng)
+            if moved.status not in FAILURES:
+                return moved
+        # a design over the decisions' boxes (those without both bounds at their start): the one of least ||Phi||
+        from .certificate import kronecker
+
+        box = np.isfinite(lo) & np.isfinite(hi)
+        if not box.any():
+            return state
+        best = state
+        for u in kronecker(int(box.sum()), DOMAIN_DESIGN, np.random.default_rng(0)):
+            start = a.copy()
+            start[box] = lo[box] + (hi[box] - lo[box]) * u
+            moved = self.newton.init(np.concatenate([start, state.z[n:]]), x, rng)
+            if moved.status not in FAILURES and not moved.residual_norm >= best.residual_norm:
+                best = moved
+        return best
 
     def restart(self, z0: np.ndarray, x: np.ndarray | None = None,
                 rng: np.random.Generator | None = None) -> SSNState:
