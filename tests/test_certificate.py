@@ -16,7 +16,8 @@ import pytest
 from gnerun.game.compile import CompiledGame, compile_game
 from gnerun.language.config import load_config
 from gnerun.runs.solving import solve
-from gnerun.solvers.certificate import DESIGN_LARGE, DESIGN_SMALL, best_response, certificate, kkt_residuals, kronecker
+from gnerun.solvers.certificate import DESIGN_LARGE, DESIGN_SMALL, best_response, certificate, kkt_residuals
+from gnerun.solvers.design import kronecker
 
 from .conftest import CONFIGS
 

@@ -58,6 +58,7 @@ from ..game.agents import OwnProblem
 from ..game.compile import CompiledGame
 from ..game.tape import Tape, UnsupportedTape
 from . import global_response, unbounded
+from .design import kronecker
 from .unbounded import Ray
 
 FEASIBILITY_TOL = 1e-9
@@ -103,24 +104,6 @@ def kkt_residuals(game: CompiledGame, z: np.ndarray, x: np.ndarray | None = None
 def _seed(agent: int, a: np.ndarray) -> list[int]:
     """A seed for an agent's random starts at candidate a: reproducible, and different at every candidate."""
     return [agent, zlib.crc32(np.ascontiguousarray(a, dtype=float).tobytes())]
-
-
-def kronecker(d: int, count: int, rng: np.random.Generator) -> np.ndarray:
-    """``count`` points of a low-discrepancy design in [0, 1)^d: the Kronecker sequence frac(u + k alpha),
-    k = 1..count, with alpha_j = phi_d^-j (phi_d the positive root of x^(d+1) = x + 1, the golden ratio for d = 1:
-    Roberts' R_d sequence) and a uniform random shift u drawn from ``rng`` (randomised quasi-Monte Carlo).
-
-    Measured against scipy's scrambled Sobol design by the centered discrepancy (tests/test_certificate.py): at the
-    same size it is 1.0-1.9 times Sobol's in 4-40 dimensions and 1.4-5.7 times in 1-3, so the design is larger
-    (``DESIGN_SMALL``, ``DESIGN_LARGE``): 256 of its points in 1-3 dimensions lie below 64 Sobol points'
-    discrepancy, 32 below 16 Sobol points' in 4-40 (the sizes a Sobol design had here). Without scipy.stats, whose
-    import (0.3-0.5 s) a certified solve otherwise paid for its design alone."""
-    phi = 2.0
-    for _ in range(64):  # the fixed point of x = (1 + x)^(1/(d+1)): contracting, to rounding in a few dozen steps
-        phi = (1.0 + phi) ** (1.0 / (d + 1))
-    alpha = phi ** -np.arange(1, d + 1, dtype=float)
-    u = rng.random(d)
-    return np.mod(u + np.arange(1, count + 1, dtype=float)[:, None] * alpha, 1.0)
 
 
 def _scales(game: CompiledGame, agent: int, a: np.ndarray) -> np.ndarray:

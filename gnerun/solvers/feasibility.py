@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..game.compile import CompiledGame
-from .certificate import kronecker
+from .design import kronecker
 
 TOL = 1e-7  # a smallest violation above this (relative to the rows' size) is infeasibility
 DESIGN = 512  # nonlinear rows: design points screened for a feasible point before the local searches

@@ -102,6 +102,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .avi import AffineVI
+from .design import kronecker
 from .driver import iterate
 from .interior_point import STARTS, InteriorIterate, InteriorPoint
 from .josephy_newton import kkt_lcp_point
@@ -278,8 +279,6 @@ class HybridNewton:
             if moved.status not in FAILURES:
                 return moved
         # a design over the decisions' boxes (those without both bounds at their start): the one of least ||Phi||
-        from .certificate import kronecker
-
         box = np.isfinite(lo) & np.isfinite(hi)
         if not box.any():
             return state
