@@ -66,7 +66,8 @@ class LineSearchNewton:
         def trial(t: float) -> tuple[float, np.ndarray]:
             z = state.z + t * dz
             phi, _ = newton.phi(*newton.kkt_residual(z, state.x), z)
-            return 0.5 * float(phi @ phi), z
+            with np.errstate(over="ignore"):  # a trial point far out: its merit is inf, and the step is refused
+                return 0.5 * float(phi @ phi), z
 
         found = self.search.search(0.5 * state.residual_norm**2, slope, trial)
         if found is None:
