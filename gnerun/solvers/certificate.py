@@ -590,15 +590,19 @@ def check_player(game: CompiledGame, agent: int, z: np.ndarray, x: np.ndarray | 
     return PlayerCheck(gap, best_x, kind, note, box, bound, ray, True, starts.kinks)
 
 
+def _origins(game: CompiledGame, agent: int, a: np.ndarray) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
+    """The agent's search box and where a pole search may begin in it: its start values, then the box's centre."""
+    lower, upper = search_box(game, agent, a)
+    return lower, upper, [np.clip(game.a_start[game.agent_slices[agent]], lower, upper), 0.5 * (lower + upper)]
+
+
 def _lowest_defined(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | None,
                     prices: np.ndarray) -> np.ndarray | None:
     """The agent's lowest feasible point with a finite cost among its start values, its search box's centre and a
     Kronecker design of DESIGN_LARGE points in the box (None: none)."""
-    sl = game.agent_slices[agent]
-    lower, upper = search_box(game, agent, a)
+    lower, upper, points = _origins(game, agent, a)
     rng = np.random.default_rng(_seed(agent, a))
-    points = [np.clip(game.a_start[sl], lower, upper), 0.5 * (lower + upper)]
-    points += list(lower + (upper - lower) * kronecker(sl.stop - sl.start, DESIGN_LARGE, rng))
+    points += list(lower + (upper - lower) * kronecker(lower.size, DESIGN_LARGE, rng))
     with np.errstate(all="ignore"):
         vals, ok = _values(game, agent, a, x, points, prices)
     vals = np.where(ok & np.isfinite(vals), vals, np.inf)
@@ -619,14 +623,8 @@ def _pole(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | None, p
     candidate, or the best response found), to the edge of its search box, and (a player with at most
     COORDINATE_RAYS_UP_TO decisions) on the segments from ``target`` to the box's edge along each coordinate; and at
     ``target`` itself, approached along those directions (:func:`gnerun.solvers.unbounded.approach_point`)."""
-    sl = game.agent_slices[agent]
-    lower, upper = search_box(game, agent, a)
-    segments = []
-    for start in (np.clip(game.a_start[sl], lower, upper), 0.5 * (lower + upper)):
-        segment = unbounded.pole_segment(start, target, lower, upper)
-        if segment is not None:
-            segments.append(segment)
-            break
+    lower, upper, starts = _origins(game, agent, a)
+    segments = next(([s] for s in (unbounded.pole_segment(o, target, lower, upper) for o in starts) if s), [])
     coordinates = unbounded.coordinate_segments(target, lower, upper) if target.size <= \
         unbounded.COORDINATE_RAYS_UP_TO else []
 
@@ -635,7 +633,7 @@ def _pole(game: CompiledGame, agent: int, a: np.ndarray, x: np.ndarray | None, p
             return _values(game, agent, a, x, points, prices)
 
     # the target itself within rounding of a pole (a local solve's end next to log|x - p|'s), then the segments
-    directions = [s * d for _, d, _ in segments[:1] for s in (1.0, -1.0)] + [d for _, d, _ in coordinates]
+    directions = [s * d for _, d, _ in segments for s in (1.0, -1.0)] + [d for _, d, _ in coordinates]
     length = float(np.max(upper - lower, initial=1.0))
     rays = [unbounded.approach_point(values, target, directions, length),
             unbounded.pole_approach(values, segments + coordinates)]

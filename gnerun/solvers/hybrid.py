@@ -282,7 +282,7 @@ class HybridNewton:
         box = np.isfinite(lo) & np.isfinite(hi)
         if not box.any():
             return state
-        best = state
+        best = state  # its ||Phi|| is NaN: the first finite one is taken, then any lower
         for u in kronecker(int(box.sum()), DOMAIN_DESIGN, np.random.default_rng(0)):
             start = a.copy()
             start[box] = lo[box] + (hi[box] - lo[box]) * u
