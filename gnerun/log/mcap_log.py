@@ -26,7 +26,7 @@ from mcap.writer import CompressionType, Writer
 from ..errors import InputError, WriteError, shorten
 from ..files import open_for_writing, read_regular
 from ..language.yaml_source import parse_yaml
-from .messages import TOPICS, LogEntry, Message
+from .messages import TOPICS, LogEntry, Message, SamplingTime
 from .topics import LOG
 
 PROFILE = "gnerun"
@@ -117,6 +117,13 @@ class RunLog:
         data = message.to_json()  # compact; missing and non-finite values left out (JSON has no NaN)
         self._writer.add_message(channel_id=channel, log_time=t, publish_time=t, data=data, sequence=self._sequence)
         self._sequence += 1
+
+    def sampling_time(self, record: SamplingTime) -> None:
+        """A closed loop's sampling time: its messages (:meth:`~gnerun.log.messages.SamplingTime.messages`), then a
+        flush."""
+        for topic, message in record.messages():
+            self.write(topic, message)
+        self.flush()
 
     def log(self, level: str, text: str) -> None:
         """A ``/log`` text event (a foxglove.Log; ``level``: debug, info, warning or error)."""

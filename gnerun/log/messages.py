@@ -15,9 +15,13 @@ import json
 import math
 import types
 import typing
+from dataclasses import dataclass
 from typing import Any, ClassVar
 
+import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
+
+from .topics import mpc
 
 
 def _absent(v: Any) -> bool:
@@ -259,6 +263,81 @@ class MpcError(Message):
     t: int
     e_norm: float | None = Field(None, description="||e(t)||")
     e_norm_agent: dict[str, float | None] = Field(default_factory=dict, description="||e_i(t)|| by agent name")
+
+
+PLAN_DIGITS = 6  # significant digits of a logged plan: it is drawn, not computed with (half the bytes it would take)
+
+
+def significant(values: np.ndarray, digits: int = PLAN_DIGITS) -> np.ndarray:
+    """``values`` rounded to ``digits`` significant digits (non-finite values as they are)."""
+    with np.errstate(all="ignore"):
+        scale = 10.0 ** (digits - 1 - np.floor(np.log10(np.abs(np.where(values == 0, 1.0, values)))))
+        return np.where(np.isfinite(values) & np.isfinite(scale), np.round(values * scale) / scale, values)
+
+
+@dataclass
+class SamplingTime:
+    """One sampling time t of the closed loop with budget K as the log receives it: plain numbers, from which
+    :meth:`messages` makes its messages (its iterates, the state with the input applied and the plan's predicted
+    states, the error). Plain data crosses to a log written by another process (:mod:`gnerun.log.writer`) at a
+    fraction of the messages' cost."""
+
+    K: int
+    t: int
+    iterates: list[tuple[int, float, float | None]]  # (k, ||Phi(z^k)||, ||z^k - z*|| or None)
+    x: np.ndarray
+    u: np.ndarray | None
+    status: str
+    fallback: bool
+    constraint_violation: float
+    e_norm: float
+    e_norm_agent: dict[str, float]
+    plan: np.ndarray | None = None  # the states the applied plan predicts, (T + 2) x nx
+
+    def pack(self) -> tuple:
+        """The record as a few plain values and the bytes of its numbers (what crosses to a writer process:
+        pickled in microseconds); :meth:`unpack` makes it again. An iterate's missing error crosses as NaN, which
+        its message leaves out as it leaves out None."""
+        its = np.array([(r, math.nan if err is None else err) for _, r, err in self.iterates], dtype=float)
+        u = np.zeros(0) if self.u is None else self.u
+        plan = np.zeros((0, 0)) if self.plan is None else self.plan
+        numbers = np.concatenate([its.reshape(-1), self.x, u, plan.reshape(-1), list(self.e_norm_agent.values()),
+                                  [self.constraint_violation, self.e_norm]])
+        return (self.K, self.t, tuple(k for k, _, _ in self.iterates), self.x.size,
+                None if self.u is None else u.size, None if self.plan is None else plan.shape, self.status,
+                self.fallback, tuple(self.e_norm_agent), numbers.tobytes())
+
+    @classmethod
+    def unpack(cls, packed: tuple) -> SamplingTime:
+        K, t, ks, nx, nu, plan_shape, status, fallback, agents, data = packed
+        numbers = np.frombuffer(data, dtype=float)
+        its = numbers[: 2 * len(ks)].reshape(-1, 2)
+        at = 2 * len(ks)
+        x = numbers[at: at + nx]
+        at += nx
+        u = None if nu is None else numbers[at: at + nu]
+        at += nu or 0
+        plan = None
+        if plan_shape is not None:
+            plan = numbers[at: at + plan_shape[0] * plan_shape[1]].reshape(plan_shape)
+            at += plan.size
+        e_agent = dict(zip(agents, numbers[at: at + len(agents)].tolist(), strict=True))
+        violation, e_norm = numbers[at + len(agents):].tolist()
+        return cls(K=K, t=t, iterates=[(k, float(r), float(err)) for k, (r, err) in zip(ks, its, strict=True)], x=x,
+                   u=u, status=status, fallback=fallback, constraint_violation=violation, e_norm=e_norm,
+                   e_norm_agent=e_agent, plan=plan)
+
+    def messages(self) -> list[tuple[str, Message]]:
+        """(topic, message) in the order they are written."""
+        t, K = self.t, self.K
+        out: list[tuple[str, Message]] = [(mpc(K, "iterate"), MpcIterate(t=t, k=k, residual_norm=r, error_norm=err))
+                                          for k, r, err in self.iterates]
+        out.append((mpc(K, "state"), MpcState(
+            t=t, x=self.x.tolist(), u=None if self.u is None else self.u.tolist(), status=self.status,
+            fallback=self.fallback, constraint_violation=self.constraint_violation,
+            plan=None if self.plan is None else significant(self.plan).reshape(-1).tolist())))
+        out.append((mpc(K, "error"), MpcError(t=t, e_norm=self.e_norm, e_norm_agent=dict(self.e_norm_agent))))
+        return out
 
 
 class RuntimeValues(Message):

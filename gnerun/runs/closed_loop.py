@@ -35,7 +35,7 @@ from ..language.runtime import References
 from ..language.vehicles import vehicles
 from ..log import topics
 from ..log.mcap_log import json_ready
-from ..log.messages import MpcError, MpcIterate, MpcState, RuntimeValues
+from ..log.messages import MpcState, RuntimeValues, SamplingTime
 from ..solvers.driver import IterateRow, iterate
 from ..solvers.factory import make_solver
 from ..solvers.status import FAILURES, Status
@@ -322,16 +322,6 @@ class LoopRecord:
             parameters=self.parameters[:per_step], references=self.references[:per_step])
 
 
-PLAN_DIGITS = 6  # significant digits of a logged plan: it is drawn, not computed with (half the bytes it would take)
-
-
-def _significant(values: np.ndarray, digits: int = PLAN_DIGITS) -> np.ndarray:
-    """``values`` rounded to ``digits`` significant digits (non-finite values as they are)."""
-    with np.errstate(all="ignore"):
-        scale = 10.0 ** (digits - 1 - np.floor(np.log10(np.abs(np.where(values == 0, 1.0, values)))))
-        return np.where(np.isfinite(values) & np.isfinite(scale), np.round(values * scale) / scale, values)
-
-
 class LoopLog:
     """A closed loop's messages in the run log: per sampling time its iterates, the state with the inputs applied
     and the tracking error (topics /K<k>/mpc/iterate, /state, /error), on the loop's own time axis."""
@@ -349,17 +339,11 @@ class LoopLog:
                       sample: Sample, plan: np.ndarray | None = None) -> None:
         """Sampling time t (flushed): its iterates, the state with the inputs applied and the states its plan
         predicts, the error."""
-        with self.run.timed():
-            for k, r, zk in trace:
-                err = None if z_star is None else float(np.linalg.norm(zk - z_star))
-                self.run.write(topics.mpc(self.K, "iterate"), MpcIterate(t=t, k=k, residual_norm=r, error_norm=err))
-            self.run.write(topics.mpc(self.K, "state"), MpcState(
-                t=t, x=x.tolist(), u=None if u is None else u.tolist(), status=sample.status,
-                fallback=bool(sample.fallback), constraint_violation=float(sample.constraint_violation),
-                plan=None if plan is None else _significant(plan).reshape(-1).tolist()))
-            self.run.write(topics.mpc(self.K, "error"), MpcError(t=t, e_norm=sample.e_norm,
-                                                                  e_norm_agent=dict(sample.e_norm_agent)))
-            self.run.flush()
+        iterates = [(k, r, None if z_star is None else float(np.linalg.norm(zk - z_star))) for k, r, zk in trace]
+        self.run.sampling_time(SamplingTime(
+            K=self.K, t=t, iterates=iterates, x=x, u=u, status=sample.status, fallback=bool(sample.fallback),
+            constraint_violation=float(sample.constraint_violation), e_norm=sample.e_norm,
+            e_norm_agent=dict(sample.e_norm_agent), plan=plan))
 
     def parameters(self, t: int, values: dict, references: dict) -> None:
         with self.run.timed():

@@ -20,8 +20,9 @@ from ..files import replace_text, write_text
 from ..language.config import Config
 from ..language.runtime import data_path
 from ..log.mcap_log import RunLog, json_ready
-from ..log.messages import Message, SolveIterate
+from ..log.messages import Message, SamplingTime, SolveIterate
 from ..log.topics import SOLVE_ITERATE
+from ..log.writer import LogProcess, open_log
 from .interrupt import Stopped
 from .lock import DirectoryLock, contents
 
@@ -86,7 +87,7 @@ def data_copies(cfg: Config) -> dict[str, tuple[Path, str]]:
 class RunDirectory:
     """An open run directory and its MCAP log; it holds the directory's lock until :meth:`close`."""
 
-    def __init__(self, path: Path, log: RunLog, lock: DirectoryLock | None = None):
+    def __init__(self, path: Path, log: RunLog | LogProcess, lock: DirectoryLock | None = None):
         self.path = path
         self.log_sink = log
         self._lock = lock
@@ -108,6 +109,8 @@ class RunDirectory:
 
     @classmethod
     def create(cls, out: str | Path, cfg: Config, *, command: str, force: bool = False) -> RunDirectory:
+        """The run directory at ``out`` with its config.yaml and an open log (written by a process of its own for
+        a closed loop with ``run.log_writer: process``)."""
         t0 = time.perf_counter()
         run = cls._create(out, cfg, command=command, force=force)
         run.time_s += time.perf_counter() - t0
@@ -152,7 +155,8 @@ class RunDirectory:
                              if command == "simulate" else "iteration: k x 1 s"),
             }
             made.append(path / "run.mcap")
-            log = RunLog(path / "run.mcap", config_yaml=config_yaml, metadata=metadata)
+            log = open_log(path / "run.mcap", config_yaml=config_yaml, metadata=metadata,
+                           process=command == "simulate" and cfg.run.log_writer == "process")
             log.set_time(0)  # the run's start on its own time axis
         except BaseException as exc:
             for f in made:
@@ -187,6 +191,11 @@ class RunDirectory:
     def flush(self) -> None:
         with self.timed():
             self.log_sink.flush()
+
+    def sampling_time(self, record: SamplingTime) -> None:
+        """A closed loop's sampling time, flushed."""
+        with self.timed():
+            self.log_sink.sampling_time(record)
 
     def at(self, seconds: float) -> None:
         """Stamp what follows (messages and /log) with this simulated time."""
