@@ -548,6 +548,17 @@ def trajectory_loop_rows(row, quick: bool) -> None:
                  f"{walls.max() * 1e3:.0f} ms); {converged} of {steps} sampling times converged, "
                  f"{len(r.fallback_steps)} fallback steps, worst violation {r.max_constraint_violation:.1e}; "
                  f"first sampling time (solved) {np.diff(marks)[0]:.2f} s")
+    with tempfile.TemporaryDirectory() as tmp:
+        marks, sim = loop(ROOT / "configs" / "algames_merge_mpc.yaml",
+                          {"run.K": [3], "run.steps": steps, "run.reference": "none", "run.log_writer": "process"}, tmp)
+    walls = np.diff(marks)[1:]
+    rates["process"] = 1.0 / float(np.median(walls))
+    converged = sim[3].status.count("converged")
+    if rates["process"] >= 1000 and converged == steps:
+        fast.append("K = 3 (run.log_writer: process)")
+    row("ALGAMES MPC merge (41 knots, 3 cars), K = 3: median sampling time, logging on, run.log_writer: process",
+        float(np.median(walls)), note=f"{rates['process']:.0f} Hz (inline {rates[3]:.0f} Hz); {converged} of {steps} "
+                                      "sampling times converged; the log written by a process of its own")
     marks, sim = loop(ROOT / "configs" / "algames_merge_mpc.yaml",
                       {"run.K": [3], "run.steps": steps, "run.reference": "none"}, None)
     walls = np.diff(marks)[1:]
@@ -557,7 +568,8 @@ def trajectory_loop_rows(row, quick: bool) -> None:
     row("ALGAMES MPC merge: a K with most sampling times converged at >= 40 Hz, median <= 25 ms", None,
         target="one K", met=bool(good), note=", ".join(good) or "none")
     row("ALGAMES MPC merge, K = 3: median sampling rate >= 1 kHz, every sampling time converged", None,
-        target=">= 1 kHz", met=bool(fast), note=", ".join(fast) or f"{rates[3]:.0f} Hz at K = 3")
+        target=">= 1 kHz", met=bool(fast),
+        note=", ".join(fast) or f"{rates[3]:.0f} Hz at K = 3 (inline log), {rates['process']:.0f} Hz (log process)")
     with tempfile.TemporaryDirectory() as tmp:
         t0 = time.perf_counter()
         marks, sim = loop(ROOT / "configs" / "mcp_demo.yaml",
