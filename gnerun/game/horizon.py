@@ -88,18 +88,30 @@ class Horizon:
         return np.concatenate(parts)
 
     @functools.cached_property
+    def rollout_function(self):
+        """x(0) and the stages' inputs (nu x (T + 1)) -> x(1..T+1): the plant model accumulated over the horizon."""
+        return self.game._dynamics.function.mapaccum("rollout", self.game.horizon + 1)
+
+    @functools.cached_property
     def _rollout(self) -> Evaluator:
-        """x(0) and the stages' inputs -> x(1..T+1): the plant model accumulated over the horizon, one call."""
-        return Evaluator(self.game._dynamics.function.mapaccum("rollout", self.game.horizon + 1))
+        return Evaluator(self.rollout_function)
+
+    @functools.cached_property
+    def stage_order(self) -> np.ndarray:
+        """The places in a of u(0), u(1), ..., u(T), each stage's inputs in agent order (the stages'
+        inputs stage by stage: ``a[stage_order]``)."""
+        game = self.game
+        blocks = zip(game.agent_slices, game.variable_names, strict=True)
+        order = np.hstack([np.arange(sl.start, sl.stop).reshape(game.horizon + 1, len(v)) for sl, v in blocks])
+        order = order.reshape(-1)
+        order.flags.writeable = False
+        return order
 
     def predicted_states(self, a: np.ndarray, x: np.ndarray) -> np.ndarray:
         """The states the plan's inputs lead to from x under the plant model: x(0) = x, x(tau + 1) = f(x(tau), u(tau))
         for tau = 0..T: a (T + 2) x nx array (the states the stage costs see, after x; a plan that diverges gives
         non-finite values from there on)."""
-        game = self.game
-        blocks = zip(game.agent_slices, game.variable_names, strict=True)
-        stages = np.hstack([a[sl].reshape(game.horizon + 1, len(v)) for sl, v in blocks])
         x = np.asarray(x, dtype=float)
         with np.errstate(all="ignore"):
-            states = self._rollout(x, stages.reshape(-1))[0]
+            states = self._rollout(x, np.asarray(a, dtype=float)[self.stage_order])[0]
         return np.vstack([x, states.T])

@@ -369,9 +369,9 @@ class RunConfig(Strict):
                           "improving one); false: the KKT residual alone")
     log_writer: Literal["inline", "process"] = Field(
         "inline", description="simulate: who writes the run log: inline (the loop's own process, between sampling "
-                              "times) or process (a writer process of its own: a sampling time hands over plain "
-                              "numbers, about 20 us, instead of making and writing its messages, about 0.5 ms on "
-                              "the 41-knot MPC merge)")
+                              "times) or process (a writer process of its own, to which a sampling time hands plain "
+                              "numbers: on the 41-knot MPC merge the log then costs the loop about 0.08 ms a "
+                              "sampling time instead of 0.5 ms)")
     sampling_time: float | None = Field(
         None, gt=0, description="seconds from one sampling time t to the next: the time axis of simulate's log "
                                 "(log_time = t x sampling_time); default: dynamics.dt of an ode, else 1")

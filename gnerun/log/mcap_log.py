@@ -18,7 +18,7 @@ import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import IO, Any
+from typing import IO, TYPE_CHECKING, Any
 
 import numpy as np
 from mcap.writer import CompressionType, Writer
@@ -28,6 +28,9 @@ from ..files import open_for_writing, read_regular
 from ..language.yaml_source import parse_yaml
 from .messages import TOPICS, LogEntry, Message, SamplingTime
 from .topics import LOG
+
+if TYPE_CHECKING:
+    from .plans import PlanStates  # casadi: loaded where plans are computed, not where logs are read
 
 PROFILE = "gnerun"
 
@@ -63,6 +66,7 @@ class RunLog:
         self._sequence = 0
         self._closed = False
         self._broken: str | None = None  # why writing failed; the log then accepts nothing more
+        self._plan_states: PlanStates | None = None
         now = time.time_ns()
         self._writer.add_metadata("gnerun.run", {k: str(v) for k, v in metadata.items()})
         self._writer.add_attachment(create_time=now, log_time=now, name="config.yaml",
@@ -118,10 +122,16 @@ class RunLog:
         self._writer.add_message(channel_id=channel, log_time=t, publish_time=t, data=data, sequence=self._sequence)
         self._sequence += 1
 
+    def plan_states(self, plan_states: PlanStates) -> bool:
+        """Use ``plan_states`` for sampling times that carry a plan's decisions; False: the loop computes the states
+        (in the loop's process, its compiled function is faster)."""
+        self._plan_states = plan_states
+        return False
+
     def sampling_time(self, record: SamplingTime) -> None:
         """A closed loop's sampling time: its messages (:meth:`~gnerun.log.messages.SamplingTime.messages`), then a
         flush."""
-        for topic, message in record.messages():
+        for topic, message in record.messages(self._plan_states):
             self.write(topic, message)
         self.flush()
 

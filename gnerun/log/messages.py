@@ -15,6 +15,7 @@ import json
 import math
 import types
 import typing
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -293,49 +294,54 @@ class SamplingTime:
     e_norm: float
     e_norm_agent: dict[str, float]
     plan: np.ndarray | None = None  # the states the applied plan predicts, (T + 2) x nx
+    plan_inputs: np.ndarray | None = None  # or the applied plan's decisions a, from which messages() computes them
+
+    _ARRAYS = ("x", "u", "plan", "plan_inputs")
 
     def pack(self) -> tuple:
         """The record as a few plain values and the bytes of its numbers (what crosses to a writer process:
         pickled in microseconds); :meth:`unpack` makes it again. An iterate's missing error crosses as NaN, which
         its message leaves out as it leaves out None."""
-        its = np.array([(r, math.nan if err is None else err) for _, r, err in self.iterates], dtype=float)
-        u = np.zeros(0) if self.u is None else self.u
-        plan = np.zeros((0, 0)) if self.plan is None else self.plan
-        numbers = np.concatenate([its.reshape(-1), self.x, u, plan.reshape(-1), list(self.e_norm_agent.values()),
-                                  [self.constraint_violation, self.e_norm]])
-        return (self.K, self.t, tuple(k for k, _, _ in self.iterates), self.x.size,
-                None if self.u is None else u.size, None if self.plan is None else plan.shape, self.status,
-                self.fallback, tuple(self.e_norm_agent), numbers.tobytes())
+        arrays = [getattr(self, name) for name in self._ARRAYS]
+        its = [v for _, r, err in self.iterates for v in (r, math.nan if err is None else err)]
+        data = b"".join([np.array(its, dtype=float).tobytes(),
+                         *(np.asarray(a, dtype=float).tobytes() for a in arrays if a is not None),
+                         np.array([*self.e_norm_agent.values(), self.constraint_violation, self.e_norm],
+                                  dtype=float).tobytes()])
+        return (self.K, self.t, tuple(k for k, _, _ in self.iterates), tuple(None if a is None else a.shape
+                                                                              for a in arrays),
+                self.status, self.fallback, tuple(self.e_norm_agent), data)
 
     @classmethod
     def unpack(cls, packed: tuple) -> SamplingTime:
-        K, t, ks, nx, nu, plan_shape, status, fallback, agents, data = packed
+        K, t, ks, shapes, status, fallback, agents, data = packed
         numbers = np.frombuffer(data, dtype=float)
-        its = numbers[: 2 * len(ks)].reshape(-1, 2)
-        at = 2 * len(ks)
-        x = numbers[at: at + nx]
-        at += nx
-        u = None if nu is None else numbers[at: at + nu]
-        at += nu or 0
-        plan = None
-        if plan_shape is not None:
-            plan = numbers[at: at + plan_shape[0] * plan_shape[1]].reshape(plan_shape)
-            at += plan.size
+        iterates = [(k, float(r), float(err)) for k, (r, err) in zip(ks, numbers[: 2 * len(ks)].reshape(-1, 2),
+                                                                     strict=True)]
+        at, arrays = 2 * len(ks), {}
+        for name, shape in zip(cls._ARRAYS, shapes, strict=True):
+            size = 0 if shape is None else math.prod(shape)
+            arrays[name] = None if shape is None else numbers[at: at + size].reshape(shape)
+            at += size
         e_agent = dict(zip(agents, numbers[at: at + len(agents)].tolist(), strict=True))
         violation, e_norm = numbers[at + len(agents):].tolist()
-        return cls(K=K, t=t, iterates=[(k, float(r), float(err)) for k, (r, err) in zip(ks, its, strict=True)], x=x,
-                   u=u, status=status, fallback=fallback, constraint_violation=violation, e_norm=e_norm,
-                   e_norm_agent=e_agent, plan=plan)
+        return cls(K=K, t=t, iterates=iterates, status=status, fallback=fallback, constraint_violation=violation,
+                   e_norm=e_norm, e_norm_agent=e_agent, **arrays)
 
-    def messages(self) -> list[tuple[str, Message]]:
-        """(topic, message) in the order they are written."""
+    def messages(self, plan_states: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None
+                 ) -> list[tuple[str, Message]]:
+        """(topic, message) in the order they are written; ``plan_states(a, x)`` the states a plan's decisions
+        predict (:class:`~gnerun.log.plans.PlanStates`), where the record carries the decisions."""
+        plan = self.plan
+        if plan is None and self.plan_inputs is not None and plan_states is not None:
+            plan = plan_states(self.plan_inputs, self.x)
         t, K = self.t, self.K
         out: list[tuple[str, Message]] = [(mpc(K, "iterate"), MpcIterate(t=t, k=k, residual_norm=r, error_norm=err))
                                           for k, r, err in self.iterates]
         out.append((mpc(K, "state"), MpcState(
             t=t, x=self.x.tolist(), u=None if self.u is None else self.u.tolist(), status=self.status,
             fallback=self.fallback, constraint_violation=self.constraint_violation,
-            plan=None if self.plan is None else significant(self.plan).reshape(-1).tolist())))
+            plan=None if plan is None else significant(plan).reshape(-1).tolist())))
         out.append((mpc(K, "error"), MpcError(t=t, e_norm=self.e_norm, e_norm_agent=dict(self.e_norm_agent))))
         return out
 

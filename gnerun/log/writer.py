@@ -23,6 +23,7 @@ from __future__ import annotations
 import contextlib
 import fcntl
 import os
+import pickle
 import signal
 import subprocess
 import sys
@@ -30,10 +31,14 @@ import time
 import weakref
 from multiprocessing.connection import Connection
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from ..errors import WriteError
 from .mcap_log import RunLog, model_for
 from .messages import Message, SamplingTime
+
+if TYPE_CHECKING:
+    from .plans import PlanStates  # casadi: loaded where plans are computed, not where logs are read
 
 PAUSE = 2e-4  # seconds between looks at an empty pipe, doubling while it stays empty
 MAX_PAUSE = 5e-3
@@ -81,6 +86,8 @@ def serve(source: Connection, replies: Connection) -> None:
                     log.log(*args)
                 elif kind == "sampling":
                     log.sampling_time(SamplingTime.unpack(args[0]))
+                elif kind == "plans":
+                    log.plan_states(args[0])
                 else:
                     log.flush()
             except WriteError:
@@ -158,8 +165,8 @@ class LogProcess:
     def _send(self, op: tuple) -> None:
         if self._broken is not None or self._closed:
             return
-        try:
-            self._pipe.send(op)
+        try:  # plain pickle (multiprocessing's pickler copies its reducer table at every call): the ops hold
+            self._pipe.send_bytes(pickle.dumps(op, protocol=pickle.HIGHEST_PROTOCOL))  # no file or socket
         except OSError:  # the writer ended: its reply says why, if it could send one
             self._check()
             raise self._failed("the log writer process ended") from None
@@ -187,6 +194,12 @@ class LogProcess:
 
     def log(self, level: str, text: str) -> None:
         self._send(("log", level, text, self.now()))
+
+    def plan_states(self, plan_states: PlanStates) -> bool:
+        """The writer computes the plans' predicted states (:class:`~gnerun.log.plans.PlanStates`, serialized): a
+        sampling time hands it the plan's decisions."""
+        self._send(("plans", plan_states, self.now()))
+        return True
 
     def sampling_time(self, record: SamplingTime) -> None:
         """As :meth:`RunLog.sampling_time <gnerun.log.mcap_log.RunLog.sampling_time>` (the writer flushes it)."""
@@ -246,6 +259,7 @@ def main() -> None:
     replies = Connection(os.dup(1), readable=False)
     os.dup2(2, 1)  # anything printed goes to stderr, not into the replies
     serve(source, replies)
+    os._exit(0)  # the log is closed: no interpreter teardown (about 50 ms the closing run would wait for)
 
 
 if __name__ == "__main__":

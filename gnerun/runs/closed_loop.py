@@ -36,6 +36,7 @@ from ..language.vehicles import vehicles
 from ..log import topics
 from ..log.mcap_log import json_ready
 from ..log.messages import MpcState, RuntimeValues, SamplingTime
+from ..log.plans import PlanStates
 from ..solvers.driver import IterateRow, iterate
 from ..solvers.factory import make_solver
 from ..solvers.status import FAILURES, Status
@@ -326,8 +327,13 @@ class LoopLog:
     """A closed loop's messages in the run log: per sampling time its iterates, the state with the inputs applied
     and the tracking error (topics /K<k>/mpc/iterate, /state, /error), on the loop's own time axis."""
 
-    def __init__(self, run: RunDirectory, K: int, sampling_time: float):
+    def __init__(self, run: RunDirectory, K: int, sampling_time: float, game: CompiledGame | None = None):
+        """``game``: the plans' predicted states are logged (computed here, or by a log written by a process of its
+        own, which gets the plans' decisions)."""
         self.run, self.K, self.dt = run, K, sampling_time
+        self.game = game
+        self.remote_plans = game is not None and run.plan_states(PlanStates(game.plans.rollout_function,
+                                                                            game.plans.stage_order))
 
     def at(self, t: int) -> None:
         self.run.at(t * self.dt)
@@ -336,14 +342,20 @@ class LoopLog:
         self.run.log(level, text)
 
     def sampling_time(self, t: int, trace: list, z_star: np.ndarray | None, x: np.ndarray, u: np.ndarray | None,
-                      sample: Sample, plan: np.ndarray | None = None) -> None:
-        """Sampling time t (flushed): its iterates, the state with the inputs applied and the states its plan
-        predicts, the error."""
+                      sample: Sample, a: np.ndarray | None = None) -> None:
+        """Sampling time t (flushed): its iterates, the state with the inputs applied and the states its plan (the
+        applied decisions ``a``) predicts, the error."""
         iterates = [(k, r, None if z_star is None else float(np.linalg.norm(zk - z_star))) for k, r, zk in trace]
+        plan = plan_inputs = None
+        if a is not None and self.game is not None:
+            if self.remote_plans:
+                plan_inputs = a
+            else:
+                plan = self.game.predicted_states(a, x)
         self.run.sampling_time(SamplingTime(
             K=self.K, t=t, iterates=iterates, x=x, u=u, status=sample.status, fallback=bool(sample.fallback),
             constraint_violation=float(sample.constraint_violation), e_norm=sample.e_norm,
-            e_norm_agent=dict(sample.e_norm_agent), plan=plan))
+            e_norm_agent=dict(sample.e_norm_agent), plan=plan, plan_inputs=plan_inputs))
 
     def parameters(self, t: int, values: dict, references: dict) -> None:
         with self.run.timed():
@@ -400,9 +412,10 @@ class ClosedLoop:
         self.safeguard = (Fallback(game, self.solver, self.stage) if cfg.run.safeguard == "fallback"
                           else PaperRule())
         self.plant = PlantNoise(cfg.disturbance.plant, game.nx)
-        self.log = LoopLog(run, K, cfg.run.sampling_time) if run is not None else None
         # the plans' predicted states are logged for Rerun's paths view: games with positions in the plane only
         self.plans = bool(vehicles(game.state_names))
+        self.log = (LoopLog(run, K, cfg.run.sampling_time, game if self.plans else None) if run is not None
+                    else None)
         self.progress, self.interrupt = progress, interrupt
         self.record = record if record is not None else LoopRecord(K, cfg.run.steps, game)
         self.agent_idx = [game.agent_indices(i) for i in range(len(game.agent_names))]
@@ -583,8 +596,7 @@ class ClosedLoop:
             rec.add(sample, x_next)
             if log is not None:  # (the plan's predicted states are for the paths view: computed for the log only)
                 with log.run.timed():
-                    log.sampling_time(t, trace, z_star, x, sample.u, sample,
-                                      game.predicted_states(applied.z[: game.n], x) if self.plans else None)
+                    log.sampling_time(t, trace, z_star, x, sample.u, sample, applied.z[: game.n])
             if self.progress is not None:
                 self.progress(StepReport(self.K, t, steps, x.copy(), sample.u.copy(), sample.status,
                                          bool(applied.fallback), float(sample.constraint_violation), int(state.k),

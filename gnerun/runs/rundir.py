@@ -21,6 +21,7 @@ from ..language.config import Config
 from ..language.runtime import data_path
 from ..log.mcap_log import RunLog, json_ready
 from ..log.messages import Message, SamplingTime, SolveIterate
+from ..log.plans import PlanStates
 from ..log.topics import SOLVE_ITERATE
 from ..log.writer import LogProcess, open_log
 from .interrupt import Stopped
@@ -191,6 +192,10 @@ class RunDirectory:
     def flush(self) -> None:
         with self.timed():
             self.log_sink.flush()
+
+    def plan_states(self, plan_states: PlanStates) -> bool:
+        """Whether the log computes the plans' predicted states itself (a log written by a process of its own)."""
+        return self.log_sink.plan_states(plan_states)
 
     def sampling_time(self, record: SamplingTime) -> None:
         """A closed loop's sampling time, flushed."""
