@@ -799,9 +799,9 @@ class StageConstraints:
         v = self.violations(x_next, u)
         if not v.size:
             return 0.0, None
-        if not np.all(np.isfinite(v)):
+        j = int(np.argmax(v))  # (a NaN's place, where there is one: violations are >= 0 or NaN)
+        if not math.isfinite(v[j]):
             return math.nan, self.labels[int(np.flatnonzero(~np.isfinite(v))[0])]
-        j = int(np.argmax(v))
         return (float(v[j]), self.labels[j]) if v[j] > 0 else (0.0, None)
 
 

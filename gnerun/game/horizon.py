@@ -26,15 +26,21 @@ class Horizon:
         another function (a constraint that depends on tau, e.g. a safety margin that grows over the first stages,
         :attr:`changed_rows`) or the constraint does not hold at the next stage (``stages``): there it starts
         from zero."""
-        out = np.array(z, dtype=float)
         if self.game.kind != "dynamic":
-            return out
-        source = self._shift_source
-        out = np.where(source >= 0, out[np.maximum(source, 0)], 0.0)
-        changed = self.changed_rows
-        if changed.any():
-            out[self.game.n:][changed] = 0.0
+            return np.array(z, dtype=float)
+        take, zero = self._shift_take
+        out = np.asarray(z, dtype=float)[take]
+        out[zero] = 0.0
         return out
+
+    @functools.cached_property
+    def _shift_take(self) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`shift` as one gather: the entry of z each entry of the shifted plan takes, and the entries that start
+        from zero instead (no source, or a row :attr:`changed_rows` names)."""
+        source = self._shift_source
+        zero = source < 0
+        zero[self.game.n:] |= self.changed_rows
+        return np.maximum(source, 0), np.flatnonzero(zero)
 
     @functools.cached_property
     def _shift_source(self) -> np.ndarray:
@@ -84,8 +90,13 @@ class Horizon:
 
     def first_inputs(self, a: np.ndarray) -> np.ndarray:
         """u(0): every agent's first input, in agent order (what the plant receives)."""
-        parts = [a[sl][: len(v)] for sl, v in zip(self.game.agent_slices, self.game.variable_names, strict=True)]
-        return np.concatenate(parts)
+        return np.asarray(a)[self._first]
+
+    @functools.cached_property
+    def _first(self) -> np.ndarray:
+        """The places of u(0) in a."""
+        blocks = zip(self.game.agent_slices, self.game.variable_names, strict=True)
+        return np.concatenate([np.arange(sl.start, sl.start + len(v), dtype=np.intp) for sl, v in blocks])
 
     @functools.cached_property
     def rollout_function(self):
