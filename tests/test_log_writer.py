@@ -69,15 +69,22 @@ def test_a_log_written_by_a_process_holds_what_an_inline_one_holds(tmp_path) -> 
             assert a[topic] == b[topic], topic
     # the /log texts: the same events (their timings differ)
     assert [text.split(":")[0] for text in a["/log"]] == [text.split(":")[0] for text in b["/log"]]
-    # the plans' predicted states of games in the plane: rolled out by the writer, the same numbers
-    merge = {"run.K": [3], "run.steps": 3, "run.reference": "none"}
-    for writer_kind in ("inline", "process"):
-        gnerun.simulate(load_config(CONFIGS / "algames_merge_mpc.yaml", merge | {"run.log_writer": writer_kind}),
-                        out=tmp_path / f"merge-{writer_kind}")
-    a, b = _topics(tmp_path / "merge-inline"), _topics(tmp_path / "merge-process")
-    states = b["/K3/mpc/state"]
-    assert len(states) == 4 and all(len(m["plan"]) == 41 * 12 for m in states[:3])
-    assert a["/K3/mpc/state"] == states and a["/K3/mpc/iterate"] == b["/K3/mpc/iterate"]
+    # the plans' predicted states of games in the plane, rolled out by the writer, and runtime parameters (messages
+    # the loop makes itself): the same
+    for name, over in (("algames_merge_mpc", {"run.K": [3], "run.steps": 3, "run.reference": "none"}),
+                       ("moving_obstacle", {"run.K": [10], "run.steps": 3})):
+        for writer_kind in ("inline", "process"):
+            gnerun.simulate(load_config(CONFIGS / f"{name}.yaml", over | {"run.log_writer": writer_kind}),
+                            out=tmp_path / f"{name}-{writer_kind}")
+        a, b = _topics(tmp_path / f"{name}-inline"), _topics(tmp_path / f"{name}-process")
+        K = over["run.K"][0]
+        states = b[f"/K{K}/mpc/state"]
+        assert len(states) == 4 and all("plan" in m for m in states[:3])
+        if name == "algames_merge_mpc":
+            assert all(len(m["plan"]) == 41 * 12 for m in states[:3])
+        else:
+            assert len(b[f"/K{K}/mpc/parameters"]) == 3
+        assert a == b
 
 
 def test_the_writer_finishes_the_log_of_a_loop_process_killed_without_clean_up(tmp_path) -> None:
