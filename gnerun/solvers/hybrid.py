@@ -97,7 +97,7 @@ from __future__ import annotations
 
 import functools
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -110,7 +110,7 @@ from .linalg import largest, norm
 from .line_search_newton import LineSearchNewton
 from .response_round import response_round
 from .ssn import SemismoothNewton
-from .status import FAILURES, SSNState, Status
+from .status import FAILURES, SSNState, Status, evolve
 
 MEMORY = 4  # nonmonotone reference: the largest ||Phi|| of this many last accepted Newton iterates
 WATCHDOG = 4  # Newton steps without a new best ||Phi|| (SUFFICIENT below it) before the interior phase takes over
@@ -417,12 +417,12 @@ class HybridNewton:
             decoupled = self._decoupled(state, memory)
             if decoupled is not None:
                 return decoupled
-            memory = replace(memory, decouple=False)
+            memory = evolve(memory, decouple=False)
         if memory.crash:
             crashed = self._crash(state, memory)
             if crashed is not None:
                 return crashed
-            memory = replace(memory, crash=False)
+            memory = evolve(memory, crash=False)
         candidate, regularized = self._candidate(state, memory)
         merit = candidate.residual_norm
         if (memory.interior is not None and not regularized and candidate.status == Status.RUNNING
@@ -442,13 +442,13 @@ class HybridNewton:
             if merit < (1.0 - SUFFICIENT) * best:
                 best, stalls = merit, 0
             if stalls < WATCHDOG:
-                return replace(candidate, search=replace(memory, merits=(*memory.merits[-MEMORY + 1:], merit),
+                return evolve(candidate, search=evolve(memory, merits=(*memory.merits[-MEMORY + 1:], merit),
                                                          best=best, stalls=stalls))
         # refused: the interior phase, at the interior iterate left at the last hand-over, or from the start
         if memory.interior is None:
             return self._start_interior(state, 0)
         it = memory.interior
-        memory = replace(memory, phase="interior", best=math.inf, stalls=0,
+        memory = evolve(memory, phase="interior", best=math.inf, stalls=0,
                          handover=0.1 * min(memory.handover, state.residual_norm))
         return self._interior_step(self.newton.advance(state, it.z, search=memory, k=state.k), memory)
 
@@ -477,14 +477,14 @@ class HybridNewton:
         the iterate k)."""
         memory: Memory = state.search
         z, w, eps = self.interior.start(memory.origin, state.x, attempt, warm)
-        memory = replace(memory, phase="interior", best=math.inf, stalls=0, attempt=attempt,
+        memory = evolve(memory, phase="interior", best=math.inf, stalls=0, attempt=attempt,
                          handover=memory.handover0, crash=False, decouple=False)
         start = self.newton.advance(state, z, search=memory, k=state.k if k is None else k)
         # Mehrotra's steps in the first start from z^0; the restarts and warm starts keep the monotone barrier
         predict = attempt == 0 and not warm
-        memory = replace(memory, interior=self.interior.measure(z, w, start.parts.L, start.parts.c, eps,
+        memory = evolve(memory, interior=self.interior.measure(z, w, start.parts.L, start.parts.c, eps,
                                                                 predict=predict))
-        start = replace(start, search=memory)
+        start = evolve(start, search=memory)
         return start if k is not None else self._interior_step(start, memory)
 
     def _handover(self, state: SSNState) -> SSNState | None:
@@ -508,7 +508,7 @@ class HybridNewton:
         on its result (a halving step that is short, see TAKEN_DECREASE): after the residual there, from the same
         factors."""
         newton = self.newton
-        z, rcond = newton.newton_point(state if active is state.active else replace(state, active=active),
+        z, rcond = newton.newton_point(state if active is state.active else evolve(state, active=active),
                                        estimate=False)
         if z is None:
             return None, rcond, False, None, None
@@ -561,9 +561,9 @@ class HybridNewton:
             candidate = self._handover(state)
             if candidate is not None:
                 merit = candidate.residual_norm
-                return replace(candidate, search=replace(memory, phase="newton", merits=(state.residual_norm, merit),
+                return evolve(candidate, search=evolve(memory, phase="newton", merits=(state.residual_norm, merit),
                                                          best=merit, stalls=0))
-            memory = replace(memory, handover=HANDOVER_RETRY * state.residual_norm)
+            memory = evolve(memory, handover=HANDOVER_RETRY * state.residual_norm)
         proposal = self.interior.step(memory.interior, state.parts)
         if proposal[0] is None:
             return self._restart(state, memory, Status.SINGULAR_JACOBIAN, proposal[1])
@@ -578,14 +578,14 @@ class HybridNewton:
         best, stalls = memory.best, memory.stalls + 1
         if new.residual_norm < 0.9 * best:
             best, stalls = new.residual_norm, 0
-        memory = replace(memory, interior=it, best=best, stalls=stalls)
+        memory = evolve(memory, interior=it, best=best, stalls=stalls)
         if (self.searches and not memory.searched and new.k >= SLOW and not self.at_solution(new)
                 and not self.game.piecewise):
             return self._start_search(new, memory)
         if stalls >= STALL:
             return self._restart(new, memory, Status.STALLED, f"||Phi|| made no progress in {STALL} interior-point "
                                                                "steps")
-        return replace(new, search=memory)
+        return evolve(new, search=memory)
 
     # the line-search phase ------------------------------------------------------------------
     @functools.cached_property
@@ -600,7 +600,7 @@ class HybridNewton:
         back to."""
         method = self._search_method
         inner = method.init(memory.origin, state.x)
-        memory = replace(memory, phase="search", searched=True, inner=inner, steps=0)
+        memory = evolve(memory, phase="search", searched=True, inner=inner, steps=0)
         if inner.status in FAILURES:
             return self._end_search(state, memory)
         return self._search_step(state, memory)
@@ -615,18 +615,18 @@ class HybridNewton:
         inner = method.step(inner)
         if inner.status in FAILURES:
             return self._end_search(state, memory)
-        memory = replace(memory, inner=inner, steps=memory.steps + 1)
+        memory = evolve(memory, inner=inner, steps=memory.steps + 1)
         new = self.newton.advance(state, inner.z, search=memory, rcond=inner.rcond, parts=inner.parts)
         if new.status in FAILURES:
             return self._end_search(state, memory)
         if new.residual_norm <= memory.handover and not self.at_solution(new):
-            return replace(new, search=replace(memory, phase="newton", merits=(new.residual_norm,),
+            return evolve(new, search=evolve(memory, phase="newton", merits=(new.residual_norm,),
                                                best=new.residual_norm, stalls=0))
         return new
 
     def _end_search(self, state: SSNState, memory: Memory) -> SSNState:
         """Back to the interior phase, at the interior iterate the line-search phase began from."""
-        memory = replace(memory, phase="interior", inner=None, best=math.inf, stalls=0)
+        memory = evolve(memory, phase="interior", inner=None, best=math.inf, stalls=0)
         it = memory.interior
         return self._interior_step(self.newton.advance(state, it.z, search=memory, k=state.k), memory)
 
@@ -644,7 +644,7 @@ class HybridNewton:
             if answered is not None:
                 return answered
         if memory.attempt < RESTARTS:
-            return self._start_interior(replace(state, search=memory), memory.attempt + 1)
+            return self._start_interior(evolve(state, search=memory), memory.attempt + 1)
         if answers and not memory.answered_start:
             start = memory.origin if memory.start is None else memory.start
             answered = self._answer(state, memory, start[:n], start_plans=True)
@@ -660,7 +660,7 @@ class HybridNewton:
         if memory.answered:
             from_answers = memory.before + memory.attempt + 1 - memory.cold
             starts = f"{memory.cold} start(s) from z^0 and {from_answers} from the players' best answers"
-        return replace(state, status=status,
+        return evolve(state, status=status,
                        message=f"interior-point phase at iteration {state.k}, after {starts}: "
                                f"{why} (||Phi|| = {state.residual_norm:.2e})")
 
@@ -678,10 +678,10 @@ class HybridNewton:
             return None
         origin = np.concatenate([a, np.zeros(self.game.m)])
         first = not memory.answered
-        memory = replace(memory, origin=origin, answered=True, answered_start=start_plans or memory.answered_start,
+        memory = evolve(memory, origin=origin, answered=True, answered_start=start_plans or memory.answered_start,
                          cold=memory.attempt + 1 if first else memory.cold, before=memory.before + memory.attempt + 1,
                          start=(memory.origin if memory.start is None else memory.start) if first else memory.start)
-        return self._start_interior(replace(state, search=memory), 0, warm=True)
+        return self._start_interior(evolve(state, search=memory), 0, warm=True)
 
     def _pivot(self, state: SSNState, memory: Memory) -> SSNState | None:
         """LQ games: the KKT system is a linear complementarity problem; solve it by Lemke's method from z^0 with
@@ -693,7 +693,7 @@ class HybridNewton:
             d = None if attempt == 0 else rng.uniform(0.1, 10.0, size=state.z.size * 4)
             z = kkt_lcp_point(parts, memory.origin, self.game.equality_mask, d)
             if z is not None:
-                memory = replace(memory, phase="newton", merits=(state.residual_norm,), best=state.residual_norm,
+                memory = evolve(memory, phase="newton", merits=(state.residual_norm,), best=state.residual_norm,
                                  stalls=0, interior=None, attempt=RESTARTS + PIVOTS)
                 return self.newton.advance(state, z, search=memory)
         return None

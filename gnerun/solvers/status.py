@@ -8,7 +8,7 @@ nothing of gnerun: the view may import it.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, fields, replace
 from enum import StrEnum
 from typing import TYPE_CHECKING
 
@@ -35,6 +35,30 @@ class Status(StrEnum):
     KKT_POINT = "kkt_point"  # a KKT point whose best responses were not (or could not be) checked: not certified
     UNBOUNDED_PLAYER = "unbounded_player"  # a player has no best response: its cost keeps decreasing along a ray
     INFEASIBLE = "infeasible"  # the game's constraints cannot all hold at once (phase 1)
+
+
+_FIELDS: dict[type, tuple[str, ...]] = {}
+
+
+def evolve(obj, **changes):
+    """``dataclasses.replace(obj, **changes)`` for the iterate state and the globalization's memory, in half the time
+    (4.8 -> 2.7 us; a Newton step of the hybrid method makes two, so does a closed loop's sampling time twice): the
+    new object's fields set directly, as replace's ``__init__`` would for a dataclass whose fields are all
+    ``init`` fields and that has no ``__post_init__`` (checked once per class; otherwise replace itself)."""
+    cls = type(obj)
+    names = _FIELDS.get(cls)
+    if names is None:
+        plain = not hasattr(cls, "__post_init__") and all(f.init for f in fields(cls))
+        names = _FIELDS[cls] = tuple(f.name for f in fields(cls)) if plain else ()
+    if not names:
+        return replace(obj, **changes)
+    unknown = changes.keys() - set(names)
+    if unknown:
+        raise TypeError(f"{cls.__name__} has no field {sorted(unknown)[0]!r}")
+    new = object.__new__(cls)
+    for name in names:
+        object.__setattr__(new, name, changes[name] if name in changes else getattr(obj, name))
+    return new
 
 
 FAILURES = frozenset({Status.SINGULAR_JACOBIAN, Status.DIVERGED, Status.NAN, Status.SUBPROBLEM_FAILED,
