@@ -25,7 +25,7 @@ from . import __version__
 from .errors import MAX_MESSAGE, InputError, Unavailable, one_line, shorten
 from .threads import single_threaded_blas
 
-IMPORTED = time.perf_counter()  # the wall clock's start where the process's own is unknown (see _wall_s)
+IMPORTED = time.perf_counter()  # the wall clock's start where the process's own is unknown (see _started_s)
 
 EXAMPLES = """Examples:
 
@@ -250,7 +250,18 @@ class _IterateTable:
         self.seconds += time.perf_counter() - t0
 
 
+_STARTED: list[float] = []  # the process's start on time.perf_counter's scale, found once
+
+
 def _wall_s() -> float:
+    """Seconds since this process started (:func:`_started_s` the first time, then on the same scale: a child waited
+    for later, such as a log writer, would make /proc's reading switch scales)."""
+    if not _STARTED:
+        _STARTED.append(time.perf_counter() - _started_s())
+    return time.perf_counter() - _STARTED[0]
+
+
+def _started_s() -> float:
     """Seconds since this process started (Linux: /proc; elsewhere since the CLI was imported).
 
     A shell runs the last command of ``bash -c '...; gnerun solve ...'`` in its own process (exec): /proc then dates

@@ -22,7 +22,7 @@ from gnerun.log import writer
 from gnerun.log.mcap_log import RunLog, read_run
 from gnerun.log.messages import SamplingTime
 
-from .conftest import CONFIGS
+from .conftest import CONFIGS, run_cli
 from .test_reliability import _start, _steps_are_whole, _wait_for_steps
 
 
@@ -169,3 +169,15 @@ def test_a_log_the_writer_cannot_open_is_an_oserror_at_once(tmp_path) -> None:
     (tmp_path / "dir").mkdir()
     with pytest.raises(OSError):
         writer.LogProcess(tmp_path / "dir", config_yaml="name: x\n", metadata={})
+
+
+def test_the_cli_times_a_run_whose_log_a_process_writes_on_one_clock(tmp_path) -> None:
+    """The timing line's parts add up to its wall time: having waited for the writer, the process's own start is
+    no longer read from /proc (which would put the end on another scale than the startup)."""
+    proc = run_cli("simulate", str(CONFIGS / "paper_study2.yaml"), "--set", "run.steps=3", "--set", "run.K=[1]",
+                   "--set", "run.log_writer=process", "--out", str(tmp_path / "run"))
+    assert proc.returncode == 0, proc.stderr
+    [line] = [row for row in proc.stdout.splitlines() if row.startswith("wall ")]
+    parts = dict(part.rsplit(" ", 1) for part in line.split(": ", 1)[1].split(", "))
+    assert float(parts["logging"]) > 0.05  # the writer's start is the run's
+    assert float(parts["other"]) >= 0.0, line
