@@ -148,6 +148,27 @@ def test_a_write_the_disk_refuses_is_reported_once_and_the_log_keeps_what_came_b
     assert len(read_run(tmp_path / "run.mcap").messages["/K3/mpc/iterate"]) == 3  # the first sampling time
 
 
+def test_a_call_the_writer_cannot_carry_out_stops_the_log_there_readable(tmp_path) -> None:
+    source, pipe = Pipe(duplex=False)
+    replies_in, replies = Pipe(duplex=False)
+    serving = threading.Thread(target=writer.serve, args=(source, replies))
+    serving.start()
+    pipe.send((str(tmp_path / "run.mcap"), "name: x\n", {"version": "test"}))
+    assert replies_in.recv() == ("ready",)
+    pipe.send(("sampling", _record(t=0).pack(), 0))
+    pipe.send(("sampling", ("not", "a", "record"), 1))
+    pipe.send(("sampling", _record(t=2).pack(), 2))  # not written: the log stops at the failure
+    pipe.send(("close", None))
+    serving.join(30)
+    news = []
+    while replies_in.poll(1):
+        news.append(replies_in.recv())
+    assert [kind for kind, _ in news] == ["broken", "closed"]
+    assert news[0][1].startswith("the log writer failed: ValueError") and news[1][1] == news[0][1]
+    record = read_run(tmp_path / "run.mcap")
+    assert record.complete and [m["t"] for m in record.messages["/K3/mpc/state"]] == [0]
+
+
 def test_a_writer_that_ends_is_a_write_error_in_the_loop_process(tmp_path) -> None:
     log = writer.LogProcess(tmp_path / "run.mcap", config_yaml="name: x\n", metadata={"version": "test"})
     log.sampling_time(_record())

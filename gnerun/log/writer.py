@@ -61,6 +61,7 @@ def serve(source: Connection, replies: Connection) -> None:
         replies.send(("oserror", e.errno, e.strerror, e.filename))
         return
     replies.send(("ready",))
+    why: str | None = None  # why writing stopped: the disk refused (RunLog.broken), or a call failed
     reported = False
     pause = PAUSE
     try:
@@ -72,35 +73,35 @@ def serve(source: Connection, replies: Connection) -> None:
             pause = PAUSE
             try:
                 kind, *args, t = source.recv()
+                if kind == "close":
+                    break
+                if why is None:
+                    log.set_time(t)
+                    if kind == "write":
+                        log.write(args[0], args[1], log_time=t)
+                    elif kind == "log":
+                        log.log(*args)
+                    elif kind == "sampling":
+                        log.sampling_time(SamplingTime.unpack(args[0]))
+                    elif kind == "plans":
+                        log.plan_states(args[0])
+                    else:
+                        log.flush()
             except EOFError:  # the loop's process ended without closing the log (killed): finish what came
                 break
-            if kind == "close":
-                break
-            if log.broken is not None:
-                continue
-            log.set_time(t)
-            try:
-                if kind == "write":
-                    log.write(args[0], args[1], log_time=t)
-                elif kind == "log":
-                    log.log(*args)
-                elif kind == "sampling":
-                    log.sampling_time(SamplingTime.unpack(args[0]))
-                elif kind == "plans":
-                    log.plan_states(args[0])
-                else:
-                    log.flush()
             except WriteError:
-                pass
-            if log.broken is not None and not reported:
+                why = log.broken
+            except Exception as e:  # noqa: BLE001 (a call the writer cannot carry out: the log stops there, readable)
+                why = f"the log writer failed: {type(e).__name__}: {e}"
+            if why is not None and not reported:
                 reported = True
                 with contextlib.suppress(OSError):
-                    replies.send(("broken", log.broken))
+                    replies.send(("broken", why))
     finally:
         with contextlib.suppress(WriteError):
             log.close()
         with contextlib.suppress(OSError):
-            replies.send(("closed", log.broken))
+            replies.send(("closed", why or log.broken))
 
 
 def _abandon(pipe: Connection, process: subprocess.Popen) -> None:
