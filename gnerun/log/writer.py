@@ -60,6 +60,9 @@ def serve(source: Connection, replies: Connection) -> None:
     except OSError as e:
         replies.send(("oserror", e.errno, e.strerror, e.filename))
         return
+    except WriteError as e:  # opened, but its first records were refused
+        replies.send(("oserror", None, str(e), path))
+        return
     replies.send(("ready",))
     why: str | None = None  # why writing stopped: the disk refused (RunLog.broken), or a call failed
     reported = False
