@@ -137,7 +137,7 @@ class LogProcess:
         self._closed = False
         self._next_check = 0.0
         try:
-            self._pipe.send((str(self.path), config_yaml, dict(metadata)))
+            self._put((str(self.path), config_yaml, dict(metadata)))
             reply = self._replies.recv()
         except (OSError, EOFError):
             reply = ("oserror", None, "the log writer process ended", str(self.path))
@@ -169,11 +169,16 @@ class LogProcess:
     def _send(self, op: tuple) -> None:
         if self._broken is not None or self._closed:
             return
-        try:  # plain pickle (multiprocessing's pickler copies its reducer table at every call): the ops hold
-            self._pipe.send_bytes(pickle.dumps(op, protocol=pickle.HIGHEST_PROTOCOL))  # no file or socket
+        try:
+            self._put(op)
         except OSError:  # the writer ended: its reply says why, if it could send one
             self._check()
             raise self._failed("the log writer process ended") from None
+
+    def _put(self, op: tuple) -> None:
+        """``op`` into the pipe, pickled plainly (multiprocessing's pickler copies its reducer table at every call;
+        the ops hold no file or socket)."""
+        self._pipe.send_bytes(pickle.dumps(op, protocol=pickle.HIGHEST_PROTOCOL))
 
     def _check(self) -> None:
         """The writer's news, without waiting: a write that failed raises here."""
@@ -224,7 +229,7 @@ class LogProcess:
         why = self._broken
         try:
             with contextlib.suppress(OSError):
-                self._pipe.send(("close", None))
+                self._put(("close", None))
             if self._replies.poll(CLOSE_TIMEOUT):
                 with contextlib.suppress(EOFError):
                     while True:  # the last news: ("closed", why)
