@@ -122,6 +122,24 @@ def test_ctrl_c_ends_a_run_whose_log_a_process_writes_as_it_ends_any_run(tmp_pat
     assert any("interrupted" in e["message"] for e in record.messages["/log"])
 
 
+def _served(path, ops: list[tuple]) -> list[tuple]:
+    """The writer (serve, in a thread of this process: its monkeypatches apply) given ``ops`` and the close: its
+    news after the opening."""
+    source, pipe = Pipe(duplex=False)
+    replies_in, replies = Pipe(duplex=False)
+    serving = threading.Thread(target=writer.serve, args=(source, replies))
+    serving.start()
+    pipe.send((str(path), "name: x\n", {"version": "test"}))
+    assert replies_in.recv() == ("ready",)
+    for op in [*ops, ("close", None)]:
+        pipe.send(op)
+    serving.join(30)
+    news = []
+    while replies_in.poll(1):
+        news.append(replies_in.recv())
+    return news
+
+
 def test_a_write_the_disk_refuses_is_reported_once_and_the_log_keeps_what_came_before(tmp_path, monkeypatch) -> None:
     original, calls = RunLog._write, []
 
@@ -131,38 +149,18 @@ def test_a_write_the_disk_refuses_is_reported_once_and_the_log_keeps_what_came_b
             raise OSError(28, "No space left on device")
         return original(self, *args, **kwargs)
     monkeypatch.setattr(RunLog, "_write", write)
-    source, pipe = Pipe(duplex=False)
-    replies_in, replies = Pipe(duplex=False)
-    serving = threading.Thread(target=writer.serve, args=(source, replies))
-    serving.start()
-    pipe.send((str(tmp_path / "run.mcap"), "name: x\n", {"version": "test"}))
-    assert replies_in.recv() == ("ready",)
-    for t in range(4):  # 5 messages each: the sixth is refused
-        pipe.send(("sampling", _record(t=t, iterates=[(0, 1.0, None), (1, 0.1, None), (2, 0.01, None)]).pack(), t))
-    pipe.send(("close", None))
-    serving.join(30)
-    news = []
-    while replies_in.poll(1):
-        news.append(replies_in.recv())
+    # 5 messages each: the sixth is refused
+    news = _served(tmp_path / "run.mcap", [("sampling", _record(t=t, iterates=[(0, 1.0, None), (1, 0.1, None),
+                                                                              (2, 0.01, None)]).pack(), t)
+                                           for t in range(4)])
     assert news == [("broken", "No space left on device"), ("closed", "No space left on device")]
     assert len(read_run(tmp_path / "run.mcap").messages["/K3/mpc/iterate"]) == 3  # the first sampling time
 
 
 def test_a_call_the_writer_cannot_carry_out_stops_the_log_there_readable(tmp_path) -> None:
-    source, pipe = Pipe(duplex=False)
-    replies_in, replies = Pipe(duplex=False)
-    serving = threading.Thread(target=writer.serve, args=(source, replies))
-    serving.start()
-    pipe.send((str(tmp_path / "run.mcap"), "name: x\n", {"version": "test"}))
-    assert replies_in.recv() == ("ready",)
-    pipe.send(("sampling", _record(t=0).pack(), 0))
-    pipe.send(("sampling", ("not", "a", "record"), 1))
-    pipe.send(("sampling", _record(t=2).pack(), 2))  # not written: the log stops at the failure
-    pipe.send(("close", None))
-    serving.join(30)
-    news = []
-    while replies_in.poll(1):
-        news.append(replies_in.recv())
+    news = _served(tmp_path / "run.mcap", [("sampling", _record(t=0).pack(), 0),
+                                           ("sampling", ("not", "a", "record"), 1),
+                                           ("sampling", _record(t=2).pack(), 2)])  # not written: the log stops
     assert [kind for kind, _ in news] == ["broken", "closed"]
     assert news[0][1].startswith("the log writer failed: ValueError") and news[1][1] == news[0][1]
     record = read_run(tmp_path / "run.mcap")
