@@ -42,7 +42,7 @@ if TYPE_CHECKING:
 
 PAUSE = 2e-4  # seconds between looks at an empty pipe, doubling while it stays empty
 MAX_PAUSE = 5e-3
-PIPE_BYTES = 2**20  # room for about 200 sampling times of the merge before the loop waits for the writer
+PIPE_BYTES = 2**20  # room for about 450 sampling times of the merge (2.3 kB each) before the loop waits
 CHECK_EVERY = 0.05  # seconds between looks for the writer's news while a closed loop runs
 CLOSE_TIMEOUT = 120.0  # seconds a closing run waits for the writer to finish the log
 
