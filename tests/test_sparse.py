@@ -539,3 +539,61 @@ def test_the_eliminated_layout_outlives_the_active_sets_layouts() -> None:
     assert len(system.stage_order.layouts) == 64
     assert system.layout(everything, at, lam0 + np.arange(m)) is eliminated
     assert system.layout(system.kept(np.arange(1))) is not first
+
+
+def test_deferred_parts_hold_the_numbers_of_the_whole_evaluation() -> None:
+    """L and c from the residual alone are the whole evaluation's, bit for bit, for the game's system and for a
+    player's part of it (the certificate's); F, J and F0 come when asked for; a pickle holds the whole parts."""
+    import pickle
+
+    from gnerun.game.compile import compile_agent_problem
+    from gnerun.game.sparse import AgentSparseKKT, DeferredParts, SparseParts, sparse_system
+
+    cfg = load_config(CONFIGS / "algames_intersection.yaml", {"solver.formulation": "sparse"})
+    game = compile_game(cfg)
+    system = sparse_system(cfg, game)
+    rng = np.random.default_rng(3)
+    problem = compile_agent_problem(cfg, 1, 0.0)
+    rows = game.agents.constraint_rows(1)
+    labels = [game.constraints[r].label for r in rows]
+    view = AgentSparseKKT(system, problem, 1, rows[[labels.index(c.label) for c in problem.constraints]])
+    sl = game.agent_slices[1]
+    for _ in range(5):
+        a = game.z_start()[:game.n] + 0.3 * rng.standard_normal(game.n)
+        lam = rng.random(game.m) * (rng.random(game.m) < 0.5)
+        x = game.x0 + 0.05 * rng.standard_normal(game.nx)
+        z_view = np.concatenate([a[sl], rng.random(problem.m)])
+        p = np.concatenate([game._x(None), a[:sl.start], a[sl.stop:], a[sl]])
+        for sys_, z, at in ((system, np.concatenate([a, lam]), x), (view, z_view, p)):
+            whole, deferred = sys_.evaluate(z, at), sys_.deferred(z, at)
+            assert isinstance(deferred, DeferredParts) and deferred._parts is None
+            assert np.array_equal(deferred.L, whole.L) and np.array_equal(deferred.c, whole.c)
+            for name in ("F", "J", "F0"):
+                assert np.array_equal(getattr(deferred, name), getattr(whole, name))
+            again = pickle.loads(pickle.dumps(sys_.deferred(z, at)))
+            assert isinstance(again, SparseParts)
+            assert all(np.array_equal(u, v) for u, v in zip(again[4:], whole[4:], strict=True))
+
+
+def test_a_converging_newton_step_leaves_the_jacobian_of_its_end_unevaluated(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A closed loop's sampling time of the MPC merge: two Newton steps from the shifted plan (||Phi|| ~ 1e-3, 1e-6,
+    then below tol); the second step's end is evaluated by the residual alone: two whole evaluations, not three."""
+    from gnerun.game.sparse import SparseKKT
+
+    cfg = load_config(CONFIGS / "algames_merge_mpc.yaml", {"run.K": [3], "run.steps": 6, "run.reference": "none"})
+    game = compile_game(cfg)
+    counts = {"whole": 0, "residual": 0}
+    evaluate, residual = SparseKKT.evaluate, SparseKKT.residual
+
+    def counted(kind, f):
+        def call(self, *args):
+            counts[kind] += 1
+            return f(self, *args)
+        return call
+    monkeypatch.setattr(SparseKKT, "evaluate", counted("whole", evaluate))
+    monkeypatch.setattr(SparseKKT, "residual", counted("residual", residual))
+    seen = []
+    simulate(cfg, game=game, progress=lambda report: seen.append((report.iterations, dict(counts))))
+    steps = [(k, after["whole"] - before["whole"], after["residual"] - before["residual"])
+             for (_, before), (k, after) in zip(seen, seen[1:], strict=False)]
+    assert steps and all(s == (2, 2, 1) for s in steps), steps

@@ -69,6 +69,42 @@ class SparseParts(NamedTuple):
     F0: np.ndarray  # F with the costates and multipliers set to zero (F is linear in them)
 
 
+class DeferredParts:
+    """:class:`SparseParts` whose full system (F, its Jacobian's nonzeros J, F0) is evaluated when first asked for:
+    L and c, all that Phi needs, come from the system's residual alone (the same expressions, so the same numbers as
+    the full evaluation's). A converged iterate is a step's last point, whose Jacobian no step uses: on the MPC
+    merge the residual costs 27 us and the whole system 63."""
+
+    __slots__ = ("L", "c", "_evaluate", "_parts")
+    dL_dz = None
+    dc_da = None
+
+    def __init__(self, L: np.ndarray, c: np.ndarray, evaluate: Callable[[], SparseParts]):
+        self.L, self.c = L, c
+        self._evaluate = evaluate
+        self._parts: SparseParts | None = None
+
+    def _full(self) -> SparseParts:
+        if self._parts is None:
+            self._parts = self._evaluate()
+        return self._parts
+
+    @property
+    def F(self) -> np.ndarray:
+        return self._full().F
+
+    @property
+    def J(self) -> np.ndarray:
+        return self._full().J
+
+    @property
+    def F0(self) -> np.ndarray:
+        return self._full().F0
+
+    def __reduce__(self):  # pickled and deep-copied whole (the evaluation it defers is a closure)
+        return SparseParts, tuple(self._full())
+
+
 class SparseKKT:
     """The full-space KKT system of a dynamic game, evaluated at rolled-out states and solved costates.
 
@@ -107,6 +143,11 @@ class SparseKKT:
         n = self.n
         F, J, F0 = self._eval(z[:n], z[n:], self.game._x(x))
         return SparseParts(F[:n], F[self._lam0:], None, None, F, J, F0)
+
+    def deferred(self, z: np.ndarray, x: np.ndarray) -> DeferredParts:
+        """The parts at z with L and c evaluated and the rest (:meth:`evaluate`) when first asked for."""
+        L, c = self.residual(z, x)
+        return DeferredParts(L, c, lambda: self.evaluate(z, x))
 
     def matrix(self, J: np.ndarray) -> sp.csc_matrix:
         """dF/dw as a sparse matrix, from the nonzeros of an evaluation."""

@@ -112,6 +112,10 @@ class KKTSystem:
         np.minimum(a, lam, out=a)
         return KKTParts(v[:n], v[n:], self._dL, self._dc), phi, active
 
+    def evaluate_next(self, state: SSNState, z: np.ndarray) -> tuple[KKTParts, np.ndarray, np.ndarray]:
+        """:meth:`evaluate` at the iterate after ``state`` (:meth:`advance`'s evaluation)."""
+        return self.evaluate(z, state.x)
+
     def kkt_residual(self, z: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """L(z) and c(a) alone, without derivatives (what a line search evaluates)."""
         return self.game.kkt_residual(z, x)
@@ -214,7 +218,7 @@ class KKTSystem:
         if parts is not None and self.condensed and not self._affine:
             phi, active = self.residual(parts, z)
         else:
-            parts, phi, active = self.evaluate(z, state.x)
+            parts, phi, active = self.evaluate_next(state, z)
         moved = k is not None
         new = SSNState(z=z, x=state.x, k=k if moved else state.k + 1, phi=phi, residual_norm=norm(phi), parts=parts,
                        active=active, z_prev=state.z_prev if moved else state.z,
