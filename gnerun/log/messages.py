@@ -299,34 +299,20 @@ class SamplingTime:
     _ARRAYS = ("x", "u", "plan", "plan_inputs")
 
     def pack(self) -> tuple:
-        """The record as a few plain values and the bytes of its numbers (what crosses to a writer process:
-        pickled in microseconds); :meth:`unpack` makes it again. An iterate's missing error crosses as NaN, which
-        its message leaves out as it leaves out None."""
-        arrays = [getattr(self, name) for name in self._ARRAYS]
-        its = [v for _, r, err in self.iterates for v in (r, math.nan if err is None else err)]
-        data = b"".join([np.array(its, dtype=float).tobytes(),
-                         *(np.asarray(a, dtype=float).tobytes() for a in arrays if a is not None),
-                         np.array([*self.e_norm_agent.values(), self.constraint_violation, self.e_norm],
-                                  dtype=float).tobytes()])
-        return (self.K, self.t, tuple(k for k, _, _ in self.iterates), tuple(None if a is None else a.shape
-                                                                              for a in arrays),
-                self.status, self.fallback, tuple(self.e_norm_agent), data)
+        """The record as plain values, its arrays as (shape, bytes): what crosses to a writer process, pickled in
+        about 2 us; :meth:`unpack` makes it again."""
+        arrays = tuple(None if a is None else (a.shape, np.asarray(a, dtype=float).tobytes())
+                       for a in (getattr(self, name) for name in self._ARRAYS))
+        return (self.K, self.t, tuple(self.iterates), arrays, self.status, self.fallback, self.constraint_violation,
+                self.e_norm, tuple(self.e_norm_agent.items()))
 
     @classmethod
     def unpack(cls, packed: tuple) -> SamplingTime:
-        K, t, ks, shapes, status, fallback, agents, data = packed
-        numbers = np.frombuffer(data, dtype=float)
-        iterates = [(k, float(r), float(err)) for k, (r, err) in zip(ks, numbers[: 2 * len(ks)].reshape(-1, 2),
-                                                                     strict=True)]
-        at, arrays = 2 * len(ks), {}
-        for name, shape in zip(cls._ARRAYS, shapes, strict=True):
-            size = 0 if shape is None else math.prod(shape)
-            arrays[name] = None if shape is None else numbers[at: at + size].reshape(shape)
-            at += size
-        e_agent = dict(zip(agents, numbers[at: at + len(agents)].tolist(), strict=True))
-        violation, e_norm = numbers[at + len(agents):].tolist()
-        return cls(K=K, t=t, iterates=iterates, status=status, fallback=fallback, constraint_violation=violation,
-                   e_norm=e_norm, e_norm_agent=e_agent, **arrays)
+        K, t, iterates, arrays, status, fallback, violation, e_norm, e_agent = packed
+        values = {name: None if a is None else np.frombuffer(a[1], dtype=float).reshape(a[0])
+                  for name, a in zip(cls._ARRAYS, arrays, strict=True)}
+        return cls(K=K, t=t, iterates=list(iterates), status=status, fallback=fallback, constraint_violation=violation,
+                   e_norm=e_norm, e_norm_agent=dict(e_agent), **values)
 
     def messages(self, plan_states: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None
                  ) -> list[tuple[str, Message]]:
