@@ -60,3 +60,18 @@ def shipped_configs() -> list[Path]:
     """The shipped experiment configs (configs/*.yaml without the sweep specs, tested in test_sweep.py)."""
     return sorted(p for p in CONFIGS.glob("*.yaml") if not any(line.startswith("grid:")
                                                               for line in p.read_text().splitlines()))
+
+
+def refuse_log_write(monkeypatch: pytest.MonkeyPatch, n: int, error: BaseException) -> None:
+    """The n-th message any RunLog writes (counted from now) raises ``error`` instead: a disk that refuses it, or a
+    failure injected while logging."""
+    from gnerun.log.mcap_log import RunLog
+
+    original, calls = RunLog._write, []
+
+    def write(self, *args, **kwargs):
+        calls.append(1)
+        if len(calls) == n:
+            raise error
+        return original(self, *args, **kwargs)
+    monkeypatch.setattr(RunLog, "_write", write)

@@ -19,10 +19,10 @@ import gnerun
 from gnerun.errors import WriteError
 from gnerun.language.config import load_config
 from gnerun.log import writer
-from gnerun.log.mcap_log import RunLog, read_run
+from gnerun.log.mcap_log import read_run
 from gnerun.log.messages import SamplingTime
 
-from .conftest import CONFIGS, run_cli
+from .conftest import CONFIGS, refuse_log_write, run_cli
 from .test_reliability import _start, _steps_are_whole, _wait_for_steps
 
 
@@ -141,14 +141,7 @@ def _served(path, ops: list[tuple]) -> list[tuple]:
 
 
 def test_a_write_the_disk_refuses_is_reported_once_and_the_log_keeps_what_came_before(tmp_path, monkeypatch) -> None:
-    original, calls = RunLog._write, []
-
-    def write(self, *args, **kwargs):
-        calls.append(1)
-        if len(calls) == 6:
-            raise OSError(28, "No space left on device")
-        return original(self, *args, **kwargs)
-    monkeypatch.setattr(RunLog, "_write", write)
+    refuse_log_write(monkeypatch, 6, OSError(28, "No space left on device"))
     # 5 messages each: the sixth is refused
     news = _served(tmp_path / "run.mcap", [("sampling", _record(t=t, iterates=[(0, 1.0, None), (1, 0.1, None),
                                                                               (2, 0.01, None)]).pack(), t)

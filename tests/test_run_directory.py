@@ -18,13 +18,13 @@ import pytest
 import gnerun
 from gnerun.errors import WriteError
 from gnerun.language.config import load_config
-from gnerun.log.mcap_log import RunLog, read_run
+from gnerun.log.mcap_log import read_run
 from gnerun.runs import closed_loop as closed_loop_module
 from gnerun.runs import solving as solving_module
 from gnerun.runs.lock import LOCK_FILE, DirectoryBusy
 from gnerun.runs.reference import ReferenceSolver
 
-from .conftest import CONFIGS, run_cli
+from .conftest import CONFIGS, refuse_log_write, run_cli
 
 
 class Injected(Exception):
@@ -108,15 +108,7 @@ def test_a_failure_at_each_stage_of_a_solve_leaves_a_complete_directory(stage: s
             if "best response" in text:
                 raise Injected("the stage callback")
     elif stage == "logging":
-        original_write = RunLog._write
-        calls = []
-
-        def write(self, *args, **kwargs):
-            calls.append(1)
-            if len(calls) == 4:
-                raise Injected("the log's fourth message")
-            return original_write(self, *args, **kwargs)
-        monkeypatch.setattr(RunLog, "_write", write)
+        refuse_log_write(monkeypatch, 4, Injected("the log's fourth message"))
     elif stage == "summary":
         from gnerun.solvers import certificate
 
@@ -134,15 +126,7 @@ def test_a_failure_at_each_stage_of_a_solve_leaves_a_complete_directory(stage: s
 def test_a_log_the_disk_refuses_still_gets_a_summary(tmp_path, monkeypatch) -> None:
     """A disk that refuses the log (an OSError: WriteError): the summary is still written (a separate file), the log
     keeps what was flushed before, the lock is released."""
-    original = RunLog._write
-    calls = []
-
-    def write(self, *args, **kwargs):
-        calls.append(1)
-        if len(calls) == 6:
-            raise OSError(28, "No space left on device")
-        return original(self, *args, **kwargs)
-    monkeypatch.setattr(RunLog, "_write", write)
+    refuse_log_write(monkeypatch, 6, OSError(28, "No space left on device"))
     with pytest.raises(WriteError):
         gnerun.simulate(load_config(STUDY2, {"run.K": [1], "run.steps": 4}), out=tmp_path / "run")
     summary = _complete(tmp_path / "run", finished=False)
@@ -202,15 +186,7 @@ def test_a_failure_at_each_stage_of_a_closed_loop_leaves_a_complete_directory(st
         monkeypatch.setattr(ReferenceSolver, "reached", staticmethod(counted(original_reached)))
     elif stage.startswith("logging"):
         n = int(stage.split()[-1])
-        original_write = RunLog._write
-        calls = []
-
-        def write(self, *args, **kwargs):
-            calls.append(1)
-            if len(calls) == n:
-                raise Injected(f"the log's message {n}")
-            return original_write(self, *args, **kwargs)
-        monkeypatch.setattr(RunLog, "_write", write)
+        refuse_log_write(monkeypatch, n, Injected(f"the log's message {n}"))
     else:
         from gnerun.game.compile import StageConstraints
 

@@ -94,9 +94,8 @@ class Horizon:
 
     @functools.cached_property
     def _first(self) -> np.ndarray:
-        """The places of u(0) in a."""
-        blocks = zip(self.game.agent_slices, self.game.variable_names, strict=True)
-        return np.concatenate([np.arange(sl.start, sl.start + len(v), dtype=np.intp) for sl, v in blocks])
+        """The places of u(0) in a: the first stage's of :attr:`stage_order`."""
+        return self.stage_order[: sum(len(v) for v in self.game.variable_names)]
 
     @functools.cached_property
     def rollout_function(self):
