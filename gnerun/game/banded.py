@@ -19,8 +19,12 @@ dger, which OpenBLAS makes as one daxpy per column (y += (-1 * u) x, fused multi
 swaps and multipliers (dger, or dgemv_t for the transpose: its SSE2 kernel for the rows in fours, products rounded
 and added in 2 x 2 lanes, then the last rows in fused multiply-adds) and solves with U by dtbsv (axpy, or a dot
 product: ddot's 16 lanes of fused multiply-adds for the first n & -16 terms, then one at a time). The C code makes
-the same operations on each entry in the same order; only where they are independent does it order them otherwise
-(dger's columns in one pass over the rows held in registers).
+the same operations on each entry in the same order; only where they are independent does it order them otherwise.
+It leaves out the operations that add a zero, which the stage-ordered KKT bands are mostly made of (91% of the
+merge's band is zero inside it): dger's columns whose entry in the pivot's row is zero and its rows whose multiplier
+is zero, and a solve's axpy of a zero multiple. Adding a zero leaves a finite number as it was, so the values are
+LAPACK's to the bit; only a zero's sign can differ (LAPACK's -0 + 0 is +0; nothing downstream tells them apart). A
+zero times a value that is not finite is NaN, so such values go back to LAPACK (below).
 
 The same library holds the rest of the interior step's players' blocks of the Schur complement
 (:class:`PlayersComplement`: numpy's gathers and divisions and scipy.sparse's products, csr_matvecs, in their order,
@@ -33,9 +37,10 @@ when three things hold: the library builds and loads, the processor has fused mu
 it is compiled for AVX2 and FMA and checks the processor before it runs), and its results on test bands equal
 LAPACK's bit for bit (another BLAS, or OpenBLAS's kernels for a processor without FMA, round differently). Otherwise
 all of it is LAPACK's. Only the payload of a NaN can differ (which of two NaN operands an instruction passes on
-depends on the instruction's form): where LAPACK's result is NaN, so is this one's. A column to pivot on that holds
-a value that is not finite (idamax and dscal treat those their own way) goes back to LAPACK, as does dgbtrf's
-blocked path and a transposed solve of several right-hand sides (dgemv_t sums two and four columns otherwise).
+depends on the instruction's form): where LAPACK's result is NaN, so is this one's. A column to pivot on, a
+multiplier or an entry of U that is not finite (idamax and dscal treat those their own way, and dger would spread
+them as NaNs where the compiled update adds nothing) goes back to LAPACK, as does dgbtrf's blocked path and a
+transposed solve of several right-hand sides (dgemv_t sums two and four columns otherwise).
 """
 
 from __future__ import annotations
@@ -122,32 +127,6 @@ static void axpy(int n, double da, const double *restrict x, double *restrict y)
     for (int i = 0; i < n; i++) y[i] = __builtin_fma(da, x[i], y[i]);
 }
 
-/* dger as OpenBLAS makes it (kernel/generic/ger.c: one daxpy per column, alpha_c = -1 * y_c): column c = 1 .. cols
-   of a (at a step of `step` from a; its entry 0 is y_c, entries 1 .. m are updated) += alpha_c x, one fused
-   multiply-add per entry as daxpy's, the rows taken 16 at a time (in registers) across all columns */
-__attribute__((target("avx2,fma")))
-static void rank_one(int m, int cols, const double *restrict x, double *restrict a, size_t step) {
-    for (int r = 0; r < m; r += 32) {  /* rows in blocks of up to 32 (in registers), all columns for each block */
-        int rows = m - r < 32 ? m - r : 32, quads = rows >> 2, two = rows & 2, one = rows & 1;
-        __m256d xv[8];
-        for (int k = 0; k < quads; k++) xv[k] = _mm256_loadu_pd(x + r + 4 * k);
-        __m128d x2 = two ? _mm_loadu_pd(x + r + 4 * quads) : _mm_setzero_pd();
-        double x1 = one ? x[r + rows - 1] : 0.0;
-        for (int c = 1; c <= cols; c++) {
-            double alpha = -1.0 * a[c * step];
-            double *u = a + c * step + 1 + r;
-            __m256d al = _mm256_set1_pd(alpha);
-            for (int k = 0; k < quads; k++)
-                _mm256_storeu_pd(u + 4 * k, _mm256_fmadd_pd(al, xv[k], _mm256_loadu_pd(u + 4 * k)));
-            if (two) {
-                double *v = u + 4 * quads;
-                _mm_storeu_pd(v, _mm_fmadd_pd(_mm256_castpd256_pd128(al), x2, _mm_loadu_pd(v)));
-            }
-            if (one) u[rows - 1] = __builtin_fma(alpha, x1, u[rows - 1]);
-        }
-    }
-}
-
 /* OpenBLAS's ddot (kernel/x86_64/ddot.c, ddot_microk_skylakex-2.c as compiled for SkylakeX): the first n & -16
    terms in 16 lanes of fused multiply-adds (4 x 8 lanes over blocks of 32, folded to 4 x 4, then 4 x 4 over a block
    of 16), the lanes summed (((a0 + a1) + a2) + a3, then the halves, then the pair), then the rest one fused
@@ -224,9 +203,61 @@ static inline double gemv_t1(int m, const double *a, const double *x, double y) 
     return y;
 }
 
+/* OpenBLAS's idamax: the first entry of largest magnitude (from 0), or -1 where one is not finite; the largest
+   found in four lanes at a time */
+__attribute__((target("avx2,fma")))
+static int first_largest(int n, const double *x) {
+    const __m256d sign = _mm256_set1_pd(-0.0), top = _mm256_set1_pd(__DBL_MAX__);
+    __m256d big = _mm256_setzero_pd(), finite = _mm256_castsi256_pd(_mm256_set1_epi64x(-1));
+    int i = 0;
+    for (; i + 4 <= n; i += 4) {
+        __m256d v = _mm256_andnot_pd(sign, _mm256_loadu_pd(x + i));
+        finite = _mm256_and_pd(finite, _mm256_cmp_pd(v, top, _CMP_LE_OQ));
+        big = _mm256_max_pd(big, v);
+    }
+    if (_mm256_movemask_pd(finite) != 15) return -1;
+    double lanes[4], best;
+    _mm256_storeu_pd(lanes, big);
+    best = lanes[0] > lanes[1] ? lanes[0] : lanes[1];
+    if (lanes[2] > best) best = lanes[2];
+    if (lanes[3] > best) best = lanes[3];
+    for (int k = i; k < n; k++) {
+        double v = __builtin_fabs(x[k]);
+        if (!(v <= __DBL_MAX__)) return -1;
+        if (v > best) best = v;
+    }
+    for (int k = 0; k < n; k++)
+        if (__builtin_fabs(x[k]) == best) return k;
+    return 0;
+}
+
+/* dger as OpenBLAS makes it (kernel/generic/ger.c: one daxpy per column, alpha_c = -1 * y_c): column c = 1 .. cols
+   of a (at a step of `step` from a; its entry 0 is y_c, entries 1 .. m are updated) += alpha_c x, one fused
+   multiply-add per entry as daxpy's; nothing where that adds a zero: a column whose y_c is zero, the rows outside
+   lo .. hi - 1 (x is finite and zero there; no rows where lo = hi, every y_c still checked). So the same values as
+   dger's, a zero's sign aside (-0 + 0 is +0). Band KKT matrices are mostly zero inside their band: on the merge's,
+   86% of the columns and 77% of the multipliers. Returns 1 where a y_c is not finite (dger's NaNs would reach the
+   rows skipped: the caller asks LAPACK), else 0. */
+__attribute__((target("avx2,fma")))
+static int rank_one(int cols, const double *restrict x, double *restrict a, size_t step, int lo, int hi) {
+    for (int c = 1; c <= cols; c++) {
+        double alpha = -1.0 * a[c * step];
+        if (alpha == 0.0) continue;
+        if (!(__builtin_fabs(alpha) <= __DBL_MAX__)) return 1;
+        double *u = a + c * step + 1;
+        int r = lo;
+        __m256d al = _mm256_set1_pd(alpha);
+        for (; r + 4 <= hi; r += 4)
+            _mm256_storeu_pd(u + r, _mm256_fmadd_pd(al, _mm256_loadu_pd(x + r), _mm256_loadu_pd(u + r)));
+        for (; r < hi; r++) u[r] = __builtin_fma(alpha, x[r], u[r]);
+    }
+    return 0;
+}
+
 /* dgbtf2: 0, LAPACK's info (the first zero pivot, from 1; the factorisation goes on as LAPACK's does), or -1 where
-   a column to pivot on holds a value that is not finite (OpenBLAS's idamax and dscal treat those their own way: the
-   caller factorises with LAPACK) */
+   a column to pivot on, a multiplier or an entry of U is not finite (OpenBLAS's idamax and dscal treat those their
+   own way, and dger's NaNs reach where rank_one adds nothing: the caller factorises with LAPACK). So factors that
+   come back are finite, and a solve may skip a multiple of zero. */
 __attribute__((target("avx2,fma")))
 int band_lu(int n, int kl, int ku, double *ab, int ld, int *ipiv) {
     int kv = ku + kl, info = 0, ju = 0;
@@ -237,14 +268,8 @@ int band_lu(int n, int kl, int ku, double *ab, int ld, int *ipiv) {
             for (int i = 0; i < kl; i++) ab[(size_t)(j + kv) * ld + i] = 0.0;
         int km = kl < n - 1 - j ? kl : n - 1 - j;
         double *col = ab + (size_t)j * ld + kv;  /* the diagonal entry (j, j); (j + r, j) at col[r] */
-        int jp = 0;
-        double best = __builtin_fabs(col[0]);
-        if (!(best <= __DBL_MAX__)) return -1;
-        for (int r = 1; r <= km; r++) {
-            double v = __builtin_fabs(col[r]);
-            if (!(v <= __DBL_MAX__)) return -1;
-            if (v > best) { best = v; jp = r; }
-        }
+        int jp = first_largest(km + 1, col);
+        if (jp < 0) return -1;
         ipiv[j] = jp + j;
         if (col[jp] != 0.0) {
             int last = j + ku + jp < n - 1 ? j + ku + jp : n - 1;
@@ -257,8 +282,12 @@ int band_lu(int n, int kl, int ku, double *ab, int ld, int *ipiv) {
                 }
             if (km > 0) {
                 double r = 1.0 / col[0];
-                for (int i = 1; i <= km; i++) col[i] *= r;
-                if (ju > j) rank_one(km, ju - j, col + 1, col, (size_t)ld - 1);
+                if (!(__builtin_fabs(r) <= __DBL_MAX__)) return -1;  /* a pivot whose reciprocal overflows */
+                for (int i = 1; i <= km; i++) col[i] *= r;  /* finite: |col[i]| <= |col[0]| */
+                int lo = 0, hi = km;  /* the multipliers' nonzero rows: lo .. hi - 1 */
+                while (lo < km && col[1 + lo] == 0.0) lo++;
+                while (hi > lo && col[hi] == 0.0) hi--;
+                if (ju > j && rank_one(ju - j, col + 1, col, (size_t)ld - 1, lo, hi)) return -1;  /* row j of U */
             }
         } else if (!info) {
             info = j + 1;
@@ -281,13 +310,13 @@ int band_lu_solve(int n, int kl, int ku, const double *ab, int ld, const int *ip
                 for (int j = 0; j < n - 1; j++) {
                     int lm = kl < n - 1 - j ? kl : n - 1 - j, l = ipiv[j];
                     if (l != j) { double t = x[l]; x[l] = x[j]; x[j] = t; }
-                    axpy(lm, -1.0 * x[j], ab + (size_t)j * ld + kv + 1, x + j + 1);
+                    if (x[j] != 0.0) axpy(lm, -1.0 * x[j], ab + (size_t)j * ld + kv + 1, x + j + 1);
                 }
             for (int i = n - 1; i >= 0; i--) {  /* dtbsv, upper, no transpose (driver/level2/tbsv_U.c) */
                 const double *a = ab + (size_t)i * ld;
                 x[i] /= a[kv];
                 int len = i < kv ? i : kv;
-                if (len > 0) axpy(len, -x[i], a + kv - len, x + i - len);
+                if (len > 0 && x[i] != 0.0) axpy(len, -x[i], a + kv - len, x + i - len);
             }
         } else {
             for (int i = 0; i < n; i++) {  /* dtbsv, upper, transpose (driver/level2/tbsv_L.c with TRANSA) */
@@ -552,10 +581,11 @@ def solve(band: np.ndarray, b: np.ndarray, transpose: bool = False) -> int:
 def lu_factor(ab: np.ndarray, kl: int, ku: int) -> tuple[np.ndarray, np.ndarray, int] | None:
     """LAPACK's dgbtrf of the band matrix ``ab`` (LAPACK's band storage with room for the fill: Fortran-ordered,
     2 ``kl`` + ``ku`` + 1 rows, one column per column of the matrix) in place, as scipy's
-    ``lapack.dgbtrf(ab, kl, ku, overwrite_ab=1)`` returns it: the factors (``ab``), the pivots (from 0) and info (0,
-    or the first zero pivot, from 1). Compiled, or LAPACK's where nothing is compiled or dgbtrf takes its blocked path
+    ``lapack.dgbtrf(ab, kl, ku, overwrite_ab=1)`` returns it (the same values, a zero's sign aside): the factors
+    (``ab``), the pivots (from 0) and info (0, or the first zero pivot, from 1). Compiled, or LAPACK's where nothing is compiled or dgbtrf takes its blocked path
     (``kl`` >= 32 and ``ku`` > 64: LAPACK's block size). None where the compiled factorisation met a value that is
-    not finite in a column to pivot on: ``ab`` is then half factorised; factorise the matrix again with LAPACK."""
+    not finite (in a column to pivot on, among the multipliers or in U): ``ab`` is then half factorised; factorise
+    the matrix again with LAPACK."""
     kernels = _lu_kernels()
     if kernels is None or (kl >= 32 and ku > 64):
         lu, piv, info = lapack.dgbtrf(ab, kl, ku, overwrite_ab=1)
@@ -760,22 +790,24 @@ def _agrees(kernel) -> bool:
 
 
 def _lu_agrees(factor, solve_lu) -> bool:
-    """Whether the compiled banded LU gives LAPACK's factors, pivots and solutions bit for bit on test bands: with
-    pivoting and without, solves of both kinds (dot products and dgemv's sums of every length the band holds:
-    ``kl`` + ``ku`` beyond 32, ``kl`` of every residue mod 4), a band with a zero pivot, several right-hand sides."""
+    """Whether the compiled banded LU gives LAPACK's factors, pivots and solutions on test bands, the same values bit
+    for bit (a zero's sign aside: the factorisation skips the updates that add zeros): with pivoting and without,
+    solves of both kinds (dot products and dgemv's sums of every length the band holds: ``kl`` + ``ku`` beyond 32,
+    ``kl`` of every residue mod 4), a band with a zero pivot, several right-hand sides, a band mostly zero inside."""
     rng = np.random.default_rng(1)
-    for n, kl, ku, m in ((60, 19, 27, 1), (41, 6, 40, 3), (9, 3, 1, 2), (30, 2, 0, 1), (25, 0, 3, 1)):
+    for n, kl, ku, m, zeros in ((60, 19, 27, 1, 0.3), (41, 6, 40, 3, 0.3), (9, 3, 1, 2, 0.3), (30, 2, 0, 1, 0.3),
+                                (25, 0, 3, 1, 0.3), (90, 18, 18, 2, 0.85)):
         ld = 2 * kl + ku + 1
         ab = np.zeros((ld, n), order="F")
         ab[kl:] = rng.standard_normal((kl + ku + 1, n)) * 10.0 ** rng.integers(-2, 3, (kl + ku + 1, n))
-        ab[kl:][rng.random((kl + ku + 1, n)) < 0.3] = 0.0
+        ab[kl:][rng.random((kl + ku + 1, n)) < zeros] = 0.0
         ab[kl + ku][ab[kl + ku] == 0.0] = 1.0  # no zero pivot without pivoting (kl = 0) ...
         if n == 30:  # ... but one here
             ab[kl + ku, 7] = ab[kl + ku + 1, 7] = ab[kl + ku + 2, 7] = 0.0  # column 8: its pivot is zero
         ref, piv, info = lapack.dgbtrf(ab.copy(order="F"), kl, ku)
         got, gpiv = ab.copy(order="F"), np.zeros(n, dtype=np.int32)
         if factor(n, kl, ku, got.ctypes.data, ld, gpiv.ctypes.data) != info or not (
-                _same(ref, got) and np.array_equal(piv, gpiv)):
+                _same_values(ref, got) and np.array_equal(piv, gpiv)):
             return False
         if info:
             continue
@@ -783,10 +815,11 @@ def _lu_agrees(factor, solve_lu) -> bool:
         for trans in (0, 1) if m == 1 else (0,):
             x = b.copy(order="F")
             solve_lu(n, kl, ku, got.ctypes.data, ld, gpiv.ctypes.data, m, x.ctypes.data, trans)
-            if not _same(lapack.dgbtrs(ref, kl, ku, b, piv, trans=trans)[0], x):
+            if not _same_values(lapack.dgbtrs(ref, kl, ku, b, piv, trans=trans)[0], x):
                 return False
     return True
 
 
-def _same(a: np.ndarray, b: np.ndarray) -> bool:
-    return a.shape == b.shape and np.array_equal(a.view(np.int64), b.view(np.int64))
+def _same_values(a: np.ndarray, b: np.ndarray) -> bool:
+    """The same numbers bit for bit, NaN for NaN; +0 and -0 alike."""
+    return a.shape == b.shape and np.array_equal(a, b, equal_nan=True)
