@@ -582,10 +582,10 @@ def lu_factor(ab: np.ndarray, kl: int, ku: int) -> tuple[np.ndarray, np.ndarray,
     """LAPACK's dgbtrf of the band matrix ``ab`` (LAPACK's band storage with room for the fill: Fortran-ordered,
     2 ``kl`` + ``ku`` + 1 rows, one column per column of the matrix) in place, as scipy's
     ``lapack.dgbtrf(ab, kl, ku, overwrite_ab=1)`` returns it (the same values, a zero's sign aside): the factors
-    (``ab``), the pivots (from 0) and info (0, or the first zero pivot, from 1). Compiled, or LAPACK's where nothing is compiled or dgbtrf takes its blocked path
-    (``kl`` >= 32 and ``ku`` > 64: LAPACK's block size). None where the compiled factorisation met a value that is
-    not finite (in a column to pivot on, among the multipliers or in U): ``ab`` is then half factorised; factorise
-    the matrix again with LAPACK."""
+    (``ab``), the pivots (from 0) and info (0, or the first zero pivot, from 1). Compiled, or LAPACK's where nothing
+    is compiled or dgbtrf takes its blocked path (``kl`` >= 32 and ``ku`` > 64: LAPACK's block size). None where the
+    compiled factorisation met a value that is not finite (in a column to pivot on, among the multipliers or in U):
+    ``ab`` is then half factorised; factorise the matrix again with LAPACK."""
     kernels = _lu_kernels()
     if kernels is None or (kl >= 32 and ku > 64):
         lu, piv, info = lapack.dgbtrf(ab, kl, ku, overwrite_ab=1)
