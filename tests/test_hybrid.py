@@ -12,7 +12,7 @@ from benchmarks.problems import fk, lq
 from gnerun.game.compile import compile_game
 from gnerun.language.config import load_config
 from gnerun.runs.solving import iterate, make_solver, solve
-from gnerun.solvers import avi, hybrid
+from gnerun.solvers import avi, hybrid, interior_point
 from gnerun.solvers.certificate import kkt_residuals
 from gnerun.solvers.ssn import FAILURES, SemismoothNewton, Status
 
@@ -619,6 +619,63 @@ def test_decoupled_plans_that_drive_through_each_other_give_way_to_the_configure
     assert state.status == plain.status == Status.CONVERGED
     assert state.k == plain.k + back and np.allclose(state.z, plain.z, atol=1e-9)
     assert max(problem.best_response_gaps(state.z[: game.n]).values()) <= 1e-5
+
+
+def _through(state) -> int:
+    """Iterations counted through the decoupled game's solve (its own iterations inside the first)."""
+    return state.k + max(state.search.alone - 1, 0)
+
+
+def test_the_barrier_from_the_decoupled_plans_shrinks_faster(monkeypatch: pytest.MonkeyPatch) -> None:
+    """ALGAMES's merge, draw 4 of seed 0: the decoupled game's own solve and the interior phase from its plans take
+    the faster barrier (eps shrinks once H_eps is solved to KAPPA_PLANS eps instead of KAPPA eps). Counted through the
+    decoupled solve the merge takes fewer iterations than at the usual pace, and reaches the same equilibrium."""
+    problem, cfg, game, solver = _merge_draw(4)
+    paces: list[float] = []
+    measure = interior_point.InteriorPoint.measure
+
+    def measured(self, *args, **kwargs):
+        it = measure(self, *args, **kwargs)
+        paces.append(it.kappa)
+        return it
+
+    monkeypatch.setattr(interior_point.InteriorPoint, "measure", measured)
+    states: list = []
+    state = iterate(solver, solver.init(), on_iterate=states.append)
+    assert state.status == Status.CONVERGED and state.search.alone > 1
+    assert paces and set(paces) == {interior_point.KAPPA_PLANS}  # the decoupled solve's steps and those after it
+    assert all(s.search.abandon < np.inf for s in states[1:])  # the plans kept: z^0 from them to the end
+    monkeypatch.setattr(interior_point, "KAPPA_PLANS", interior_point.KAPPA)
+    usual_solver = make_solver(cfg, game)
+    usual = iterate(usual_solver, usual_solver.init())
+    assert usual.status == Status.CONVERGED and _through(state) < _through(usual), (_through(state), _through(usual))
+    assert np.allclose(state.z[:game.n], usual.z[:game.n], atol=1e-8)
+    assert max(problem.best_response_gaps(state.z[: game.n]).values()) <= 1e-5
+
+
+def test_the_configured_start_takes_over_after_three_stalled_steps_from_the_plans(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """The overtaking game from "car 1 brakes": from the cars' plans alone (the faster car driving through the slower
+    one) the interior phase makes no progress; after PLANS_STALL steps without a new best ||Phi||, not STALL, the
+    configured start takes over, at the usual barrier's pace."""
+    from benchmarks.problems import trajectory
+
+    problem = next(p for p in trajectory.overtaking_problems() if "brakes" in p.start)
+    cfg = load_config(text=problem.config_yaml)
+    game = compile_game(cfg)
+    backs, plans_stall = [], hybrid.PLANS_STALL
+    for stall in (plans_stall, hybrid.STALL):
+        monkeypatch.setattr(hybrid, "PLANS_STALL", stall)
+        solver = make_solver(cfg, game)
+        start = solver.init()
+        states: list = []
+        state = iterate(solver, start, on_iterate=states.append)
+        assert state.status == Status.CONVERGED
+        back = next(k for k, s in enumerate(states) if k > 1 and np.array_equal(s.z, start.z))
+        after = [s.search.interior.kappa for s in states[back:] if s.search.phase == "interior"]
+        assert after and set(after) == {interior_point.KAPPA}
+        backs.append(back)
+    assert backs[0] == 2 + plans_stall < backs[1], backs  # the plans at k = 1, their interior phase from k = 2
 
 
 def test_the_decoupled_plans_are_only_a_cold_start_of_a_trajectory_game_far_from_stationary() -> None:

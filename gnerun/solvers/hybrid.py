@@ -28,7 +28,10 @@ first, judged by a nonmonotone watchdog; a more robust method when it fails; res
    alone are near the equilibrium (||Phi|| 60-110 times lower than at zero inputs): the median solve takes 12 iterations
    instead of 18, the p90 14 instead of 33 (19 and 22 counting the decoupled solve's own 8), the slowest 23 instead of
    71; the intersections' start plans are near stationary already (||Phi(z^0)|| < 1) and are left alone (measured:
-   benchmarks/results/solver-design.md).
+   benchmarks/results/solver-design.md). The decoupled game's solve and the interior phase from its plans take a
+   faster barrier (``interior_point.KAPPA_PLANS``: counted through the decoupled solve, the merges' median 15 instead
+   of 19), and there ``PLANS_STALL`` steps without progress, not ``STALL``, give the solve back to the configured
+   z^0 (where the faster barrier stalls: the overtaking game from "car 1 brakes").
 1. **Newton phase.** The semismooth Newton step (min map or Fischer-Burmeister, with the configured perturbation)
    is taken unless it multiplies ||Phi|| by more than ``BLOWUP`` over a nonmonotone reference (the largest of its
    last ``MEMORY`` values), as PATH's watchdog does: the local method's own path may climb before it converges.
@@ -101,6 +104,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import interior_point
 from .avi import AffineVI
 from .design import kronecker
 from .driver import iterate
@@ -122,6 +126,7 @@ HANDOVER_RETRY = 0.5  # after a refused hand-over, the next try once ||Phi|| is 
 HANDOVER_ROUNDS = 3  # a refused hand-over step is tried again this many times with its active set corrected
 CORRECT_ABOVE = 30.0  # ... and so is a Newton step after a hand-over that multiplies ||Phi|| by more than this
 STALL = 15  # interior steps without a new best ||Phi|| (by 10%) before a restart (or a round of best responses)
+PLANS_STALL = 3  # ... from the decoupled plans: then the configured z^0 again (a faster barrier stalls sooner there)
 RESTARTS = len(STARTS) - 1
 LM_FAR = 1e-4  # far from a solution, a singular JPhi gets the Levenberg-Marquardt step with mu = LM_FAR ||Phi||
 FLAT = 1e-2  # a Levenberg-Marquardt step that changes ||Phi|| by less than this fraction ends the Newton phase
@@ -228,6 +233,7 @@ class HybridNewton:
         # on first use (the sparse formulation takes min-map steps alone; a perturbed method is studied as it is)
         self.searches = handover and exact and newton.condensed
         self.exact = exact
+        self.plans = False  # the decoupled game's own solve (:attr:`_alone`): the faster barrier (:meth:`_kappa`)
         # the rows a hand-over's active set may hold: inequalities that a decision reaches
         self._inequalities = np.zeros(self.game.m, dtype=bool)
         self._inequalities[self.interior.I] = True
@@ -395,6 +401,7 @@ class HybridNewton:
         newton.options = newton.options.model_copy(update={"tol": ALONE_TOL})
         alone = HybridNewton(newton)
         alone.answers = alone.decouples = alone.searches = False
+        alone.plans = True
         return alone
 
     def _abandoned(self, state: SSNState, memory: Memory) -> SSNState:
@@ -483,9 +490,15 @@ class HybridNewton:
         # Mehrotra's steps in the first start from z^0; the restarts and warm starts keep the monotone barrier
         predict = attempt == 0 and not warm
         memory = evolve(memory, interior=self.interior.measure(z, w, start.parts.L, start.parts.c, eps,
-                                                                predict=predict))
+                                                                predict=predict, kappa=self._kappa(memory)))
         start = evolve(start, search=memory)
         return start if k is not None else self._interior_step(start, memory)
+
+    def _kappa(self, memory: Memory) -> float:
+        """The barrier's pace (eps shrinks once H_eps is solved to kappa eps): ``interior_point.KAPPA_PLANS`` in the
+        decoupled game's own solve and from its plans, else ``interior_point.KAPPA``."""
+        plans = self.plans or memory.abandon < math.inf
+        return interior_point.KAPPA_PLANS if plans else interior_point.KAPPA
 
     def _handover(self, state: SSNState) -> SSNState | None:
         """The Newton step from an interior iterate (Levenberg-Marquardt where JPhi is singular), if it reduces
@@ -574,7 +587,8 @@ class HybridNewton:
         new = self.newton.advance(state, z, search=memory, rcond=rcond)
         if new.status in FAILURES:  # NaN or divergence: restart if a start is left
             return self._restart(state, memory, new.status, new.message)
-        it = self.interior.measure(z, w, new.parts.L, new.parts.c, memory.interior.eps, t, memory.interior.predict)
+        it = self.interior.measure(z, w, new.parts.L, new.parts.c, memory.interior.eps, t, memory.interior.predict,
+                                   memory.interior.kappa)
         best, stalls = memory.best, memory.stalls + 1
         if new.residual_norm < 0.9 * best:
             best, stalls = new.residual_norm, 0
@@ -582,7 +596,7 @@ class HybridNewton:
         if (self.searches and not memory.searched and new.k >= SLOW and not self.at_solution(new)
                 and not self.game.piecewise):
             return self._start_search(new, memory)
-        if stalls >= STALL:
+        if stalls >= (PLANS_STALL if memory.abandon < math.inf else STALL):
             return self._restart(new, memory, Status.STALLED, f"||Phi|| made no progress in {STALL} interior-point "
                                                                "steps")
         return evolve(new, search=memory)

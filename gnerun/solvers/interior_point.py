@@ -32,7 +32,9 @@ benchmarks/results/solver-design.md):
 - **Slacks start close**: at -c, or ``START_FLOOR`` = 0.1 where a row is violated or nearly active (not 1, which is
   ten times the size of a trajectory game's constraint values: collision distances and road margins of order 0.1),
   and the barrier target eps shrinks once every residual of H_eps is below ``KAPPA`` = 100 eps (the
-  measurements that chose both: benchmarks/results/solver-design.md).
+  measurements that chose both: benchmarks/results/solver-design.md); below ``KAPPA_PLANS`` = 1000 eps in the
+  decoupled game's solve and from its plans (:mod:`gnerun.solvers.hybrid`), near an equilibrium but for the rows
+  that couple the players.
 - **No merit function**: every step is taken at its full length to the boundary (a potential-reduction line search
   and residual-based backtracking lost robustness on nonconvex games); instead, the globalized method
   (:mod:`gnerun.solvers.hybrid`) watches for stalls and restarts.
@@ -75,6 +77,10 @@ from .linalg import factor, largest
 BOUNDARY = 0.995  # a step goes at most this fraction of the way to the boundary lambda_I = 0 or w = 0
 SHRINK = 0.2  # eps shrinks by this factor ...
 KAPPA = 100.0  # ... once every residual of H_eps is below KAPPA eps
+# ... or KAPPA_PLANS eps in the decoupled game's solve and from its plans (gnerun.solvers.hybrid): near the
+# equilibrium but for the coupling rows, where the faster barrier saves a quarter of the steps (ALGAMES's merges);
+# elsewhere it lets the overtaking game's steps cycle (benchmarks/results/solver-design.md)
+KAPPA_PLANS = 1000.0
 # lambda_i w_i starts at mu, times the size of the pseudogradient when scaled (it says how large the multipliers
 # must become); one start after another: the globalized method restarts with the next when the phase stalls
 STARTS = ((1e-3, False), (1e-4, False), (1e-2, True))
@@ -100,6 +106,7 @@ class InteriorIterate:
     eps: float  # the target of lambda_i w_i
     t: float = 1.0  # the step length that led here (fraction of the Newton step)
     predict: bool = False  # whether this start takes Mehrotra's steps (its first start from z^0: InteriorPoint.step)
+    kappa: float = KAPPA  # eps shrinks once H_eps is solved to kappa eps
 
 
 class InteriorPoint:
@@ -143,13 +150,13 @@ class InteriorPoint:
         return z, w, mu
 
     def measure(self, z: np.ndarray, w: np.ndarray, L: np.ndarray, c: np.ndarray, eps: float,
-                t: float = 1.0, predict: bool = False) -> InteriorIterate:
-        """The iterate at (z, w) given L and c there; eps shrinks if H_eps is solved to KAPPA eps. ``predict``:
+                t: float = 1.0, predict: bool = False, kappa: float = KAPPA) -> InteriorIterate:
+        """The iterate at (z, w) given L and c there; eps shrinks if H_eps is solved to ``kappa`` eps. ``predict``:
         Mehrotra's steps are taken from it (see :meth:`step`)."""
         I, E = self.I, self.E
         lw = z[self.n + I] * w
         err = max(largest(L), largest(c[I] + w), largest(c[E]), largest(lw - eps))
-        return InteriorIterate(z, w, L, c, eps * SHRINK if err <= KAPPA * eps else eps, t, predict)
+        return InteriorIterate(z, w, L, c, eps * SHRINK if err <= kappa * eps else eps, t, predict, kappa)
 
     def convex_at(self, it: InteriorIterate, parts) -> bool:
         """Whether every player's block of the barrier Newton matrix at ``it`` (``parts``: the derivatives there) is
