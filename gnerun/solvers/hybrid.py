@@ -596,8 +596,9 @@ class HybridNewton:
         if (self.searches and not memory.searched and new.k >= SLOW and not self.at_solution(new)
                 and not self.game.piecewise):
             return self._start_search(new, memory)
-        if stalls >= (PLANS_STALL if memory.abandon < math.inf else STALL):
-            return self._restart(new, memory, Status.STALLED, f"||Phi|| made no progress in {STALL} interior-point "
+        limit = PLANS_STALL if memory.abandon < math.inf else STALL
+        if stalls >= limit:
+            return self._restart(new, memory, Status.STALLED, f"||Phi|| made no progress in {limit} interior-point "
                                                                "steps")
         return evolve(new, search=memory)
 
