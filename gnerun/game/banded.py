@@ -28,9 +28,10 @@ zero times a value that is not finite is NaN, so such values go back to LAPACK (
 
 The same library holds the rest of the interior step's players' blocks of the Schur complement
 (:class:`PlayersComplement`: numpy's gathers and divisions and scipy.sparse's products, csr_matvecs, in their order,
-without fused multiply-adds as those are compiled) and the players' convexifying shifts (with the dpotrf that
-scipy.linalg.lapack calls, its address taken from scipy.linalg.cython_lapack); the caller compares a system's first
-result with its numpy code bit for bit and keeps the numpy code where they differ.
+without fused multiply-adds as those are compiled, less the additions of zeros: the dynamics' solve and the
+multipliers' rows are zero beyond a column that grows with the stage) and the players' convexifying shifts (with the
+dpotrf that scipy.linalg.lapack calls, its address taken from scipy.linalg.cython_lapack); the caller compares a
+system's first result with its numpy code, value for value, and keeps the numpy code where they differ.
 
 It is compiled once per machine by the system's C compiler into the kernels' cache (gnerun.game.kernels) and used
 when three things hold: the library builds and loads, the processor has fused multiply-add (the library's code for
@@ -445,55 +446,97 @@ int banded_solve(int n, int k, const double *band, int m, double *b, int transpo
 
 /* ---- the players' blocks of the interior step's Schur complement (gnerun.solvers.interior_point._AgentBlocks) ---- */
 
-/* y (zeros, rows x m, C order) = A x for A in CSR form with values data[pos]: scipy's csr_matvecs (y_i += a_ij x_j,
-   row by row, entry by entry, a product then a sum: no fused multiply-add) */
+/* y (rows x m, C order) = A x for A in CSR form with values data[pos]: scipy's csr_matvecs (y_i += a_ij x_j from
+   zeros, row by row, entry by entry, a product then a sum: no fused multiply-add), with nothing added where it adds a
+   zero: a row's first product is its start (0 + p is p), a row of x is read up to its length xlen[j] (NULL: m; zero
+   beyond), and a row without entries is zeros. So the same values, a zero's sign aside (0 + -0 is +0). ylen (NULL:
+   not asked): each row of y's length, the longest of the rows of x it reads. */
 __attribute__((target("avx2")))
 static void csr_times(long long rows, const long long *indptr, const long long *indices, const long long *pos,
-                      const double *data, int m, const double *x, double *y) {
+                      const double *data, int m, const double *x, const int *xlen, double *y, int *ylen) {
     for (long long i = 0; i < rows; i++) {
         double *restrict yi = y + (size_t)i * m;
+        int len = 0;
         for (long long jj = indptr[i]; jj < indptr[i + 1]; jj++) {
             const double a = data[pos[jj]];
             const double *restrict xj = x + (size_t)indices[jj] * m;
-            for (int k = 0; k < m; k++) yi[k] += a * xj[k];
+            int lj = xlen ? xlen[indices[jj]] : m;
+            int k = 0;
+            for (; k < (lj < len ? lj : len); k++) yi[k] += a * xj[k];
+            for (; k < lj; k++) yi[k] = a * xj[k];  /* beyond the row's length so far: its start */
+            if (lj > len) len = lj;
+        }
+        for (int k = len; k < m; k++) yi[k] = 0.0;
+        if (ylen) ylen[i] = len;
+    }
+}
+
+/* lower's solve of L Y = B where each row of B is zero beyond some column: row i read up to its last nonzero (its
+   length, into len), and nothing added where it adds a zero (the same values, a zero's sign aside) */
+__attribute__((target("avx2,fma")))
+static void lower_rows(int n, int k, const double *restrict band, int m, double *restrict b, int *len) {
+    for (int i = 0; i < n; i++) {
+        double *restrict bi = b + (size_t)i * m;
+        const double *a = band + (size_t)i * (k + 1);
+        int l = m;
+        while (l > 0 && bi[l - 1] == 0.0) l--;
+        len[i] = l;
+        double d = a[0];
+        for (int j = 0; j < l; j++) bi[j] = bi[j] / d;
+        int below = n - i - 1 < k ? n - i - 1 : k;
+        for (int j0 = 0; j0 < l && below > 0; j0 += CHUNK) {
+            int j1 = l - j0 < CHUNK ? l : j0 + CHUNK;
+            double alpha[CHUNK];
+            for (int j = j0; j < j1; j++) alpha[j - j0] = -bi[j];
+            for (int r = 1; r <= below; r++) {
+                double *restrict br = bi + (size_t)r * m;
+                double ar = a[r];
+                for (int j = j0; j < j1; j++) br[j] = __builtin_fma(ar, alpha[j - j0], br[j]);
+            }
         }
     }
 }
 
-/* _AgentBlocks.complement's numpy and scipy.sparse operations, in their order, on its gathers and products.
+/* _AgentBlocks.complement's numpy and scipy.sparse operations, in their order, on its gathers and products, with
+   nothing added where it adds a zero (the dynamics' solve Y_x and the multipliers' rows Y_lambda are zero beyond a
+   column that grows with the stage: half of them): the same values, a zero's sign aside.
    dims: ng (states), m (columns), width (the band's), nI, na (rows of C and of A), and the gathers' lengths n_da,
    n_band, n_ka; ix: da (flat, pos), band (flat, pos), Kx (indptr, indices, pos), Ka (flat, pos), touched,
-   Kl (indptr, indices, pos), Ap (indptr, indices, pos); work: ng m + ng (width + 1) + (ng + na) m + na m;
-   K: (nI + ng + na) m, the result (its last na rows the blocks). 0, or 1 where a diagonal entry of D_x is zero. */
+   Kl (indptr, indices, pos), Ap (indptr, indices, pos); work: ng m + ng (width + 1) + (ng + na) m + na m doubles
+   and ng + nI + ng + na ints; K: (nI + ng + na) m, the result (its last na rows the blocks). 0, or 1 where a diagonal
+   entry of D_x is zero. */
 __attribute__((target("avx2")))
 int players_complement(const long long *dims, const long long *const *ix, const double *data, const double *D,
                        double *work, double *K) {
     long long ng = dims[0], nI = dims[3], na = dims[4];
     int m = (int)dims[1], width = (int)dims[2];
     double *Yx = work, *band = Yx + ng * m, *LY = band + ng * (width + 1), *tmp = LY + (ng + na) * m;
+    int *xlen = (int *)(tmp + na * m), *klen = xlen + ng;
     for (long long i = 0; i < ng * m; i++) Yx[i] = 0.0;
     for (long long t = 0; t < dims[5]; t++) Yx[ix[0][t]] = -1.0 * data[ix[1][t]];
     if (ng) {
         for (long long i = 0; i < ng * (width + 1); i++) band[i] = 0.0;
         for (long long t = 0; t < dims[6]; t++) band[ix[2][t]] = data[ix[3][t]];
         if (first_zero((int)ng, width, band)) return 1;
-        lower((int)ng, width, band, m, Yx);
+        lower_rows((int)ng, width, band, m, Yx, xlen);
     }
     long long rows = nI + ng + na;
-    for (long long i = 0; i < rows * m; i++) K[i] = 0.0;
-    csr_times(rows, ix[4], ix[5], ix[6], data, m, Yx, K);
-    for (long long t = 0; t < dims[7]; t++) K[ix[7][t]] += data[ix[8][t]];
-    for (long long i = 0; i < nI; i++) {
-        double d = D[ix[9][i]];
-        for (int k = 0; k < m; k++) K[i * m + k] = K[i * m + k] / d;
+    csr_times(rows, ix[4], ix[5], ix[6], data, m, Yx, ng ? xlen : NULL, K, klen);
+    for (long long t = 0; t < dims[7]; t++) {
+        long long at = ix[7][t], row = at / m;
+        int col = (int)(at - row * m) + 1;
+        K[at] += data[ix[8][t]];
+        if (col > klen[row]) klen[row] = col;  /* a row's length: beyond it, zeros */
     }
-    for (long long i = 0; i < (ng + na) * m; i++) LY[i] = 0.0;
-    csr_times(ng + na, ix[10], ix[11], ix[12], data, m, K, LY);
+    for (long long i = 0; i < nI; i++) {  /* Y_lambda */
+        double d = D[ix[9][i]];
+        for (int k = 0; k < klen[i]; k++) K[i * m + k] = K[i * m + k] / d;
+    }
+    csr_times(ng + na, ix[10], ix[11], ix[12], data, m, K, klen, LY, NULL);
     double *G = K + nI * m;
     for (long long i = 0; i < ng * m; i++) G[i] = -(G[i] + LY[i]);
     if (ng) upper((int)ng, width, band, m, G);
-    for (long long i = 0; i < na * m; i++) tmp[i] = 0.0;
-    csr_times(na, ix[13], ix[14], ix[15], data, m, G, tmp);
+    csr_times(na, ix[13], ix[14], ix[15], data, m, G, NULL, tmp, NULL);
     double *S = G + ng * m;
     for (long long i = 0; i < na * m; i++) S[i] = (S[i] + tmp[i]) + LY[ng * m + i];
     return 0;
@@ -645,8 +688,8 @@ class PlayersComplement:
     """The compiled form of :meth:`gnerun.solvers.interior_point._AgentBlocks.complement` for one set of its gathers
     and products (``parts``: the index arrays in the order of ``players_complement``'s ``ix``; ``dims``: ng, m,
     width, nI, na; the players' blocks: ``decisions[i]`` rows of the last na from row ``rows[i]`` of them): the same
-    operations in the same order, so the same bits (checked on the first call against the numpy and scipy.sparse
-    code by the caller)."""
+    operations in the same order, less those that add a zero, so the same values to the bit, a zero's sign aside
+    (checked on the first call against the numpy and scipy.sparse code by the caller)."""
 
     def __init__(self, function, dims: tuple[int, ...], parts: list[np.ndarray], rows: np.ndarray,
                  decisions: np.ndarray, shifts=(None, None)) -> None:
@@ -655,7 +698,8 @@ class PlayersComplement:
         ng, m, width, nI, na = dims
         self._dims = np.array([*dims, self._parts[0].size, self._parts[2].size, self._parts[7].size], dtype=np.int64)
         self._pointers = (ctypes.c_void_p * len(self._parts))(*[p.ctypes.data for p in self._parts])
-        self._work = ng * m + ng * (width + 1) + (ng + na) * m + na * m
+        # doubles, then ints for the rows' lengths (ng + nI + ng + na), in doubles' room
+        self._work = ng * m + ng * (width + 1) + (ng + na) * m + na * m + (2 * ng + nI + na + 1) // 2 + 1
         self._shape = (nI + ng + na, m)
         self._rows = np.ascontiguousarray(rows, dtype=np.int64)
         self._decisions = np.ascontiguousarray(decisions, dtype=np.int64)
