@@ -656,16 +656,16 @@ def test_the_barrier_from_the_decoupled_plans_shrinks_faster(monkeypatch: pytest
 def test_the_configured_start_takes_over_after_three_stalled_steps_from_the_plans(
         monkeypatch: pytest.MonkeyPatch) -> None:
     """The overtaking game from "car 1 brakes": from the cars' plans alone (the faster car driving through the slower
-    one) the interior phase makes no progress; after PLANS_STALL steps without a new best ||Phi||, not STALL, the
+    one) the interior phase makes no progress; after FAST_STALL steps without a new best ||Phi||, not STALL, the
     configured start takes over, at the usual barrier's pace."""
     from benchmarks.problems import trajectory
 
     problem = next(p for p in trajectory.overtaking_problems() if "brakes" in p.start)
     cfg = load_config(text=problem.config_yaml)
     game = compile_game(cfg)
-    backs, plans_stall = [], hybrid.PLANS_STALL
-    for stall in (plans_stall, hybrid.STALL):
-        monkeypatch.setattr(hybrid, "PLANS_STALL", stall)
+    backs, fast_stall = [], hybrid.FAST_STALL
+    for stall in (fast_stall, hybrid.STALL):
+        monkeypatch.setattr(hybrid, "FAST_STALL", stall)
         solver = make_solver(cfg, game)
         start = solver.init()
         states: list = []
@@ -675,7 +675,54 @@ def test_the_configured_start_takes_over_after_three_stalled_steps_from_the_plan
         after = [s.search.interior.kappa for s in states[back:] if s.search.phase == "interior"]
         assert after and set(after) == {interior_point.KAPPA}
         backs.append(back)
-    assert backs[0] == 2 + plans_stall < backs[1], backs  # the plans at k = 1, their interior phase from k = 2
+    assert backs[0] == 2 + fast_stall < backs[1], backs  # the plans at k = 1, their interior phase from k = 2
+
+
+def test_a_start_near_stationary_begins_its_interior_phase_at_the_faster_barrier(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """ALGAMES's T-intersection, draw 0 of seed 0, from zero inputs (||Phi(z^0)|| about 0.5, below QUICK_BELOW): the
+    first interior start takes the faster barrier (KAPPA_PLANS) and converges in fewer iterations than at the usual
+    pace, to the same equilibrium; a closed loop's warm start keeps the usual pace."""
+    from benchmarks.problems import trajectory
+
+    problem = trajectory.intersection_problems(1)[0]
+    cfg = load_config(text=problem.config_yaml)
+    game = compile_game(cfg)
+    solver = make_solver(cfg, game)
+    start = solver.init()
+    assert start.residual_norm <= hybrid.QUICK_BELOW and start.search.quick and not start.search.decouple
+    assert not solver.init(warm=True).search.quick
+    states: list = []
+    state = iterate(solver, start, on_iterate=states.append)
+    interior = [s for s in states if s.search.phase == "interior"]
+    assert interior and all(s.search.fast and s.search.interior.kappa == interior_point.KAPPA_PLANS for s in interior)
+    monkeypatch.setattr(hybrid, "QUICK_BELOW", -1.0)
+    usual_solver = make_solver(cfg, game)
+    usual = iterate(usual_solver, usual_solver.init())
+    assert state.status == usual.status == Status.CONVERGED and state.k < usual.k, (state.k, usual.k)
+    assert np.allclose(state.z[:game.n], usual.z[:game.n], atol=1e-8)
+    assert max(problem.best_response_gaps(state.z[: game.n]).values()) <= 1e-5
+
+
+def test_a_first_start_that_stalls_at_the_faster_barrier_begins_again_at_the_usual_pace() -> None:
+    """The overtaking game from zero inputs (||Phi(z^0)|| 0.03): at the faster barrier the first interior start stalls;
+    after FAST_STALL steps without a new best ||Phi|| the same start is taken again at the usual pace, and the solve
+    converges to an equilibrium."""
+    from benchmarks.problems import trajectory
+
+    problem = next(p for p in trajectory.overtaking_problems() if "zero inputs" in p.start)
+    cfg = load_config(text=problem.config_yaml)
+    game = compile_game(cfg)
+    solver = make_solver(cfg, game)
+    states: list = []
+    state = iterate(solver, solver.init(), on_iterate=states.append)
+    fast = [k for k, s in enumerate(states) if s.search.phase == "interior" and s.search.fast]
+    usual = [k for k, s in enumerate(states) if s.search.phase == "interior" and not s.search.fast]
+    assert fast and usual and max(fast) < min(usual)
+    again = states[min(usual)]
+    assert again.search.attempt == 0 and again.search.interior.kappa == interior_point.KAPPA
+    assert state.status == Status.CONVERGED
+    assert max(problem.best_response_gaps(state.z[: game.n]).values()) <= 1e-5
 
 
 def test_the_decoupled_plans_are_only_a_cold_start_of_a_trajectory_game_far_from_stationary() -> None:

@@ -34,7 +34,7 @@ benchmarks/results/solver-design.md):
   and the barrier target eps shrinks once every residual of H_eps is below ``KAPPA`` = 100 eps (the
   measurements that chose both: benchmarks/results/solver-design.md); below ``KAPPA_PLANS`` = 1000 eps in the
   decoupled game's solve and from its plans (:mod:`gnerun.solvers.hybrid`), near an equilibrium but for the rows
-  that couple the players.
+  that couple the players, and in the first start from a trajectory game's start near stationary.
 - **No merit function**: every step is taken at its full length to the boundary (a potential-reduction line search
   and residual-based backtracking lost robustness on nonconvex games); instead, the globalized method
   (:mod:`gnerun.solvers.hybrid`) watches for stalls and restarts.
@@ -79,7 +79,8 @@ SHRINK = 0.2  # eps shrinks by this factor ...
 KAPPA = 100.0  # ... once every residual of H_eps is below KAPPA eps
 # ... or KAPPA_PLANS eps in the decoupled game's solve and from its plans (gnerun.solvers.hybrid): near the
 # equilibrium but for the coupling rows, where the faster barrier saves a quarter of the steps (ALGAMES's merges);
-# elsewhere it lets the overtaking game's steps cycle (benchmarks/results/solver-design.md)
+# and in the first start from a trajectory game's start near stationary (the intersections: a third), given up
+# after a few stalled steps: elsewhere it lets the overtaking game's steps cycle (benchmarks/results/solver-design.md)
 KAPPA_PLANS = 1000.0
 # lambda_i w_i starts at mu, times the size of the pseudogradient when scaled (it says how large the multipliers
 # must become); one start after another: the globalized method restarts with the next when the phase stalls
