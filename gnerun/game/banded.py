@@ -472,7 +472,8 @@ static void csr_times(long long rows, const long long *indptr, const long long *
 }
 
 /* lower's solve of L Y = B where each row of B is zero beyond some column: row i read up to its last nonzero (its
-   length, into len), and nothing added where it adds a zero (the same values, a zero's sign aside) */
+   length, into len), and nothing added where it adds a zero (the same values, a zero's sign aside; lower itself
+   stays LAPACK's to the bit, zeros' signs included, for banded_solve) */
 __attribute__((target("avx2,fma")))
 static void lower_rows(int n, int k, const double *restrict band, int m, double *restrict b, int *len) {
     for (int i = 0; i < n; i++) {

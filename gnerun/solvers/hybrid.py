@@ -511,7 +511,7 @@ class HybridNewton:
 
     def _kappa(self, memory: Memory) -> float:
         """The barrier's pace (eps shrinks once H_eps is solved to kappa eps): ``interior_point.KAPPA_PLANS`` in the
-        decoupled game's own solve and from its plans, else ``interior_point.KAPPA``."""
+        decoupled game's own solve and in a trial (:meth:`_trial`), else ``interior_point.KAPPA``."""
         return interior_point.KAPPA_PLANS if self.plans or self._trial(memory) else interior_point.KAPPA
 
     @staticmethod
