@@ -424,6 +424,29 @@ def _unequal_vehicles():
     return _stepped(cfg, 3)
 
 
+def test_the_compiled_complement_leaves_a_value_that_is_not_finite_to_numpy() -> None:
+    """The compiled players' complement skips the zeros beyond each row's length; where a value that is not finite
+    would meet one of them (numpy's product is NaN there), the call is numpy's, NaN for NaN, and the next finite call
+    is the compiled one again."""
+    from gnerun.solvers.interior_point import InteriorPoint
+
+    game, solver, state = _merge_system()
+    ip = InteriorPoint(solver.newton)
+    templates = ip.linear._blocks()
+    D = np.random.default_rng(7).uniform(0.01, 100, ip.I.size)
+    data = state.parts.J
+    templates._stacked(data, D)  # the first call: compared with numpy
+    if not templates.compiled:
+        pytest.skip("the banded code is not compiled here")
+    bad = D.copy()
+    bad[0] = np.inf
+    K = templates._stacked(data, bad)
+    assert templates.compiled is False and np.array_equal(K, templates._numpy(data, bad), equal_nan=True)
+    assert templates._compiled(data, bad) is False
+    again = templates._stacked(data, D)
+    assert templates.compiled and np.array_equal(again, templates._numpy(data, D))
+
+
 @pytest.mark.parametrize("system", [_merge_system, _unequal_vehicles], ids=["merge", "unequal players"])
 def test_the_players_blocks_of_the_interior_complement(system) -> None:
     """Each player's block of the interior matrix's Schur complement on (a, lambda_E), found stage-structured (banded

@@ -450,10 +450,11 @@ int banded_solve(int n, int k, const double *band, int m, double *b, int transpo
    zeros, row by row, entry by entry, a product then a sum: no fused multiply-add), with nothing added where it adds a
    zero: a row's first product is its start (0 + p is p), a row of x is read up to its length xlen[j] (NULL: m; zero
    beyond), and a row without entries is zeros. So the same values, a zero's sign aside (0 + -0 is +0). ylen (NULL:
-   not asked): each row of y's length, the longest of the rows of x it reads. */
+   not asked): each row of y's length, the longest of the rows of x it reads. Returns 1 where a value that is not
+   finite meets a zero it skips (the product would be NaN: the caller computes with numpy), else 0. */
 __attribute__((target("avx2")))
-static void csr_times(long long rows, const long long *indptr, const long long *indices, const long long *pos,
-                      const double *data, int m, const double *x, const int *xlen, double *y, int *ylen) {
+static int csr_times(long long rows, const long long *indptr, const long long *indices, const long long *pos,
+                     const double *data, int m, const double *x, const int *xlen, double *y, int *ylen) {
     for (long long i = 0; i < rows; i++) {
         double *restrict yi = y + (size_t)i * m;
         int len = 0;
@@ -461,6 +462,7 @@ static void csr_times(long long rows, const long long *indptr, const long long *
             const double a = data[pos[jj]];
             const double *restrict xj = x + (size_t)indices[jj] * m;
             int lj = xlen ? xlen[indices[jj]] : m;
+            if (lj < m && !(__builtin_fabs(a) <= __DBL_MAX__)) return 1;
             int k = 0;
             for (; k < (lj < len ? lj : len); k++) yi[k] += a * xj[k];
             for (; k < lj; k++) yi[k] = a * xj[k];  /* beyond the row's length so far: its start */
@@ -469,13 +471,15 @@ static void csr_times(long long rows, const long long *indptr, const long long *
         for (int k = len; k < m; k++) yi[k] = 0.0;
         if (ylen) ylen[i] = len;
     }
+    return 0;
 }
 
 /* lower's solve of L Y = B where each row of B is zero beyond some column: row i read up to its last nonzero (its
    length, into len), and nothing added where it adds a zero (the same values, a zero's sign aside; lower itself
-   stays LAPACK's to the bit, zeros' signs included, for banded_solve) */
+   stays LAPACK's to the bit, zeros' signs included, for banded_solve). Returns 1 where a value that is not finite
+   meets a zero it skips, else 0. */
 __attribute__((target("avx2,fma")))
-static void lower_rows(int n, int k, const double *restrict band, int m, double *restrict b, int *len) {
+static int lower_rows(int n, int k, const double *restrict band, int m, double *restrict b, int *len) {
     for (int i = 0; i < n; i++) {
         double *restrict bi = b + (size_t)i * m;
         const double *a = band + (size_t)i * (k + 1);
@@ -483,8 +487,11 @@ static void lower_rows(int n, int k, const double *restrict band, int m, double 
         while (l > 0 && bi[l - 1] == 0.0) l--;
         len[i] = l;
         double d = a[0];
-        for (int j = 0; j < l; j++) bi[j] = bi[j] / d;
         int below = n - i - 1 < k ? n - i - 1 : k;
+        if (l < m)
+            for (int r = 0; r <= below; r++)
+                if (!(__builtin_fabs(a[r]) <= __DBL_MAX__)) return 1;
+        for (int j = 0; j < l; j++) bi[j] = bi[j] / d;
         for (int j0 = 0; j0 < l && below > 0; j0 += CHUNK) {
             int j1 = l - j0 < CHUNK ? l : j0 + CHUNK;
             double alpha[CHUNK];
@@ -496,6 +503,7 @@ static void lower_rows(int n, int k, const double *restrict band, int m, double 
             }
         }
     }
+    return 0;
 }
 
 /* _AgentBlocks.complement's numpy and scipy.sparse operations, in their order, on its gathers and products, with
@@ -505,7 +513,8 @@ static void lower_rows(int n, int k, const double *restrict band, int m, double 
    n_band, n_ka; ix: da (flat, pos), band (flat, pos), Kx (indptr, indices, pos), Ka (flat, pos), touched,
    Kl (indptr, indices, pos), Ap (indptr, indices, pos); work: ng m + ng (width + 1) + (ng + na) m + na m doubles
    and ng + nI + ng + na ints; K: (nI + ng + na) m, the result (its last na rows the blocks). 0, or 1 where a diagonal
-   entry of D_x is zero. */
+   entry of D_x is zero, or 2 where a value that is not finite (or D's zero) meets a zero the code skips: the caller
+   computes that call with numpy. */
 __attribute__((target("avx2")))
 int players_complement(const long long *dims, const long long *const *ix, const double *data, const double *D,
                        double *work, double *K) {
@@ -519,10 +528,10 @@ int players_complement(const long long *dims, const long long *const *ix, const 
         for (long long i = 0; i < ng * (width + 1); i++) band[i] = 0.0;
         for (long long t = 0; t < dims[6]; t++) band[ix[2][t]] = data[ix[3][t]];
         if (first_zero((int)ng, width, band)) return 1;
-        lower_rows((int)ng, width, band, m, Yx, xlen);
+        if (lower_rows((int)ng, width, band, m, Yx, xlen)) return 2;
     }
     long long rows = nI + ng + na;
-    csr_times(rows, ix[4], ix[5], ix[6], data, m, Yx, ng ? xlen : NULL, K, klen);
+    if (csr_times(rows, ix[4], ix[5], ix[6], data, m, Yx, ng ? xlen : NULL, K, klen)) return 2;
     for (long long t = 0; t < dims[7]; t++) {
         long long at = ix[7][t], row = at / m;
         int col = (int)(at - row * m) + 1;
@@ -531,13 +540,14 @@ int players_complement(const long long *dims, const long long *const *ix, const 
     }
     for (long long i = 0; i < nI; i++) {  /* Y_lambda */
         double d = D[ix[9][i]];
+        if (klen[i] < m && !(d != 0.0 && __builtin_fabs(d) <= __DBL_MAX__)) return 2;
         for (int k = 0; k < klen[i]; k++) K[i * m + k] = K[i * m + k] / d;
     }
-    csr_times(ng + na, ix[10], ix[11], ix[12], data, m, K, klen, LY, NULL);
+    if (csr_times(ng + na, ix[10], ix[11], ix[12], data, m, K, klen, LY, NULL)) return 2;
     double *G = K + nI * m;
     for (long long i = 0; i < ng * m; i++) G[i] = -(G[i] + LY[i]);
     if (ng) upper((int)ng, width, band, m, G);
-    csr_times(na, ix[13], ix[14], ix[15], data, m, G, NULL, tmp, NULL);
+    csr_times(na, ix[13], ix[14], ix[15], data, m, G, NULL, tmp, NULL);  /* G's rows whole: nothing skipped */
     double *S = G + ng * m;
     for (long long i = 0; i < na * m; i++) S[i] = (S[i] + tmp[i]) + LY[ng * m + i];
     return 0;
@@ -705,16 +715,17 @@ class PlayersComplement:
         self._rows = np.ascontiguousarray(rows, dtype=np.int64)
         self._decisions = np.ascontiguousarray(decisions, dtype=np.int64)
 
-    def __call__(self, data: np.ndarray, D: np.ndarray) -> np.ndarray | None:
-        """K = [Y_lambda; Y_p; S] (S: the players' blocks stacked), or None where D_x has a zero on its diagonal."""
+    def __call__(self, data: np.ndarray, D: np.ndarray) -> np.ndarray | bool | None:
+        """K = [Y_lambda; Y_p; S] (S: the players' blocks stacked), None where D_x has a zero on its diagonal, or False
+        where a value that is not finite meets a zero the code skips (numpy's product would be NaN there: compute this
+        call with numpy)."""
         data = np.ascontiguousarray(data, dtype=np.float64)
         D = np.ascontiguousarray(D, dtype=np.float64)
         work = np.empty(self._work)  # per call: a system's blocks may serve several solves at once
         K = np.empty(self._shape)
-        if self._function(self._dims.ctypes.data, ctypes.addressof(self._pointers), data.ctypes.data, D.ctypes.data,
-                          work.ctypes.data, K.ctypes.data):
-            return None
-        return K
+        code = self._function(self._dims.ctypes.data, ctypes.addressof(self._pointers), data.ctypes.data,
+                              D.ctypes.data, work.ctypes.data, K.ctypes.data)
+        return K if code == 0 else (None if code == 1 else False)
 
     def shifts(self, K: np.ndarray) -> tuple[list[float], float] | None:
         """The players' convexifying shifts (:func:`gnerun.solvers.interior_point.convexifying_shift` of each block

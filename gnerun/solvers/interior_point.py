@@ -664,14 +664,19 @@ class _AgentBlocks:
             compiled = banded.players_complement(dims, parts, self._rows[:-1], self.decisions)
             if compiled is not None:
                 ours, reference = compiled(data, D), self._numpy(data, D)
-                if ours is None and reference is None:  # a singular D_x: nothing to compare; the next call compares
+                if (ours is None and reference is None) or ours is False:  # nothing to compare: the next call compares
                     self.compiled = False
-                    return None
+                    return reference
                 if ours is None or reference is None or not np.array_equal(ours, reference):  # a zero's sign aside
                     compiled = None
             self._compiled = compiled if compiled is not None else False
         self.compiled = bool(compiled)
-        return compiled(data, D) if compiled else self._numpy(data, D)
+        if compiled:
+            K = compiled(data, D)
+            if K is not False:
+                return K
+            self.compiled = False  # a value that is not finite where the compiled code skips zeros
+        return self._numpy(data, D)
 
     def _numpy(self, data: np.ndarray, D: np.ndarray) -> np.ndarray | None:
         """:meth:`_stacked` by numpy and scipy.sparse. (In place where it can: the arrays are of the size of all
