@@ -536,6 +536,42 @@ def test_the_interior_matrix_solved_with_its_inequality_multipliers_eliminated()
     assert (system.layout(everything, at).lower, system.layout(everything, at).upper) == (18, 27)
 
 
+def test_the_compiled_eliminated_solve_is_numpys(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The eliminated system's solve in one compiled call (gnerun.game.banded.EliminatedSolve) gives numpy's values
+    bit for bit: the complement's right-hand side, its banded solve and the eliminated unknowns after it, with D from
+    1e-10 to 1e4 (so with the refinement step that an E below 1e-6 asks for) and from 1e-2 to 1e2 (without)."""
+    from gnerun.game import banded
+    from gnerun.game.sparse import Elimination
+
+    if banded.status() != "compiled":
+        pytest.skip(f"nothing compiled here: {banded.status()}")
+    game, solver, state = _merge_system()
+    system = solver.newton.system
+    n, m, lam0 = game.n, game.m, system.size - game.m
+    rng = np.random.default_rng(7)
+    everything = np.arange(system.size)
+    at = np.concatenate([np.arange(n), lam0 + np.arange(m)])
+    system.stage_order.banded = True
+    try:
+        for low, high in ((-10, 4), (-2, 2)):
+            add = np.concatenate([rng.uniform(0, 1e-2, n), -(10.0 ** rng.uniform(low, high, m))])
+            b = rng.standard_normal(system.size)
+            solved = {}
+            for compiled in (True, False):
+                if not compiled:
+                    monkeypatch.setattr(Elimination, "compiled", lambda self, layout: False)
+                lu, _ = system.factor_kept("interior", state.parts.J, everything, at, add, estimate=False,
+                                           eliminate=lam0 + np.arange(m))
+                solved[compiled] = (lu.solve(b), lu.refine)
+                assert bool(lu.elimination.compiled(lu.factors.layout)) == compiled
+                monkeypatch.undo()
+            assert solved[True][1] == (low == -10)  # refined once where an eliminated entry is that small
+            assert np.array_equal(solved[True][0], solved[False][0])
+            assert np.isfinite(solved[True][0]).all()
+    finally:
+        system.stage_order.banded = None
+
+
 def test_only_a_diagonal_block_is_eliminated() -> None:
     """Unknowns whose block has off-diagonal entries (the decisions': a player's Hessian) or no diagonal addition
     are refused with the reason."""

@@ -951,6 +951,16 @@ class Elimination:
         keys, self.pair_entry = np.unique(rows * size + cols, return_inverse=True)
         self.fill_r, self.fill_c = keys // size, keys % size
         self.pair_entry = self.pair_entry.reshape(-1)
+        self._compiled = None  # the compiled solve (see compiled)
+
+    def compiled(self, layout: KeptLayout):
+        """The compiled solve (:class:`gnerun.game.banded.EliminatedSolve`) with the band ``layout`` of the complement
+        (built once; False where nothing is compiled)."""
+        if self._compiled is None:
+            found = banded.eliminated_solve([self.rest, self.out, self.re[1], self.re[2], self.er[1], self.er[2],
+                                             layout.row_order, layout.col_order], layout.lower, layout.upper)
+            self._compiled = found if found is not None else False
+        return self._compiled
 
     def fill(self, data: np.ndarray, add: np.ndarray) -> np.ndarray:
         """The entries of -K_re E^-1 K_er (at ``fill_r``, ``fill_c``) for the pattern's nonzeros ``data`` and the
@@ -988,8 +998,13 @@ class EliminatedLU:
         return x
 
     def _solve(self, b: np.ndarray) -> np.ndarray:
-        """x_r from the complement's factors, then x_e = E^-1 (b_e - K_er x_r)."""
-        e = self.elimination
+        """x_r from the complement's factors, then x_e = E^-1 (b_e - K_er x_r): compiled where the factors are banded
+        (:class:`gnerun.game.banded.EliminatedSolve`, the same operations), else by numpy."""
+        e, factors = self.elimination, self.factors
+        if isinstance(factors, BandLU):
+            compiled = e.compiled(factors.layout)
+            if compiled:
+                return compiled(factors.lu, factors.piv, self.diagonal, self.re, self.er, b)
         x = np.empty_like(b)
         b_out = b[e.out] / self.diagonal
         x_rest = self.factors.solve(b[e.rest] - np.bincount(e.re[1], self.re * b_out[e.re[2]],
