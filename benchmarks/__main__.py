@@ -334,12 +334,60 @@ def robust_rows(row, reps: int, quick: bool) -> None:
             whole.append(t2 - t0)
             its.append(state.k)
         goal = 0.3e-3 if "merge" in label else 0.6e-3  # the structure allows about this (benchmarks/stages.py)
+        floor, parts = compiled_calls(solver, problems)
         row(f"{label} ({game.size} unknowns, {formulation(cfg, game)}): one iteration", statistics.median(per),
             target=f"<= {goal * 1e3:g} ms", met=statistics.median(per) <= goal,
             note=f"median over {len(problems)} random initial states, after one warm-up solve; iterations "
                  f"{min(its)}-{max(its)}; whole solve median {statistics.median(whole) * 1e3:.1f} ms"
                  + (f", its first iteration the players' decoupled plans in {decoupled} (not counted here)"
-                    if decoupled else ""))
+                    if decoupled else "")
+                 + f"; the compiled calls alone {us(floor)} per iteration ({parts}), the rest Python and numpy")
+
+
+# the calls of one iteration into compiled code (gnerun.game.banded's C, the CasADi kernels), by what they compute
+_COMPILED = (("LU", "gnerun.game.banded", None, "lu_factor"), ("solves", "gnerun.game.banded", None, "lu_solve"),
+             ("solves", "gnerun.game.banded", "EliminatedSolve", "__call__"),
+             ("estimate", "gnerun.game.banded", None, "lu_inverse_norm"),
+             ("complement", "gnerun.game.banded", "PlayersComplement", "__call__"),
+             ("shifts", "gnerun.game.banded", "PlayersComplement", "shifts"),
+             ("CasADi", "gnerun.game.evaluator", "Evaluator", "__call__"))
+
+
+def compiled_calls(solver, problems) -> tuple[float, str]:
+    """The time per iteration spent inside the calls into compiled code (timers around each, in their own solves
+    after the timed ones: the timers' cost is not in the row's time), and the share of each: what an iteration costs
+    with no Python between the calls."""
+    import importlib
+
+    spent: dict[str, float] = dict.fromkeys([label for label, *_ in _COMPILED], 0.0)
+    saved = []
+    for label, module, cls, name in _COMPILED:
+        owner = importlib.import_module(module)
+        owner = getattr(owner, cls) if cls else owner
+        original = getattr(owner, name)
+        saved.append((owner, name, original))
+
+        def timed(*args, _original=original, _label=label, **kwargs):
+            t0 = time.perf_counter()
+            try:
+                return _original(*args, **kwargs)
+            finally:
+                spent[_label] += time.perf_counter() - t0
+
+        setattr(owner, name, timed)
+    steps = 0
+    try:
+        for p in problems:
+            before = dict(spent)
+            first = solver.step(solver.init(None, np.asarray(load_config(text=p.config_yaml).game.x0)))
+            spent.update(before)  # the first iteration's calls (the decoupled plans) are not counted
+            state = iterate(solver, first)
+            steps += state.k - 1
+    finally:
+        for owner, name, original in saved:
+            setattr(owner, name, original)
+    per = {label: v / max(steps, 1) for label, v in spent.items()}
+    return sum(per.values()), ", ".join(f"{label} {us(v)}" for label, v in sorted(per.items(), key=lambda kv: -kv[1]))
 
 
 def trajectory_iteration_rows(row, quick: bool) -> None:
