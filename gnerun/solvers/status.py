@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, fields, replace
 from enum import StrEnum
+from types import MemberDescriptorType
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -58,7 +59,7 @@ def _copier(cls: type):
     ``dataclasses.replace`` where the class is not plain (a ``__post_init__``, a field that is not ``init``, no
     slots)."""
     names = tuple(f.name for f in fields(cls))
-    slots = all(type(cls.__dict__.get(name)).__name__ == "member_descriptor" for name in names)
+    slots = all(isinstance(cls.__dict__.get(name), MemberDescriptorType) for name in names)
     if hasattr(cls, "__post_init__") or not all(f.init for f in fields(cls)) or not slots:
         return lambda obj, changes: replace(obj, **changes)
     scope = {"_new": object.__new__, "_cls": cls, "_slots": {name: cls.__dict__[name] for name in names}}
@@ -72,7 +73,7 @@ def _copier(cls: type):
               "            raise TypeError(f'{_cls.__name__} has no field {name!r}')",
               "        slot.__set__(new, value)",
               "    return new"]
-    exec("\n".join(lines), scope)  # noqa: S102 (source built above from the class's own field names)
+    exec("\n".join(lines), scope)  # the source is the class's own field names, as dataclasses writes __init__
     return scope["copy"]
 
 
