@@ -12,7 +12,8 @@ from gnerun.game import banded as banded_code
 from gnerun.game.compile import compile_game
 from gnerun.language.config import ConfigError, load_config
 from gnerun.runs.solving import SPARSE_FROM, SPARSE_WORK, formulation, make_solver
-from gnerun.solvers import hybrid
+from gnerun.solvers import hybrid, interior_point
+from gnerun.solvers.driver import iterate
 from gnerun.solvers.sparse_ssn import SparseSemismoothNewton
 from gnerun.solvers.ssn import SemismoothNewton, Status
 
@@ -476,7 +477,7 @@ def test_the_players_blocks_of_the_interior_complement(system) -> None:
         D2 = scale * np.random.default_rng(5).uniform(0.01, 100, ip.I.size)
         ours, reference = templates._stacked(state.parts.J, D2), templates._numpy(state.parts.J, D2)
         assert not np.isnan(reference).any() and np.array_equal(ours, reference)
-        assert templates.shifts(state.parts.J, D2) == templates._numpy_shifts(reference)
+        assert templates.shifts(state.parts.J, D2, recursion=False) == templates._numpy_shifts(reference)
     # and the players' shifts, with scipy's dpotrf: on indefinite blocks (random), one that is not finite, one of inf
     rng = np.random.default_rng(6)
     for case in range(4):
@@ -500,6 +501,84 @@ def test_the_players_blocks_of_the_interior_complement(system) -> None:
     for b, b2 in zip(blocks, again.linear._blocks().complement(state.parts.J, D), strict=True):
         np.testing.assert_array_equal(b, b2)
 
+
+
+def _interior_matrices(problems, count: int, monkeypatch: pytest.MonkeyPatch) -> list:
+    """Every interior-point matrix (the barrier, K's nonzeros and D) that solves of these problems factorise."""
+    from gnerun.solvers import interior_point
+
+    seen = []
+    shifts = interior_point.SparseBarrier._shifts
+
+    def recorded(self, data, D):
+        seen.append((self, data.copy(), D.copy()))
+        return shifts(self, data, D)
+
+    monkeypatch.setattr(interior_point.SparseBarrier, "_shifts", recorded)
+    for p in problems[:count]:
+        cfg = load_config(text=p.config_yaml)
+        game = compile_game(cfg)
+        iterate(make_solver(cfg, game), make_solver(cfg, game).init())
+    monkeypatch.undo()
+    return seen
+
+
+@pytest.mark.parametrize("family", ["merge", "intersection", "overtaking"])
+def test_the_stage_recursion_decides_as_the_players_dense_blocks(family: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """On every interior-point matrix of ALGAMES's merges and intersections and of the overtaking game, the players'
+    stage recursion (the reduced Hessian's Riccati recursion over each player's stages) finds every block positive
+    definite exactly where the dense blocks' Cholesky factorisations all succeed, on a matrix with no convexifying
+    shift; where it says so, the shifts are zero and the scale, made when asked for, is the dense blocks'."""
+    from benchmarks.problems import trajectory
+
+    if banded_code.status() != "compiled":
+        pytest.skip(f"nothing compiled here: {banded_code.status()}")
+    problems = {"merge": lambda: trajectory.merge_problems(3),
+                "intersection": lambda: trajectory.intersection_problems(1),
+                "overtaking": trajectory.overtaking_problems}[family]()
+    seen = _interior_matrices(problems, 3, monkeypatch)
+    verdicts = {0: 0, 1: 0}
+    for barrier, data, D in seen:
+        blocks = barrier._blocks()
+        assert blocks._definite is not None  # these games have the stage structure
+        verdict = blocks._definite(data, D)
+        deltas, scale = blocks.shifts(data, D, recursion=False)
+        assert verdict == (1 if not any(deltas) else 0)
+        verdicts[verdict] += 1
+        if verdict == 1:
+            assert blocks.shifts(data, D) == ([0.0] * len(deltas), None)
+            barrier._scaled = interior_point._Factored(None, data, D, np.zeros(0), None, {}, True)
+            assert barrier.scale == scale
+    assert verdicts[1] > 0 and (family == "intersection" or verdicts[0] > 0)  # both answers met (the intersection:
+    # its players' blocks are positive definite at every step of draw 0)
+
+
+def test_a_hessian_entry_between_two_stages_leaves_the_dense_blocks(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A game whose Hessian couples two stages' groups (here a player's u(0) and u(1), as a cost on their difference
+    would) has no stage recursion: its players' blocks are formed and tested densely, as before."""
+    import scipy.sparse as sp
+
+    game, solver, state = _merge_system()
+    system = solver.newton.system
+    ip = interior_point.InteriorPoint(solver.newton)
+    barrier = ip.linear
+    pattern = system.pattern
+    numbered = sp.csc_matrix((np.arange(1, pattern.nnz + 1, dtype=float), pattern.indices, pattern.indptr),
+                             shape=pattern.shape)
+    row_stage, _, col_stage, _ = system.stage_order.stages
+    agents = []
+    n, S, lam0 = game.n, system.S, barrier.lam0
+    P = lam0 - n - S
+    for ai, pi, own in zip(game.agent_slices, system.costates, system.states, strict=True):
+        agents.append((n + P + own, n + own, np.arange(ai.start, ai.stop), np.arange(n + pi.start, n + pi.stop),
+                       np.arange(n + S + pi.start, n + S + pi.stop)))
+    lam_I = lam0 + ip.I
+    assert interior_point._StageRecursion.build(numbered, agents, lam_I, row_stage, col_stage) is not None
+    decisions = np.arange(game.agent_slices[0].start, game.agent_slices[0].stop)
+    u0, u1 = decisions[col_stage[decisions] == 0][0], decisions[col_stage[decisions] == 1][0]
+    coupled = numbered.tolil()
+    coupled[u0, u1] = pattern.nnz + 1.0
+    assert interior_point._StageRecursion.build(coupled.tocsc(), agents, lam_I, row_stage, col_stage) is None
 
 
 def test_the_interior_matrix_solved_with_its_inequality_multipliers_eliminated() -> None:

@@ -580,6 +580,144 @@ int players_complement(const long long *dims, const long long *const *ix, const 
     return 0;
 }
 
+/* ---- whether every player's block is positive definite, by a recursion over its stages ---- */
+
+/* Cholesky factor (lower, in place) of the k x k matrix a (row-major); 0 where a pivot is not positive (dpotrf's
+   test: not > 0, NaN included) */
+static int cholesky(int k, double *a) {
+    for (int j = 0; j < k; j++) {
+        double d = a[j * k + j];
+        for (int p = 0; p < j; p++) d -= a[j * k + p] * a[j * k + p];
+        if (!(d > 0.0)) return 0;
+        d = __builtin_sqrt(d);
+        a[j * k + j] = d;
+        for (int i = j + 1; i < k; i++) {
+            double v = a[i * k + j];
+            for (int p = 0; p < j; p++) v -= a[i * k + p] * a[j * k + p];
+            a[i * k + j] = v / d;
+        }
+    }
+    return 1;
+}
+
+/* gnerun.solvers.interior_point._StageRecursion: each player's block of the interior step's Schur complement is
+   the reduced Hessian of its barrier Lagrangian on its dynamics x(t+1) = A_t x(t) + B_t u(t). Stage t's group of
+   unknowns is z = (u(t), x(t), y = x(t+1)) (m = nu + 2 nx; x(0) is no unknown), its Hessian H_t the symmetric part of
+   the entries K assigns it plus C' D^-1 C over the multipliers it carries. From P_T = 0, with W = H_yy + P_{t+1}:
+     uu = H_uu + B' W B + H_uy B + B' H_uy',  ux = H_ux + B' W A + H_uy A + B' H_xy',
+     P_t = H_xx + A' W A + H_xy A + A' H_xy' - ux' uu^-1 ux;
+   the block is positive definite exactly when every uu is. dims: per player T, nu, nx and its multiplier terms; ix
+   (positions in data, -1: zero): per player and stage H (m x m), B (nx x nu), A (nx x nx), the dynamics' diagonal on
+   x(t+1) (nx: -1 there), then per term its stage (terms listed by stage), its multiplier (in D), its column over the
+   group's rows (m) and its row over the group's columns (m). Returns 1 where every player's block is positive
+   definite, 0 where one is not, -1 where the recursion cannot tell (a dynamics diagonal other than -1, a value not
+   finite). */
+static double at_(const double *data, long long k) { return k >= 0 ? data[k] : 0.0; }
+
+int players_definite(int agents, const long long *dims, const long long *const *ix, const double *data,
+                     const double *D, double *work) {
+    const long long *hp = ix[0], *bp = ix[1], *ap = ix[2], *dp = ix[3], *tg = ix[4], *td = ix[5], *tc = ix[6],
+                    *tr = ix[7];
+    for (int g = 0; g < agents; g++) {
+        int T = (int)dims[4 * g], nu = (int)dims[4 * g + 1], nx = (int)dims[4 * g + 2];
+        long long terms = dims[4 * g + 3];
+        int m = nu + 2 * nx, X = nu, Yo = nu + nx;  /* the group's x(t) and y = x(t+1) from these columns */
+        double *P = work, *W = P + nx * nx, *H = W + nx * nx, *uu = H + m * m, *ux = uu + nu * nu, *Y = ux + nu * nx,
+               *WB = Y + nu * nx, *WA = WB + nx * nu, *Bm = WA + nx * nx, *Am = Bm + nx * nu;
+        for (int i = 0; i < nx * nx; i++) P[i] = 0.0;
+        long long end = terms;
+        for (int t = T - 1; t >= 0; t--) {
+            const long long *h = hp + (long long)t * m * m, *b = bp + (long long)t * nx * nu,
+                            *a = ap + (long long)t * nx * nx, *d = dp + (long long)t * nx;
+            for (int i = 0; i < nx; i++)
+                if (d[i] < 0 || data[d[i]] != -1.0) return -1;
+            for (int i = 0; i < nx * nu; i++) Bm[i] = at_(data, b[i]);
+            for (int i = 0; i < nx * nx; i++) Am[i] = at_(data, a[i]);
+            for (int i = 0; i < m * m; i++) H[i] = at_(data, h[i]);
+            long long k = end;
+            while (k > 0 && tg[k - 1] == t) {
+                k--;
+                double inv = 1.0 / D[td[k]];
+                const long long *col = tc + k * m, *row = tr + k * m;
+                for (int i = 0; i < m; i++) {
+                    if (col[i] < 0) continue;
+                    double ci = data[col[i]] * inv;
+                    for (int j = 0; j < m; j++)
+                        if (row[j] >= 0) H[i * m + j] += ci * data[row[j]];
+                }
+            }
+            end = k;
+            for (int i = 0; i < m; i++)  /* the symmetric part, in place */
+                for (int j = i + 1; j < m; j++) {
+                    double v = 0.5 * (H[i * m + j] + H[j * m + i]);
+                    H[i * m + j] = H[j * m + i] = v;
+                }
+#define HH(i, j) H[(i) * m + (j)]
+            for (int i = 0; i < nx; i++)
+                for (int j = 0; j < nx; j++) W[i * nx + j] = HH(Yo + i, Yo + j) + P[i * nx + j];
+            for (int i = 0; i < nx; i++)
+                for (int j = 0; j < nu; j++) {
+                    double v = 0.0;
+                    for (int p = 0; p < nx; p++) v += W[i * nx + p] * Bm[p * nu + j];
+                    WB[i * nu + j] = v;
+                }
+            for (int i = 0; i < nu; i++)  /* uu = H_uu + B' W B + H_uy B + B' H_uy' */
+                for (int j = 0; j < nu; j++) {
+                    double v = HH(i, j);
+                    for (int p = 0; p < nx; p++)
+                        v += Bm[p * nu + i] * WB[p * nu + j] + HH(i, Yo + p) * Bm[p * nu + j]
+                             + Bm[p * nu + i] * HH(j, Yo + p);
+                    uu[i * nu + j] = v;
+                }
+            for (int i = 0; i < nu * nu; i++)
+                if (!(__builtin_fabs(uu[i]) <= __DBL_MAX__)) return -1;
+            if (!cholesky(nu, uu)) return 0;
+            if (t == 0) break;
+            for (int i = 0; i < nx; i++)
+                for (int j = 0; j < nx; j++) {
+                    double v = 0.0;
+                    for (int p = 0; p < nx; p++) v += W[i * nx + p] * Am[p * nx + j];
+                    WA[i * nx + j] = v;
+                }
+            for (int i = 0; i < nu; i++)  /* ux = H_ux + B' W A + H_uy A + B' H_xy' */
+                for (int j = 0; j < nx; j++) {
+                    double v = HH(i, X + j);
+                    for (int p = 0; p < nx; p++)
+                        v += Bm[p * nu + i] * WA[p * nx + j] + HH(i, Yo + p) * Am[p * nx + j]
+                             + Bm[p * nu + i] * HH(X + j, Yo + p);
+                    ux[i * nx + j] = v;
+                }
+            for (int j = 0; j < nx; j++) {  /* Y = uu^-1 ux by the Cholesky factor */
+                for (int i = 0; i < nu; i++) {
+                    double v = ux[i * nx + j];
+                    for (int p = 0; p < i; p++) v -= uu[i * nu + p] * Y[p * nx + j];
+                    Y[i * nx + j] = v / uu[i * nu + i];
+                }
+                for (int i = nu - 1; i >= 0; i--) {
+                    double v = Y[i * nx + j];
+                    for (int p = i + 1; p < nu; p++) v -= uu[p * nu + i] * Y[p * nx + j];
+                    Y[i * nx + j] = v / uu[i * nu + i];
+                }
+            }
+            for (int i = 0; i < nx; i++)  /* P = H_xx + A' W A + H_xy A + A' H_xy' - ux' Y */
+                for (int j = 0; j < nx; j++) {
+                    double v = HH(X + i, X + j);
+                    for (int p = 0; p < nx; p++)
+                        v += Am[p * nx + i] * WA[p * nx + j] + HH(X + i, Yo + p) * Am[p * nx + j]
+                             + Am[p * nx + i] * HH(X + j, Yo + p);
+                    for (int p = 0; p < nu; p++) v -= ux[p * nx + i] * Y[p * nx + j];
+                    P[i * nx + j] = v;
+                }
+#undef HH
+            for (int i = 0; i < nx * nx; i++)
+                if (!(__builtin_fabs(P[i]) <= __DBL_MAX__)) return -1;
+        }
+        hp += (long long)T * m * m; bp += (long long)T * nx * nu; ap += (long long)T * nx * nx; dp += (long long)T * nx;
+        tg += terms; td += terms; tc += terms * m; tr += terms * m;
+    }
+    return 1;
+}
+
 /* ---- the players' convexifying shifts (gnerun.solvers.interior_point.convexifying_shift) ---- */
 
 typedef void (*potrf_t)(char *, int *, double *, int *, int *);
@@ -750,6 +888,34 @@ def eliminated_solve(ix: list[np.ndarray], kl: int, ku: int) -> EliminatedSolve 
     return EliminatedSolve(kernels[6], ix, kl, ku)
 
 
+class PlayersDefinite:
+    """The compiled recursion of :class:`gnerun.solvers.interior_point._StageRecursion` (``dims``: per player T, nu,
+    nx and its multiplier terms; ``ix``: the position arrays in ``players_definite``'s order)."""
+
+    def __init__(self, function, dims: np.ndarray, ix: list[np.ndarray], work: int) -> None:
+        self._function = function
+        self._dims = np.ascontiguousarray(dims, dtype=np.int64)
+        self._ix = [np.ascontiguousarray(v, dtype=np.int64) for v in ix]  # held: the pointers point into them
+        self._pointers = (ctypes.c_void_p * len(self._ix))(*[v.ctypes.data for v in self._ix])
+        self._work = np.empty(work)
+        self._agents = self._dims.size // 4
+
+    def __call__(self, data: np.ndarray, D: np.ndarray) -> int:
+        """1 where every player's block is positive definite, 0 where one is not, -1 where it cannot tell."""
+        data = np.ascontiguousarray(data, dtype=np.float64)
+        D = np.ascontiguousarray(D, dtype=np.float64)
+        return self._function(self._agents, self._dims.ctypes.data, ctypes.addressof(self._pointers),
+                              data.ctypes.data, D.ctypes.data, self._work.ctypes.data)
+
+
+def players_definite(dims: np.ndarray, ix: list[np.ndarray], work: int) -> PlayersDefinite | None:
+    """The compiled stage recursion for these positions, or None where nothing is compiled."""
+    kernels = _lu_kernels()
+    if kernels is None:
+        return None
+    return PlayersDefinite(kernels[7], dims, ix, work)
+
+
 def one_norm(ab: np.ndarray) -> float | None:
     """``float(np.abs(ab).sum(axis=0).max())`` of a Fortran-ordered band (numpy's pairwise sums, the same number),
     without its temporary arrays; None where nothing is compiled."""
@@ -878,7 +1044,11 @@ def _load():
     eliminated = lib.eliminated_solve
     eliminated.restype = None
     eliminated.argtypes = [ctypes.c_void_p] * 10
-    return kernel, (factor, solve_lu, inverse_norm, norm, complement, (shifts, _potrf()), eliminated), "compiled"
+    definite = lib.players_definite
+    definite.restype = ctypes.c_int
+    definite.argtypes = [ctypes.c_int] + [ctypes.c_void_p] * 5
+    return kernel, (factor, solve_lu, inverse_norm, norm, complement, (shifts, _potrf()), eliminated,
+                    definite), "compiled"
 
 
 def _potrf() -> int | None:

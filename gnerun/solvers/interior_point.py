@@ -419,7 +419,6 @@ class SparseBarrier:
     def __init__(self, system, ip: InteriorPoint) -> None:
         self.system = system
         self.ip = ip
-        self.scale = 1.0
         size, m, n = system.size, system.m, ip.n
         self.lam0 = size - m
         keep = np.ones(size, dtype=bool)
@@ -431,6 +430,20 @@ class SparseBarrier:
         self._templates: _AgentBlocks | None = None
         self._diagonal: np.ndarray | None = None
         self._held: _Factored | None = None  # the last matrix factorised (see _factored)
+        self._scaled: _Factored | None = None  # the matrix of the last direction (its scale: see scale)
+
+    @property
+    def scale(self) -> float:
+        """The condensed form's scale of the last direction's matrix (what its regularisation is a multiple of): the
+        largest diagonal entry of its shifted Schur complement, at least 1; made from the dense players' blocks when
+        first asked for where the stage recursion found every block positive definite (:class:`_StageRecursion`)."""
+        held = self._scaled
+        if held is None:
+            return 1.0
+        if held.scale is None:
+            found = self._blocks().shifts(held.data, held.D, recursion=False)
+            held.scale = 1.0 if found is None else found[1]
+        return held.scale
 
     def _blocks(self) -> _AgentBlocks:
         """The sub-blocks of K that the players' blocks of the complement are built from: sliced once per system and
@@ -460,7 +473,8 @@ class SparseBarrier:
             a_cols = np.arange(ai.start, ai.stop)
             g_rows, p_cols = np.arange(n + pi.start, n + pi.stop), np.arange(n + S + pi.start, n + S + pi.stop)
             agents.append((n + P + own, n + own, a_cols, g_rows, p_cols))
-        templates = _AgentBlocks(numbered, agents, lam_I)
+        row_stage, _, col_stage, _ = system.stage_order.stages
+        templates = _AgentBlocks(numbered, agents, lam_I, (row_stage, col_stage))
         # where K's diagonal entries of the decisions are among its nonzeros (-1: not in the pattern)
         diagonal = numbered.diagonal()[:n].astype(np.int64) - 1
         return templates, diagonal
@@ -505,7 +519,7 @@ class SparseBarrier:
         rhs[lam0 + E] = -it.c[E]
         rhs = rhs[keep]
         held = self._factored(parts, D)
-        self.scale = held.scale
+        self._scaled = held
 
         def solve(delta: float):
             entry = held.factors.get(delta)
@@ -542,7 +556,7 @@ class _Factored:
     data: np.ndarray
     D: np.ndarray
     diagonal: np.ndarray
-    scale: float
+    scale: float | None  # None: not made yet (SparseBarrier.scale makes it when asked for)
     factors: dict
     convex: bool  # every player's block was positive definite as it was (no shift)
     matrix: np.ndarray | None = None
@@ -564,7 +578,10 @@ class _AgentBlocks:
     one product serve every agent: the per-agent calls cost more than their arithmetic. The blocks are zero between
     agents, so each agent's entries are computed by the same operations as on its own."""
 
-    def __init__(self, numbered, agents: list[tuple[np.ndarray, ...]], lam_I: np.ndarray) -> None:
+    def __init__(self, numbered, agents: list[tuple[np.ndarray, ...]], lam_I: np.ndarray,
+                 stages: tuple[np.ndarray, np.ndarray] | None = None) -> None:
+        # the stage recursion (None where K has not the structure, or nothing is compiled)
+        self._definite = None if stages is None else _StageRecursion.build(numbered, agents, lam_I, *stages)
         self.states = np.array([x.size for _, x, _, _, _ in agents])
         self.decisions = np.array([a.size for _, _, a, _, _ in agents])
         width = dmax = 0
@@ -625,10 +642,14 @@ class _AgentBlocks:
         S, rows = K[self.counts[0] + self.counts[1]:], self._rows
         return [S[rows[i]:rows[i + 1], :k] for i, k in enumerate(self.decisions)]
 
-    def shifts(self, data: np.ndarray, D: np.ndarray) -> tuple[list[float], float] | None:
+    def shifts(self, data: np.ndarray, D: np.ndarray,
+               recursion: bool = True) -> tuple[list[float], float | None] | None:
         """Each agent's :func:`convexifying_shift` of its block, and the largest |diagonal entry + shift| over all
         blocks, at least 1; None if some D_x is singular. Compiled with the complement (the same dpotrf), once its
-        first result equals numpy's, else numpy's."""
+        first result equals numpy's, else numpy's. Where the stage recursion (``recursion``) finds every block
+        positive definite, no block is formed: the shifts are zero, and the scale None (made when asked for)."""
+        if recursion and self._definite is not None and self._definite(data, D) == 1:
+            return [0.0] * self.decisions.size, None
         K = self._stacked(data, D)
         if K is None:
             return None
@@ -704,6 +725,115 @@ class _AgentBlocks:
         S += self._Ap(data) @ G
         S += LY[ng:]
         return K
+
+
+class _StageRecursion:
+    """Whether every player's block of the Schur complement is positive definite, by a recursion over each player's
+    stages instead of the dense blocks (:func:`gnerun.game.banded.players_definite`, in C): the block is the reduced
+    Hessian of the player's barrier Lagrangian on its dynamics. Its unknowns grouped by stage as (u(t), x(t+1)) (the
+    sparse system's stage order), with the group's Hessian (the symmetric part of K's rows u(t) and x(t+1)'s costate
+    rows, columns u(t) and x(t+1), plus C' D^-1 C over the multipliers the player carries) and the dynamics' rows
+    (-I on x(t+1), A_t on x(t), B_t on u(t)), a Riccati recursion from the last stage tests one u(t)-block each: on
+    ALGAMES's merges and intersections it decides as the dense blocks' Cholesky factorisations do, in a fraction of
+    their time (benchmarks/results/solver-design.md). Built only where every player's K has that structure (no entry
+    between two stages' groups but the dynamics', every carried multiplier's row within one stage); None otherwise.
+    The recursion's answer is used where it is "every block positive definite": then no player is shifted, as the
+    dense test would find; elsewhere the dense blocks decide."""
+
+    @classmethod
+    def build(cls, numbered, agents: list[tuple[np.ndarray, ...]], lam_I: np.ndarray, row_stage: np.ndarray,
+              col_stage: np.ndarray):
+        parts = []
+        for d_rows, x_cols, a_cols, g_rows, _ in agents:
+            part = cls._player(numbered, d_rows, x_cols, a_cols, g_rows, lam_I, row_stage, col_stage)
+            if part is None:
+                return None
+            parts.append(part)
+        dims = np.array([[T, nu, nx, tg.size] for T, nu, nx, _, _, _, _, tg, _, _, _ in parts], dtype=np.int64)
+        ix = [np.concatenate([part[k].reshape(-1) for part in parts]) for k in range(3, 11)]
+        m, nu, nx = int((dims[:, 1] + 2 * dims[:, 2]).max()), int(dims[:, 1].max()), int(dims[:, 2].max())
+        work = 4 * nx * nx + m * m + nu * nu + 4 * nu * nx + 1
+        return banded.players_definite(dims.reshape(-1), ix, work)
+
+    @staticmethod
+    def _player(numbered, d_rows, x_cols, a_cols, g_rows, lam_I, row_stage, col_stage):
+        """(T, nu, nx, and the position arrays of ``players_definite`` for one player), or None where its K does not
+        have the stage structure. Stage t's local unknowns are (u(t), x(t), x(t+1)) (x(0) is the plant state, not an
+        unknown): every Hessian entry and every carried row lies in one such group, or there is no recursion."""
+        T = int(col_stage[a_cols].max(initial=-1)) + 1
+        if T <= 0 or a_cols.size % T or x_cols.size % T or d_rows.size != x_cols.size or g_rows.size != x_cols.size:
+            return None
+        nu, nx = a_cols.size // T, x_cols.size // T
+        stage_u, stage_x = np.repeat(np.arange(T), nu), np.repeat(np.arange(T), nx)
+        if not (np.array_equal(col_stage[a_cols], stage_u) and np.array_equal(col_stage[x_cols], stage_x)
+                and np.array_equal(row_stage[d_rows], stage_x) and np.array_equal(row_stage[g_rows], stage_x)):
+            return None
+        mz = nu + 2 * nx
+        # the player's unknowns (its decisions' rows and columns, then its states' costate rows and columns): kind
+        # (0: u(t), 1: x(s), s = t + 1 for the states of stage t), time and component
+        kind = np.concatenate([np.zeros(a_cols.size, dtype=np.int64), np.ones(x_cols.size, dtype=np.int64)])
+        time = np.concatenate([stage_u, stage_x + 1])
+        comp = np.concatenate([np.tile(np.arange(nu), T), np.tile(np.arange(nx), T)])
+
+        def local(k, tau, c, t):
+            """Where unknowns sit in stage t's group (u(t), x(t), x(t+1)); -1 where outside it."""
+            out = np.where(k == 0, np.where(tau == t, c, -1), np.where(tau == t, nu + c, np.where(
+                tau == t + 1, nu + nx + c, -1)))
+            return np.where((k == 1) & (tau == 0), -1, out)
+
+        def stage_of(k, tau):
+            """The group of a set of unknowns (the stage of its decisions; of states alone, the group where the
+            latest is x(t+1)); -1 where no one group holds them all."""
+            t = int(tau[k == 0][0]) if (k == 0).any() else int(tau.max()) - 1
+            return t if 0 <= t < T and np.all(local(k, tau, np.zeros_like(k), t) >= 0) else -1
+
+        rows, cols = np.concatenate([a_cols, g_rows]), np.concatenate([a_cols, x_cols])
+        hh = numbered[rows][:, cols].tocoo()
+        H = np.full((T, mz, mz), -1, dtype=np.int64)
+        for r, c, number in zip(hh.row, hh.col, hh.data.astype(np.int64), strict=True):
+            pair_k, pair_t = kind[[r, c]], time[[r, c]]
+            t = stage_of(pair_k, pair_t)
+            if t < 0:  # a Hessian entry between two stages' groups
+                return None
+            i, j = local(pair_k, pair_t, comp[[r, c]], t)
+            H[t, i, j] = number - 1
+        # the dynamics f(x(t), u(t)) - x(t+1): B on u(t), A on x(t), -I on x(t+1), nothing else of the player's
+        dd = numbered[d_rows][:, cols].tocoo()
+        B = np.full((T, nx, nu), -1, dtype=np.int64)
+        A = np.full((T, nx, nx), -1, dtype=np.int64)
+        diag = np.full((T, nx), -1, dtype=np.int64)
+        for r, c, number in zip(dd.row, dd.col, dd.data.astype(np.int64), strict=True):
+            t, i = int(stage_x[r]), int(comp[a_cols.size + r])
+            k, tau, j = int(kind[c]), int(time[c]), int(comp[c])
+            if k == 0 and tau == t:
+                B[t, i, j] = number - 1
+            elif k == 1 and tau == t and t > 0:
+                A[t, i, j] = number - 1
+            elif k == 1 and tau == t + 1 and i == j:
+                diag[t, i] = number - 1
+            else:
+                return None
+        # the multipliers the player carries (its rows have their columns), each within one stage's group
+        carried = np.flatnonzero(numbered[rows][:, lam_I].getnnz(axis=0) > 0)
+        terms = []
+        if carried.size:
+            col = numbered[rows][:, lam_I[carried]].toarray().astype(np.int64).T - 1
+            row = numbered[lam_I[carried]][:, cols].toarray().astype(np.int64) - 1
+            for j, c, r in zip(carried, col, row, strict=True):
+                support = np.flatnonzero((c >= 0) | (r >= 0))
+                t = stage_of(kind[support], time[support])
+                if t < 0:
+                    return None
+                at = local(kind[support], time[support], comp[support], t)
+                cz, rz = np.full(mz, -1, dtype=np.int64), np.full(mz, -1, dtype=np.int64)
+                cz[at], rz[at] = c[support], r[support]
+                terms.append((t, int(j), cz, rz))
+        terms.sort(key=lambda term: term[0])
+        tg = np.array([t for t, _, _, _ in terms], dtype=np.int64)
+        td = np.array([j for _, j, _, _ in terms], dtype=np.int64)
+        tc = np.array([c for _, _, c, _ in terms], dtype=np.int64).reshape(-1, mz)
+        tr = np.array([r for _, _, _, r in terms], dtype=np.int64).reshape(-1, mz)
+        return T, nu, nx, H, B, A, diag, tg, td, tc, tr
 
 
 def _placed(numbered, blocks: list[tuple[np.ndarray, np.ndarray, int]]):
