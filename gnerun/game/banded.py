@@ -607,17 +607,17 @@ static int cholesky(int k, double *a) {
      uu = H_uu + B' W B + H_uy B + B' H_uy',  ux = H_ux + B' W A + H_uy A + B' H_xy',
      P_t = H_xx + A' W A + H_xy A + A' H_xy' - ux' uu^-1 ux;
    the block is positive definite exactly when every uu is. dims: per player T, nu, nx and its multiplier terms; ix
-   (positions in data, -1: zero): per player and stage H (m x m), B (nx x nu), A (nx x nx), the dynamics' diagonal on
-   x(t+1) (nx: -1 there), then per term its stage (terms listed by stage), its multiplier (in D), its column over the
-   group's rows (m) and its row over the group's columns (m). Returns 1 where every player's block is positive
-   definite, 0 where one is not, -1 where the recursion cannot tell (a dynamics diagonal other than -1, a value not
-   finite). */
+   (positions in data, -1: zero): per player and stage the number of H's entries (m x m), then those entries' places
+   in H and positions, B (nx x nu), A (nx x nx), the dynamics' diagonal on x(t+1) (nx: -1 there), then per term its
+   stage (terms listed by stage), its multiplier (in D), its column over the group's rows (m) and its row over the
+   group's columns (m). Returns 1 where every player's block is positive definite, 0 where one is not, -1 where the
+   recursion cannot tell (a dynamics diagonal other than -1, a value not finite). */
 static double at_(const double *data, long long k) { return k >= 0 ? data[k] : 0.0; }
 
 int players_definite(int agents, const long long *dims, const long long *const *ix, const double *data,
                      const double *D, double *work) {
-    const long long *hp = ix[0], *bp = ix[1], *ap = ix[2], *dp = ix[3], *tg = ix[4], *td = ix[5], *tc = ix[6],
-                    *tr = ix[7];
+    const long long *hn = ix[0], *hi = ix[1], *hp = ix[2], *bp = ix[3], *ap = ix[4], *dp = ix[5], *tg = ix[6],
+                    *td = ix[7], *tc = ix[8], *tr = ix[9];
     for (int g = 0; g < agents; g++) {
         int T = (int)dims[4 * g], nu = (int)dims[4 * g + 1], nx = (int)dims[4 * g + 2];
         long long terms = dims[4 * g + 3];
@@ -626,25 +626,31 @@ int players_definite(int agents, const long long *dims, const long long *const *
                *WB = Y + nu * nx, *WA = WB + nx * nu, *Bm = WA + nx * nx, *Am = Bm + nx * nu;
         for (int i = 0; i < nx * nx; i++) P[i] = 0.0;
         long long end = terms;
+        long long h_end = 0;
+        for (int t = 0; t < T; t++) h_end += hn[t];
         for (int t = T - 1; t >= 0; t--) {
-            const long long *h = hp + (long long)t * m * m, *b = bp + (long long)t * nx * nu,
-                            *a = ap + (long long)t * nx * nx, *d = dp + (long long)t * nx;
+            const long long *b = bp + (long long)t * nx * nu, *a = ap + (long long)t * nx * nx,
+                            *d = dp + (long long)t * nx;
+            long long h_start = h_end - hn[t];
             for (int i = 0; i < nx; i++)
                 if (d[i] < 0 || data[d[i]] != -1.0) return -1;
             for (int i = 0; i < nx * nu; i++) Bm[i] = at_(data, b[i]);
             for (int i = 0; i < nx * nx; i++) Am[i] = at_(data, a[i]);
-            for (int i = 0; i < m * m; i++) H[i] = at_(data, h[i]);
+            for (int i = 0; i < m * m; i++) H[i] = 0.0;
+            for (long long e = h_start; e < h_end; e++) H[hi[e]] = data[hp[e]];
+            h_end = h_start;
             long long k = end;
-            while (k > 0 && tg[k - 1] == t) {
+            while (k > 0 && tg[k - 1] == t) {  /* + col D^-1 row, over the entries there are */
                 k--;
-                double inv = 1.0 / D[td[k]];
+                double inv = 1.0 / D[td[k]], cv[m], rv[m];
+                int ci[m], ri[m], nc = 0, nr = 0;
                 const long long *col = tc + k * m, *row = tr + k * m;
                 for (int i = 0; i < m; i++) {
-                    if (col[i] < 0) continue;
-                    double ci = data[col[i]] * inv;
-                    for (int j = 0; j < m; j++)
-                        if (row[j] >= 0) H[i * m + j] += ci * data[row[j]];
+                    if (col[i] >= 0) { ci[nc] = i; cv[nc++] = data[col[i]] * inv; }
+                    if (row[i] >= 0) { ri[nr] = i; rv[nr++] = data[row[i]]; }
                 }
+                for (int a = 0; a < nc; a++)
+                    for (int b = 0; b < nr; b++) H[ci[a] * m + ri[b]] += cv[a] * rv[b];
             }
             end = k;
             for (int i = 0; i < m; i++)  /* the symmetric part, in place */
@@ -712,7 +718,10 @@ int players_definite(int agents, const long long *dims, const long long *const *
             for (int i = 0; i < nx * nx; i++)
                 if (!(__builtin_fabs(P[i]) <= __DBL_MAX__)) return -1;
         }
-        hp += (long long)T * m * m; bp += (long long)T * nx * nu; ap += (long long)T * nx * nx; dp += (long long)T * nx;
+        long long entries = 0;
+        for (int t = 0; t < T; t++) entries += hn[t];
+        hn += T; hi += entries; hp += entries;
+        bp += (long long)T * nx * nu; ap += (long long)T * nx * nx; dp += (long long)T * nx;
         tg += terms; td += terms; tc += terms * m; tr += terms * m;
     }
     return 1;

@@ -749,8 +749,8 @@ class _StageRecursion:
             if part is None:
                 return None
             parts.append(part)
-        dims = np.array([[T, nu, nx, tg.size] for T, nu, nx, _, _, _, _, tg, _, _, _ in parts], dtype=np.int64)
-        ix = [np.concatenate([part[k].reshape(-1) for part in parts]) for k in range(3, 11)]
+        dims = np.array([[part[0], part[1], part[2], part[9].size] for part in parts], dtype=np.int64)
+        ix = [np.concatenate([part[k].reshape(-1) for part in parts]) for k in range(3, 13)]
         m, nu, nx = int((dims[:, 1] + 2 * dims[:, 2]).max()), int(dims[:, 1].max()), int(dims[:, 2].max())
         work = 4 * nx * nx + m * m + nu * nu + 4 * nu * nx + 1
         return banded.players_definite(dims.reshape(-1), ix, work)
@@ -833,7 +833,10 @@ class _StageRecursion:
         td = np.array([j for _, j, _, _ in terms], dtype=np.int64)
         tc = np.array([c for _, _, c, _ in terms], dtype=np.int64).reshape(-1, mz)
         tr = np.array([r for _, _, _, r in terms], dtype=np.int64).reshape(-1, mz)
-        return T, nu, nx, H, B, A, diag, tg, td, tc, tr
+        # H's entries there are, stage by stage: how many, where in the group's matrix, where in K's nonzeros
+        flat = H.reshape(T, -1)
+        there = flat >= 0
+        return (T, nu, nx, there.sum(axis=1), np.nonzero(there)[1], flat[there], B, A, diag, tg, td, tc, tr)
 
 
 def _placed(numbered, blocks: list[tuple[np.ndarray, np.ndarray, int]]):
