@@ -350,6 +350,7 @@ _COMPILED = (("LU", "gnerun.game.banded", None, "lu_factor"), ("solves", "gnerun
              ("estimate", "gnerun.game.banded", None, "lu_inverse_norm"),
              ("complement", "gnerun.game.banded", "PlayersComplement", "__call__"),
              ("shifts", "gnerun.game.banded", "PlayersComplement", "shifts"),
+             ("stage recursion", "gnerun.game.banded", "PlayersDefinite", "__call__"),
              ("CasADi", "gnerun.game.evaluator", "Evaluator", "__call__"))
 
 

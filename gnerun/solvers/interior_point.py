@@ -775,64 +775,60 @@ class _StageRecursion:
         time = np.concatenate([stage_u, stage_x + 1])
         comp = np.concatenate([np.tile(np.arange(nu), T), np.tile(np.arange(nx), T)])
 
-        def local(k, tau, c, t):
+        def place(k, tau, c, t):
             """Where unknowns sit in stage t's group (u(t), x(t), x(t+1)); -1 where outside it."""
-            out = np.where(k == 0, np.where(tau == t, c, -1), np.where(tau == t, nu + c, np.where(
-                tau == t + 1, nu + nx + c, -1)))
-            return np.where((k == 1) & (tau == 0), -1, out)
+            return np.where(k == 0, np.where(tau == t, c, -1),
+                            np.where(tau == t, nu + c, np.where(tau == t + 1, nu + nx + c, -1)))
 
-        def stage_of(k, tau):
-            """The group of a set of unknowns (the stage of its decisions; of states alone, the group where the
-            latest is x(t+1)); -1 where no one group holds them all."""
-            t = int(tau[k == 0][0]) if (k == 0).any() else int(tau.max()) - 1
-            return t if 0 <= t < T and np.all(local(k, tau, np.zeros_like(k), t) >= 0) else -1
+        def group(u, tau_u, tau_last):
+            """The group of a set of unknowns: the stage of its decisions (``u``: it has some, at ``tau_u``), of
+            states alone the group where the latest (``tau_last``) is x(t+1)."""
+            return np.where(u, tau_u, tau_last - 1)
 
         rows, cols = np.concatenate([a_cols, g_rows]), np.concatenate([a_cols, x_cols])
         hh = numbered[rows][:, cols].tocoo()
+        r, c, number = hh.row, hh.col, hh.data.astype(np.int64) - 1
+        t = group((kind[r] == 0) | (kind[c] == 0), np.where(kind[r] == 0, time[r], time[c]), np.maximum(time[r],
+                                                                                                     time[c]))
+        i, j = place(kind[r], time[r], comp[r], t), place(kind[c], time[c], comp[c], t)
+        if not np.all((t >= 0) & (t < T) & (i >= 0) & (j >= 0)):  # a Hessian entry between two stages' groups
+            return None
         H = np.full((T, mz, mz), -1, dtype=np.int64)
-        for r, c, number in zip(hh.row, hh.col, hh.data.astype(np.int64), strict=True):
-            pair_k, pair_t = kind[[r, c]], time[[r, c]]
-            t = stage_of(pair_k, pair_t)
-            if t < 0:  # a Hessian entry between two stages' groups
-                return None
-            i, j = local(pair_k, pair_t, comp[[r, c]], t)
-            H[t, i, j] = number - 1
+        H[t, i, j] = number
         # the dynamics f(x(t), u(t)) - x(t+1): B on u(t), A on x(t), -I on x(t+1), nothing else of the player's
         dd = numbered[d_rows][:, cols].tocoo()
+        r, c, number = dd.row, dd.col, dd.data.astype(np.int64) - 1
+        t, i = stage_x[r], comp[a_cols.size + r]
+        on_u = (kind[c] == 0) & (time[c] == t)
+        on_x = (kind[c] == 1) & (time[c] == t) & (t > 0)
+        on_y = (kind[c] == 1) & (time[c] == t + 1) & (comp[c] == i)
+        if not np.all(on_u | on_x | on_y):
+            return None
         B = np.full((T, nx, nu), -1, dtype=np.int64)
         A = np.full((T, nx, nx), -1, dtype=np.int64)
         diag = np.full((T, nx), -1, dtype=np.int64)
-        for r, c, number in zip(dd.row, dd.col, dd.data.astype(np.int64), strict=True):
-            t, i = int(stage_x[r]), int(comp[a_cols.size + r])
-            k, tau, j = int(kind[c]), int(time[c]), int(comp[c])
-            if k == 0 and tau == t:
-                B[t, i, j] = number - 1
-            elif k == 1 and tau == t and t > 0:
-                A[t, i, j] = number - 1
-            elif k == 1 and tau == t + 1 and i == j:
-                diag[t, i] = number - 1
-            else:
-                return None
-        # the multipliers the player carries (its rows have their columns), each within one stage's group
+        B[t[on_u], i[on_u], comp[c[on_u]]] = number[on_u]
+        A[t[on_x], i[on_x], comp[c[on_x]]] = number[on_x]
+        diag[t[on_y], i[on_y]] = number[on_y]
+        # the multipliers the player carries (its rows have their columns), each within one stage's group: its column
+        # over the player's rows and its row over the player's columns, placed in the group's order
         carried = np.flatnonzero(numbered[rows][:, lam_I].getnnz(axis=0) > 0)
-        terms = []
-        if carried.size:
-            col = numbered[rows][:, lam_I[carried]].toarray().astype(np.int64).T - 1
-            row = numbered[lam_I[carried]][:, cols].toarray().astype(np.int64) - 1
-            for j, c, r in zip(carried, col, row, strict=True):
-                support = np.flatnonzero((c >= 0) | (r >= 0))
-                t = stage_of(kind[support], time[support])
-                if t < 0:
-                    return None
-                at = local(kind[support], time[support], comp[support], t)
-                cz, rz = np.full(mz, -1, dtype=np.int64), np.full(mz, -1, dtype=np.int64)
-                cz[at], rz[at] = c[support], r[support]
-                terms.append((t, int(j), cz, rz))
-        terms.sort(key=lambda term: term[0])
-        tg = np.array([t for t, _, _, _ in terms], dtype=np.int64)
-        td = np.array([j for _, j, _, _ in terms], dtype=np.int64)
-        tc = np.array([c for _, _, c, _ in terms], dtype=np.int64).reshape(-1, mz)
-        tr = np.array([r for _, _, _, r in terms], dtype=np.int64).reshape(-1, mz)
+        col = numbered[rows][:, lam_I[carried]].toarray().astype(np.int64).T - 1
+        row = numbered[lam_I[carried]][:, cols].toarray().astype(np.int64) - 1
+        support = (col >= 0) | (row >= 0)
+        u = support & (kind == 0)
+        t = group(u.any(axis=1), np.where(u, time, -1).max(axis=1, initial=-1),
+                  np.where(support, time, -1).max(axis=1, initial=-1))
+        at = place(kind, time, comp, t[:, None])
+        if not (np.all((t >= 0) & (t < T)) and np.all(~support | (at >= 0))):
+            return None
+        tc, tr = np.full((carried.size, mz), -1, dtype=np.int64), np.full((carried.size, mz), -1, dtype=np.int64)
+        k, e = np.nonzero(col >= 0)
+        tc[k, at[k, e]] = col[k, e]
+        k, e = np.nonzero(row >= 0)
+        tr[k, at[k, e]] = row[k, e]
+        order = np.argsort(t, kind="stable")  # by stage
+        tg, td, tc, tr = t[order].astype(np.int64), carried[order].astype(np.int64), tc[order], tr[order]
         # H's entries there are, stage by stage: how many, where in the group's matrix, where in K's nonzeros
         flat = H.reshape(T, -1)
         there = flat >= 0
