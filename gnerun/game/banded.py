@@ -906,15 +906,16 @@ class PlayersDefinite:
         self._dims = np.ascontiguousarray(dims, dtype=np.int64)
         self._ix = [np.ascontiguousarray(v, dtype=np.int64) for v in ix]  # held: the pointers point into them
         self._pointers = (ctypes.c_void_p * len(self._ix))(*[v.ctypes.data for v in self._ix])
-        self._work = np.empty(work)
+        self._work = work
         self._agents = self._dims.size // 4
 
     def __call__(self, data: np.ndarray, D: np.ndarray) -> int:
         """1 where every player's block is positive definite, 0 where one is not, -1 where it cannot tell."""
         data = np.ascontiguousarray(data, dtype=np.float64)
         D = np.ascontiguousarray(D, dtype=np.float64)
+        work = np.empty(self._work)  # per call: ctypes lets go of the GIL, and two threads may share a system
         return self._function(self._agents, self._dims.ctypes.data, ctypes.addressof(self._pointers),
-                              data.ctypes.data, D.ctypes.data, self._work.ctypes.data)
+                              data.ctypes.data, D.ctypes.data, work.ctypes.data)
 
 
 def players_definite(dims: np.ndarray, ix: list[np.ndarray], work: int) -> PlayersDefinite | None:
