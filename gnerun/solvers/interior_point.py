@@ -730,15 +730,16 @@ class _AgentBlocks:
 class _StageRecursion:
     """Whether every player's block of the Schur complement is positive definite, by a recursion over each player's
     stages instead of the dense blocks (:func:`gnerun.game.banded.players_definite`, in C): the block is the reduced
-    Hessian of the player's barrier Lagrangian on its dynamics. Its unknowns grouped by stage as (u(t), x(t+1)) (the
-    sparse system's stage order), with the group's Hessian (the symmetric part of K's rows u(t) and x(t+1)'s costate
-    rows, columns u(t) and x(t+1), plus C' D^-1 C over the multipliers the player carries) and the dynamics' rows
-    (-I on x(t+1), A_t on x(t), B_t on u(t)), a Riccati recursion from the last stage tests one u(t)-block each: on
-    ALGAMES's merges and intersections it decides as the dense blocks' Cholesky factorisations do, in a fraction of
-    their time (benchmarks/results/solver-design.md). Built only where every player's K has that structure (no entry
-    between two stages' groups but the dynamics', every carried multiplier's row within one stage); None otherwise.
-    The recursion's answer is used where it is "every block positive definite": then no player is shifted, as the
-    dense test would find; elsewhere the dense blocks decide."""
+    Hessian of the player's barrier Lagrangian on its dynamics. Its unknowns grouped by stage as (u(t), x(t), x(t+1))
+    (the sparse system's stage order; x(0) is the plant state), with the group's Hessian (the symmetric part of K's
+    entries between the group's rows, u(t) and the states' costate rows, and its columns, plus C' D^-1 C over the
+    multipliers the player carries) and the dynamics' rows (-I on x(t+1), A_t on x(t), B_t on u(t)), a Riccati
+    recursion from the last stage tests one u(t)-block each: on ALGAMES's merges and intersections and the overtaking
+    game it decides as the dense blocks' Cholesky factorisations do, in a fifth to a half of their time
+    (benchmarks/results/solver-design.md). Built only where every player's K has that structure (each Hessian entry
+    and each carried multiplier's row within one stage's group, the dynamics' rows as above); None otherwise. Its
+    answer is used where it is "every block positive definite": then no player is shifted, as the dense test would
+    find; elsewhere the dense blocks decide."""
 
     @classmethod
     def build(cls, numbered, agents: list[tuple[np.ndarray, ...]], lam_I: np.ndarray, row_stage: np.ndarray,
@@ -749,6 +750,8 @@ class _StageRecursion:
             if part is None:
                 return None
             parts.append(part)
+        # each part: T, nu, nx, then the position arrays in players_definite's order (H's entries per stage, their
+        # places, their positions, B, A, the dynamics' diagonal, the terms' stages, multipliers, columns and rows)
         dims = np.array([[part[0], part[1], part[2], part[9].size] for part in parts], dtype=np.int64)
         ix = [np.concatenate([part[k].reshape(-1) for part in parts]) for k in range(3, 13)]
         m, nu, nx = int((dims[:, 1] + 2 * dims[:, 2]).max()), int(dims[:, 1].max()), int(dims[:, 2].max())
