@@ -547,7 +547,7 @@ def test_the_stage_recursion_decides_as_the_players_dense_blocks(family: str, mo
         verdicts[verdict] += 1
         if verdict == 1:
             assert blocks.shifts(data, D) == ([0.0] * len(deltas), None)
-            barrier._scaled = interior_point._Factored(None, data, D, np.zeros(0), None, {}, True)
+            barrier._held = interior_point._Factored(None, data, D, np.zeros(0), None, {}, True)
             assert barrier.scale == scale
     assert verdicts[1] > 0 and (family == "intersection" or verdicts[0] > 0)  # both answers met (the intersection:
     # its players' blocks are positive definite at every step of draw 0)

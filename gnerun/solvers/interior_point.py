@@ -430,14 +430,14 @@ class SparseBarrier:
         self._templates: _AgentBlocks | None = None
         self._diagonal: np.ndarray | None = None
         self._held: _Factored | None = None  # the last matrix factorised (see _factored)
-        self._scaled: _Factored | None = None  # the matrix of the last direction (its scale: see scale)
 
     @property
     def scale(self) -> float:
-        """The condensed form's scale of the last direction's matrix (what its regularisation is a multiple of): the
-        largest diagonal entry of its shifted Schur complement, at least 1; made from the dense players' blocks when
-        first asked for where the stage recursion found every block positive definite (:class:`_StageRecursion`)."""
-        held = self._scaled
+        """The condensed form's scale of the last matrix factorised, the one of the last direction (what its
+        regularisation is a multiple of): the largest diagonal entry of its shifted Schur complement, at least 1;
+        made from the dense players' blocks when first asked for where the stage recursion found every block positive
+        definite (:class:`_StageRecursion`)."""
+        held = self._held
         if held is None:
             return 1.0
         if held.scale is None:
@@ -519,7 +519,6 @@ class SparseBarrier:
         rhs[lam0 + E] = -it.c[E]
         rhs = rhs[keep]
         held = self._factored(parts, D)
-        self._scaled = held
 
         def solve(delta: float):
             entry = held.factors.get(delta)
