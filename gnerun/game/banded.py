@@ -626,8 +626,9 @@ int players_definite(int agents, const long long *dims, const long long *const *
                *WB = Y + nu * nx, *WA = WB + nx * nu, *Bm = WA + nx * nx, *Am = Bm + nx * nu;
         for (int i = 0; i < nx * nx; i++) P[i] = 0.0;
         long long end = terms;
-        long long h_end = 0;
-        for (int t = 0; t < T; t++) h_end += hn[t];
+        long long entries = 0;  /* H's entries of this player, all stages */
+        for (int t = 0; t < T; t++) entries += hn[t];
+        long long h_end = entries;
         for (int t = T - 1; t >= 0; t--) {
             const long long *b = bp + (long long)t * nx * nu, *a = ap + (long long)t * nx * nx,
                             *d = dp + (long long)t * nx;
@@ -718,8 +719,6 @@ int players_definite(int agents, const long long *dims, const long long *const *
             for (int i = 0; i < nx * nx; i++)
                 if (!(__builtin_fabs(P[i]) <= __DBL_MAX__)) return -1;
         }
-        long long entries = 0;
-        for (int t = 0; t < T; t++) entries += hn[t];
         hn += T; hi += entries; hp += entries;
         bp += (long long)T * nx * nu; ap += (long long)T * nx * nx; dp += (long long)T * nx;
         tg += terms; td += terms; tc += terms * m; tr += terms * m;
