@@ -63,6 +63,8 @@ def test_the_stage_kernels_give_the_interpreted_system(name):
             assert np.max(np.abs(x - y)) <= 1e-13 * max(1.0, np.max(np.abs(x))), part
         for x, y in zip(plain.residual(z, None), staged.residual(z, None), strict=True):
             assert np.allclose(x, y, rtol=1e-13, atol=1e-13)
+        for system in (plain, staged):  # c alone: the residual's c, by the same operations
+            assert np.array_equal(system.constraints(z, None), system.residual(z, None)[1])
 
 
 def test_a_reference_in_time_shares_one_stage_function():
@@ -99,6 +101,9 @@ def test_compiled_kernels_give_the_interpreted_iterates():
             game = compile_game(c)
             runs.append(_iterates(c, game, np.asarray(cfg.game.x0)))
             assert game.derived["sparse"].kernels.mode == mode
+            system = game.derived["sparse"]
+            for z in runs[-1][0]:  # c alone, compiled or not, is the residual's c bit for bit (the slack reset's)
+                assert np.array_equal(system.constraints(z, game.x0), system.residual(z, game.x0)[1])
         (zc, sc), (zi, si) = runs
         assert len(zc) == len(zi) and sc.status == si.status and sc.k == si.k
         gaps = [np.max(np.abs(u - v)) / max(1.0, np.max(np.abs(v))) for u, v in zip(zc, zi, strict=True)]

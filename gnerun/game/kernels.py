@@ -202,17 +202,18 @@ class Stages:
     Built by gnerun.game.sparse.compile_sparse from the same expressions as the interpreted system."""
 
     def __init__(self) -> None:
-        self.groups: dict[str, tuple[ca.Function, ca.Function]] = {}  # serialization -> (rows, rows and Jacobian)
-        self.calls: list[tuple[ca.Function, ca.Function]] = []  # per stage
+        self.groups: dict[str, tuple[ca.Function, ...]] = {}  # serialization -> (rows, rows and Jacobian, c rows)
+        self.calls: list[tuple[ca.Function, ...]] = []  # per stage
         self.row_maps: list[np.ndarray] = []  # per stage: global row of each local row (-1: none)
         self.col_maps: list[np.ndarray] = []  # per stage: global column of each local unknown (-1: a given value)
         self.jac_entries: list[tuple[np.ndarray, np.ndarray]] = []  # per stage: local (row, col) of each nonzero
         self.gxn: list[list[slice]] = []  # per stage, per agent: its grad_{xi(tau+1)} rows among the local rows
 
     def add(self, inputs: list[ca.SX], rows: ca.SX, unknowns: ca.SX, row_map: np.ndarray, col_map: np.ndarray,
-            gxn: list[slice]) -> None:
+            gxn: list[slice], constraints: int = 0) -> None:
         """One stage: its Function of ``inputs`` (xi(tau), u(tau), xi(tau+1), lambda(tau), p(tau), runtime
-        values), the local rows ``rows``, their Jacobian in ``unknowns`` (a vertcat of some inputs)."""
+        values), the local rows ``rows``, their Jacobian in ``unknowns`` (a vertcat of some inputs); the last
+        ``constraints`` rows are constraint values c (a Function of their own computes them alone)."""
         J = ca.jacobian(rows, unknowns)
         r, c = J.sparsity().get_triplet()
         raw = ca.Function("raw", inputs, [rows, ca.vertcat(*J.nonzeros())])
@@ -222,7 +223,8 @@ class Stages:
         key = both.serialize()
         if key not in self.groups:
             g = len(self.groups)
-            self.groups[key] = (ca.Function(f"stage{g}_f", fresh, [out[0]]), ca.Function(f"stage{g}_fj", fresh, out))
+            self.groups[key] = (ca.Function(f"stage{g}_f", fresh, [out[0]]), ca.Function(f"stage{g}_fj", fresh, out),
+                                ca.Function(f"stage{g}_c", fresh, [out[0][rows.numel() - constraints:]]))
         self.calls.append(self.groups[key])
         self.row_maps.append(row_map)
         self.col_maps.append(col_map)

@@ -112,10 +112,11 @@ class SparseKKT:
     that agent i reaches; rows F = (G_a [n], G_xi [sum S_i], d [S], c [m]). Build with :func:`compile_sparse`.
     """
 
-    def __init__(self, game: CompiledGame, function: ca.Function, residual: ca.Function, pattern: ca.Sparsity,
-                 affine: bool, S: int, costates: list[slice], states: list[np.ndarray]):
+    def __init__(self, game: CompiledGame, function: ca.Function, residual: ca.Function, constraints: ca.Function,
+                 pattern: ca.Sparsity, affine: bool, S: int, costates: list[slice], states: list[np.ndarray]):
         self.game = game
         self._residual = Evaluator(residual)
+        self._constraints = Evaluator(constraints)
         self.n, self.m, self.S = game.n, game.m, S
         self.N = len(game.agent_names)
         self.costates = costates  # agent i's costates p_i: these positions of p (and rows of G_xi)
@@ -138,6 +139,10 @@ class SparseKKT:
         """The condensed L(z) and c(a) alone (states rolled out, costates solved; no Jacobian)."""
         L, c = self._residual(z[: self.n], z[self.n :], self.game._x(x))
         return L.reshape(-1), c.reshape(-1)
+
+    def constraints(self, z: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """c(a) alone (states rolled out): the residual's c, with nothing else evaluated."""
+        return self._constraints(z[: self.n], self.game._x(x))[0].reshape(-1)
 
     def evaluate(self, z: np.ndarray, x: np.ndarray) -> SparseParts:
         n = self.n
@@ -248,8 +253,8 @@ class AgentSparseKKT(SparseKKT):
         sub.sort_indices()
         self._F_rows, self._nonzeros = F_rows, sub.data.astype(int)
         pattern = ca.Sparsity(sub.shape[0], sub.shape[1], sub.indptr.tolist(), sub.indices.tolist())
-        super().__init__(problem, full._eval.function, full._residual.function, pattern, False, S,
-                         [slice(0, own_p.stop - own_p.start)], [full.states[agent]])
+        super().__init__(problem, full._eval.function, full._residual.function, full._constraints.function, pattern,
+                         False, S, [slice(0, own_p.stop - own_p.start)], [full.states[agent]])
         self.kernels = full.kernels
         # the game's stages (the agent's problem is compiled as a static one): its matrix is banded in their order
         # (the merge's car: 440 unknowns, band (18, 20); one stage, (52, 401), left SuperLU a third of a certificate)
@@ -269,6 +274,10 @@ class AgentSparseKKT(SparseKKT):
         a, lam, xv = self._point(z, x)
         L, c = self._full._residual(a, lam, xv)
         return L.reshape(-1)[self._slice], c.reshape(-1)[self._rows]
+
+    def constraints(self, z: np.ndarray, x: np.ndarray) -> np.ndarray:
+        a, _, xv = self._point(z, x)
+        return self._full._constraints(a, xv)[0].reshape(-1)[self._rows]
 
     def evaluate(self, z: np.ndarray, x: np.ndarray) -> SparseParts:
         F, J, F0 = self._full._eval(*self._point(z, x))
@@ -383,6 +392,7 @@ def compile_sparse(cfg: Config, game: CompiledGame, *, build_c: bool = True) -> 
     function = ca.Function("sparse_kkt", [a, lam, x], [F_proj, J_proj, F0], ["a", "lam", "x"], ["F", "J", "F0"])
     residual = ca.Function("sparse_residual", [a, lam, x], [ca.densify(F_proj[:n]), ca.densify(F_proj[F.numel() - m:])],
                            ["a", "lam", "x"], ["L", "c"])
+    constraints = ca.Function("sparse_constraints", [a, x], [ca.densify(F_proj[F.numel() - m:])], ["a", "x"], ["c"])
     affine = not ca.depends_on(J, ca.vertcat(a, X, P, lam, x)) and not game.lq.piecewise
     pattern = function.sparsity_out(1)
     report = KernelReport("interpreted", horizon=T + 1)
@@ -399,31 +409,32 @@ def compile_sparse(cfg: Config, game: CompiledGame, *, build_c: bool = True) -> 
             staged = _staged(ex, rows, lay, game, reach, offsets, inputs, a, X, x, lam, pattern, F.numel(),
                              lay.runtime.dt if timed else None)
             if build_c:
-                lib, hit, seconds = build_library(staged[:2], f"sparse_kkt_{T + 1}")
-                function, residual = _externals(lib)
+                lib, hit, seconds = build_library(staged[:3], f"sparse_kkt_{T + 1}")
+                function, residual, constraints = _externals(lib)
                 report = KernelReport("compiled", path=str(lib), cache_hit=hit, compile_s=seconds,
-                                      stages=staged[2], horizon=T + 1)
+                                      stages=staged[3], horizon=T + 1)
                 if key is not None:
                     save_entry(key, lib, {"size": np.array(F.numel()), "colind": np.asarray(pattern.colind()),
                                           "row": np.asarray(pattern.row()), "S": np.array(S), "offsets": offsets,
                                           "own": np.concatenate(own), "own_len": np.array([o.size for o in own]),
-                                          "stages": np.array(staged[2]),
+                                          "stages": np.array(staged[3]),
                                           "operations": np.array(function_ops)})
             else:
-                function, residual = staged[:2]
-                report = KernelReport("interpreted", reason="stage kernels not compiled", stages=staged[2],
+                function, residual, constraints = staged[:3]
+                report = KernelReport("interpreted", reason="stage kernels not compiled", stages=staged[3],
                                       horizon=T + 1)
         except (RuntimeError, ValueError) as why:  # a compiler's or CasADi's failure: the interpreted path stays
             report = KernelReport("interpreted", reason=one_line(str(why)), horizon=T + 1)
-    system = SparseKKT(game, function, residual, pattern, affine, S,
+    system = SparseKKT(game, function, residual, constraints, pattern, affine, S,
                        [slice(int(offsets[i]), int(offsets[i + 1])) for i in range(N)], own)
     system.kernels = report
     return system
 
 
-def _externals(library) -> tuple[ca.Function, ca.Function]:
-    """The sparse system's function and its residual function from a compiled library (:func:`_staged`'s names)."""
-    return ca.external("sparse_kkt", str(library)), ca.external("sparse_residual", str(library))
+def _externals(library) -> tuple[ca.Function, ca.Function, ca.Function]:
+    """The sparse system's function, its residual function and its constraint function from a compiled library
+    (:func:`_staged`'s names)."""
+    return tuple(ca.external(name, str(library)) for name in ("sparse_kkt", "sparse_residual", "sparse_constraints"))
 
 
 def _from_cache(game: CompiledGame, key: str, horizon: int, mode: str) -> SparseKKT | None:
@@ -436,14 +447,14 @@ def _from_cache(game: CompiledGame, key: str, horizon: int, mode: str) -> Sparse
     if mode == "auto" and int(arr["operations"]) < AUTO_FROM:
         return None
     try:
-        function, residual = _externals(library)
-    except RuntimeError:  # a library that does not load: built again
+        function, residual, constraints = _externals(library)
+    except RuntimeError:  # a library that does not load (or one without a function named here): built again
         return None
     size = int(arr["size"])
     pattern = ca.Sparsity(size, size, arr["colind"].tolist(), arr["row"].tolist())
     own = np.split(arr["own"].astype(int), np.cumsum(arr["own_len"])[:-1])
     offsets = arr["offsets"]
-    system = SparseKKT(game, function, residual, pattern, False, int(arr["S"]),
+    system = SparseKKT(game, function, residual, constraints, pattern, False, int(arr["S"]),
                        [slice(int(offsets[i]), int(offsets[i + 1])) for i in range(len(own))], own)
     system.kernels = KernelReport("compiled", path=str(library), cache_hit=True, stages=int(arr["stages"]),
                                   horizon=horizon)
@@ -472,11 +483,12 @@ def _why_interpreted(mode: str, affine: bool, operations: int, build_c: bool = T
 # long: the stage walk needs the layout, the rows and the costate sets together; split, each part would take them all
 def _staged(ex, rows: list, lay, game: CompiledGame, reach: list[np.ndarray], offsets: np.ndarray, inputs: list,
             a: ca.SX, X: ca.SX, x: ca.SX, lam: ca.SX, pattern: ca.Sparsity, size: int, dt: float | None
-            ) -> tuple[ca.Function, ca.Function, int]:
-    """The sparse system's function (a, lam, x) -> (F, nonzeros of dF/dw in ``pattern``, F0) and its residual
-    function (a, lam, x) -> (L, c) built from per-stage Functions (gnerun.game.kernels), as MX graphs of their calls.
-    Returns them and the number of distinct stage Functions. ``dt``: the expressions' stages take their own time
-    in the first runtime value (built with ``local_time``), which is t + tau dt at stage tau."""
+            ) -> tuple[ca.Function, ca.Function, ca.Function, int]:
+    """The sparse system's function (a, lam, x) -> (F, nonzeros of dF/dw in ``pattern``, F0), its residual
+    function (a, lam, x) -> (L, c) and its constraint function (a, x) -> c, built from per-stage Functions
+    (gnerun.game.kernels) as MX graphs of their calls. Returns them and the number of distinct stage Functions.
+    ``dt``: the expressions' stages take their own time in the first runtime value (built with ``local_time``),
+    which is t + tau dt at stage tau."""
     N, n, nx, T = len(lay.variable_names), lay.n, lay.nx, lay.horizon
     S, Ptot, m = nx * (T + 1), int(offsets[-1]), len(rows)
     stage_rows: list[list[int]] = [[] for _ in range(T + 1)]
@@ -529,7 +541,7 @@ def _staged(ex, rows: list, lay, game: CompiledGame, reach: list[np.ndarray], of
         first = sum(nu)
         gxn_slices = [slice(first + sum(k[:i]), first + sum(k[:i + 1])) for i in range(N)]
         stages.add([xp, u, xn, lam_t, p_t, prm], local, ca.vertcat(xp, u, xn, lam_t, p_t), row_map, col_map,
-                   gxn_slices)
+                   gxn_slices, len(sr))
 
     aM, lamM, xM = ca.MX.sym("a", n), ca.MX.sym("lam", m), ca.MX.sym("x", x.numel())
     U = ca.reshape(aM[[q for tau in range(T + 1) for q in u_index(tau)]], len(inputs), T + 1)
@@ -587,7 +599,12 @@ def _staged(ex, rows: list, lay, game: CompiledGame, reach: list[np.ndarray], of
     F_res = summed(M_F, f_only)
     residual = ca.Function("sparse_residual", [aM, lamM, xM], [F_res[:n], F_res[size - m:]], ["a", "lam", "x"],
                            ["L", "c"])
-    return kkt, residual, len(stages.groups)
+    # c alone (the states rolled out, each stage's rows of c): what the interior phase's slack reset reads
+    with_rows = [(lo, hi) for lo, hi in runs if stage_rows[lo]]
+    M_C = scatter(m, [np.asarray(stage_rows[tau], dtype=int) for lo, hi in with_rows for tau in range(lo, hi)])
+    c_only = summed(M_C, [mapped(2, lo, hi, False, zeros_P)[0] for lo, hi in with_rows]) if with_rows else ca.MX(m, 1)
+    constraints = ca.Function("sparse_constraints", [aM, xM], [c_only], ["a", "x"], ["c"])
+    return kkt, residual, constraints, len(stages.groups)
 
 
 def _costates(f: ca.Function, n_inputs: int, gx_only: list[ca.SX], reach: list[np.ndarray], X: ca.SX,

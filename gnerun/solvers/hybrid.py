@@ -604,7 +604,7 @@ class HybridNewton:
         z, w, t, rcond = proposal
         if self.handover and self.interior.I.size and state.residual_norm > RESET_ABOVE * memory.handover0:
             # the slack reset, far from a solution (the interior phase alone keeps its slacks)
-            z, w = self.interior.reset_slacks(z, w, self.newton.kkt_residual(z, state.x)[1])
+            z, w = self.interior.reset_slacks(z, w, self.newton.constraint_values(z, state.x))
         new = self.newton.advance(state, z, search=memory, rcond=rcond)
         if new.status in FAILURES:  # NaN or divergence: restart if a start is left
             return self._restart(state, memory, new.status, new.message)

@@ -120,6 +120,10 @@ class KKTSystem:
         """L(z) and c(a) alone, without derivatives (what a line search evaluates)."""
         return self.game.kkt_residual(z, x)
 
+    def constraint_values(self, z: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """c(a) alone (what the interior phase's slack reset reads): :meth:`kkt_residual`'s c."""
+        return self.kkt_residual(z, x)[1]
+
     def jacobian(self, parts: KKTParts, z: np.ndarray, active: np.ndarray) -> np.ndarray:
         """An element JPhi(z) of the limiting Jacobian of Phi (tie rule in the module docstring)."""
         n, m = self.game.n, self.game.m

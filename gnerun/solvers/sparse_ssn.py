@@ -49,3 +49,6 @@ class SparseSemismoothNewton(SemismoothNewton):
 
     def kkt_residual(self, z: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return self.system.residual(z, x)
+
+    def constraint_values(self, z: np.ndarray, x: np.ndarray) -> np.ndarray:
+        return self.system.constraints(z, x)  # the same c as the residual's, without L
