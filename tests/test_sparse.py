@@ -602,13 +602,16 @@ def test_the_interior_matrix_solved_with_its_inequality_multipliers_eliminated()
     assert np.abs(unreduced.solve(b) - reference).max() <= 1e-10 * np.abs(reference).max()
     for banded in (True, False):
         system.stage_order.banded = banded
+        system.stage_order.layouts.clear()  # (a kept layout keeps the factorisation it was made for)
         layout = system.layout(everything, at, lam0 + np.arange(m))
+        assert layout.banded == banded
         eliminated, _ = system.factor_kept("interior", state.parts.J, everything, at, add, estimate=False,
                                            eliminate=lam0 + np.arange(m))
         x = eliminated.solve(b)
         np.testing.assert_allclose(x, reference, rtol=0, atol=1e-10 * np.abs(reference).max())
         assert np.abs(K @ x - b).max() <= 1e-8 * np.abs(b).max()
     system.stage_order.banded = None
+    system.stage_order.layouts.clear()
     assert (layout.size, system.layout(everything, at).size) == (system.size - m, system.size)
     banded_layout = system.layout(everything, at, lam0 + np.arange(m))
     assert (banded_layout.lower, banded_layout.upper) == (18, 18)
