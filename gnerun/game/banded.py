@@ -870,6 +870,7 @@ class EliminatedSolve:
         self._size = self._ix[0].size + self._ix[1].size  # the kept system's
         self._dims = np.array([self._ix[0].size, self._ix[1].size, self._ix[2].size, self._ix[4].size, kl, ku,
                                2 * kl + ku + 1], dtype=np.int64)
+        self._fixed = (self._dims.ctypes.data, ctypes.addressof(self._pointers))  # the held arrays' addresses
 
     def __call__(self, lu: np.ndarray, piv: np.ndarray, diagonal: np.ndarray, re: np.ndarray, er: np.ndarray,
                  b: np.ndarray) -> np.ndarray:
@@ -882,9 +883,8 @@ class EliminatedSolve:
         diagonal, re, er = (np.ascontiguousarray(v, dtype=np.float64) for v in (diagonal, re, er))
         x = np.empty(self._size)
         work = np.empty(2 * self._size)
-        self._function(self._dims.ctypes.data, ctypes.addressof(self._pointers), diagonal.ctypes.data, re.ctypes.data,
-                       er.ctypes.data, lu.ctypes.data, piv.ctypes.data, b.ctypes.data, x.ctypes.data,
-                       work.ctypes.data)
+        self._function(*self._fixed, diagonal.ctypes.data, re.ctypes.data, er.ctypes.data, lu.ctypes.data,
+                       piv.ctypes.data, b.ctypes.data, x.ctypes.data, work.ctypes.data)
         return x
 
 
@@ -907,14 +907,14 @@ class PlayersDefinite:
         self._pointers = (ctypes.c_void_p * len(self._ix))(*[v.ctypes.data for v in self._ix])
         self._work = work
         self._agents = self._dims.size // 4
+        self._fixed = (self._agents, self._dims.ctypes.data, ctypes.addressof(self._pointers))  # (held arrays)
 
     def __call__(self, data: np.ndarray, D: np.ndarray) -> int:
         """1 where every player's block is positive definite, 0 where one is not, -1 where it cannot tell."""
         data = np.ascontiguousarray(data, dtype=np.float64)
         D = np.ascontiguousarray(D, dtype=np.float64)
         work = np.empty(self._work)  # per call: ctypes lets go of the GIL, and two threads may share a system
-        return self._function(self._agents, self._dims.ctypes.data, ctypes.addressof(self._pointers),
-                              data.ctypes.data, D.ctypes.data, work.ctypes.data)
+        return self._function(*self._fixed, data.ctypes.data, D.ctypes.data, work.ctypes.data)
 
 
 def players_definite(dims: np.ndarray, ix: list[np.ndarray], work: int) -> PlayersDefinite | None:
@@ -950,6 +950,7 @@ class PlayersComplement:
         ng, m, width, nI, na = dims
         self._dims = np.array([*dims, self._parts[0].size, self._parts[2].size, self._parts[7].size], dtype=np.int64)
         self._pointers = (ctypes.c_void_p * len(self._parts))(*[p.ctypes.data for p in self._parts])
+        self._fixed = (self._dims.ctypes.data, ctypes.addressof(self._pointers))  # the held arrays' addresses
         # doubles, then ints for the rows' lengths (ng + nI + ng + na), in doubles' room
         self._work = ng * m + ng * (width + 1) + (ng + na) * m + na * m + (2 * ng + nI + na + 1) // 2 + 1
         self._shape = (nI + ng + na, m)
@@ -964,8 +965,7 @@ class PlayersComplement:
         D = np.ascontiguousarray(D, dtype=np.float64)
         work = np.empty(self._work)  # per call: a system's blocks may serve several solves at once
         K = np.empty(self._shape)
-        code = self._function(self._dims.ctypes.data, ctypes.addressof(self._pointers), data.ctypes.data,
-                              D.ctypes.data, work.ctypes.data, K.ctypes.data)
+        code = self._function(*self._fixed, data.ctypes.data, D.ctypes.data, work.ctypes.data, K.ctypes.data)
         return K if code == 0 else (None if code == 1 else False)
 
     def shifts(self, K: np.ndarray) -> tuple[list[float], float] | None:

@@ -194,7 +194,12 @@ class SparseKKT:
         (:class:`KeptLayout`), SuperLU otherwise (``kind``: which of ``orderings``). Either has ``solve(b)`` for a
         right-hand side over ``keep``. ``eliminate``: positions in ``keep`` with a diagonal block (entries in ``add``
         only) eliminated first (:class:`Elimination`; the estimate is then the factorised complement's)."""
-        layout = self.layout(keep, at, eliminate)
+        return self.factor_layout(kind, self.layout(keep, at, eliminate), data, add, estimate)
+
+    def factor_layout(self, kind: str, layout: KeptLayout, data: np.ndarray, add: np.ndarray | None = None,
+                      estimate: bool = True) -> tuple[BandLU | EliminatedLU | spla.SuperLU | None, float]:
+        """:meth:`factor_kept` with the layout (:meth:`layout`'s) held by the caller: a matrix whose rows, columns
+        and diagonal additions are the same at every step (the interior step's) is not looked up again."""
         if layout.banded:
             return layout.factor(data, add, estimate)
         lu, rcond = self.orderings[kind].factor(layout.csc(data, add), estimate)

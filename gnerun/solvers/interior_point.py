@@ -430,6 +430,16 @@ class SparseBarrier:
         self._templates: _AgentBlocks | None = None
         self._diagonal: np.ndarray | None = None
         self._held: _Factored | None = None  # the last matrix factorised (see _factored)
+        self._layouts: dict[bool, object] = {}  # per ELIMINATE, the matrix's layout (see _layout)
+
+    def _layout(self):
+        """The layout of the matrix factorised (:meth:`~gnerun.game.sparse.SparseKKT.layout`), held: its rows,
+        columns and diagonal additions are the same at every step."""
+        layout = self._layouts.get(ELIMINATE)
+        if layout is None:
+            layout = self._layouts[ELIMINATE] = self.system.layout(self.keep, self.at,
+                                                                   self.multipliers if ELIMINATE else None)
+        return layout
 
     @property
     def scale(self) -> float:
@@ -524,11 +534,10 @@ class SparseBarrier:
             entry = held.factors.get(delta)
             if entry is None:
                 add = np.concatenate([held.diagonal + delta if delta else held.diagonal, -held.D])
-                eliminate = self.multipliers if ELIMINATE else None
                 # no condition estimate (it was 18% of a merge iteration): the step needs the factors only; a
                 # singular matrix has no factors, and a solution that overflows is refused like one
-                entry = held.factors[delta] = system.factor_kept("interior", parts.J, keep, self.at, add,
-                                                                 estimate=False, eliminate=eliminate)
+                entry = held.factors[delta] = system.factor_layout("interior", self._layout(), parts.J, add,
+                                                                   estimate=False)
             lu, rcond = entry
             if lu is None:
                 return None
