@@ -614,6 +614,16 @@ static int cholesky(int k, double *a) {
    recursion cannot tell (a dynamics diagonal other than -1, a value not finite). */
 static double at_(const double *data, long long k) { return k >= 0 ? data[k] : 0.0; }
 
+/* out = A B (row-major, r x k times k x c), each entry summed from zero in the order of k */
+static void product(int r, int k, int c, const double *A, const double *B, double *out) {
+    for (int i = 0; i < r; i++)
+        for (int j = 0; j < c; j++) {
+            double v = 0.0;
+            for (int p = 0; p < k; p++) v += A[i * k + p] * B[p * c + j];
+            out[i * c + j] = v;
+        }
+}
+
 int players_definite(int agents, const long long *dims, const long long *const *ix, const double *data,
                      const double *D, double *work) {
     const long long *hn = ix[0], *hi = ix[1], *hp = ix[2], *bp = ix[3], *ap = ix[4], *dp = ix[5], *tg = ix[6],
@@ -662,12 +672,7 @@ int players_definite(int agents, const long long *dims, const long long *const *
 #define HH(i, j) H[(i) * m + (j)]
             for (int i = 0; i < nx; i++)
                 for (int j = 0; j < nx; j++) W[i * nx + j] = HH(Yo + i, Yo + j) + P[i * nx + j];
-            for (int i = 0; i < nx; i++)
-                for (int j = 0; j < nu; j++) {
-                    double v = 0.0;
-                    for (int p = 0; p < nx; p++) v += W[i * nx + p] * Bm[p * nu + j];
-                    WB[i * nu + j] = v;
-                }
+            product(nx, nx, nu, W, Bm, WB);
             for (int i = 0; i < nu; i++)  /* uu = H_uu + B' W B + H_uy B + B' H_uy' */
                 for (int j = 0; j < nu; j++) {
                     double v = HH(i, j);
@@ -680,12 +685,7 @@ int players_definite(int agents, const long long *dims, const long long *const *
                 if (!(__builtin_fabs(uu[i]) <= __DBL_MAX__)) return -1;
             if (!cholesky(nu, uu)) return 0;
             if (t == 0) break;
-            for (int i = 0; i < nx; i++)
-                for (int j = 0; j < nx; j++) {
-                    double v = 0.0;
-                    for (int p = 0; p < nx; p++) v += W[i * nx + p] * Am[p * nx + j];
-                    WA[i * nx + j] = v;
-                }
+            product(nx, nx, nx, W, Am, WA);
             for (int i = 0; i < nu; i++)  /* ux = H_ux + B' W A + H_uy A + B' H_xy' */
                 for (int j = 0; j < nx; j++) {
                     double v = HH(i, X + j);
