@@ -509,6 +509,7 @@ def _interior_matrices(problems, count: int, monkeypatch: pytest.MonkeyPatch) ->
 
     seen = []
     shifts = interior_point.SparseBarrier._shifts
+    monkeypatch.setattr(interior_point, "FUSED", False)  # every matrix through the numpy code's shifts
 
     def recorded(self, data, D):
         seen.append((self, data.copy(), D.copy()))
@@ -652,6 +653,104 @@ def test_the_compiled_eliminated_solve_is_numpys(monkeypatch: pytest.MonkeyPatch
             assert np.isfinite(solved[True][0]).all()
     finally:
         system.stage_order.banded = None
+
+
+def _iterates(problems, fused: bool, monkeypatch: pytest.MonkeyPatch) -> tuple[list[np.ndarray], dict[int, int]]:
+    """Every iterate (z, then ||Phi||) of the default solver's solves of these problems, with the compiled interior
+    step (``fused``) or the numpy code alone; and what the compiled step answered (0: its step, else why not)."""
+    from gnerun.game import banded
+
+    answers: dict[int, int] = {}
+    call = banded.InteriorStep.__call__
+
+    def counted(self, *args):
+        found = call(self, *args)
+        code = found if isinstance(found, int) else 0
+        answers[code] = answers.get(code, 0) + 1
+        return found
+
+    monkeypatch.setattr(banded.InteriorStep, "__call__", counted)
+    monkeypatch.setattr(interior_point, "FUSED", fused)
+    out = []
+    for p in problems:
+        cfg = load_config(text=p.config_yaml)
+        game = compile_game(cfg)
+        solver = make_solver(cfg, game)
+        final = iterate(solver, solver.init(), on_iterate=lambda s: out.extend([s.z, np.array([s.residual_norm])]))
+        out.append(np.array([final.k]))
+    monkeypatch.undo()
+    return out, answers
+
+
+@pytest.mark.parametrize("family", ["merge", "intersection", "overtaking"])
+def test_the_compiled_interior_step_takes_numpys_steps(family: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """With the interior-point step in one compiled call (gnerun.game.banded.InteriorStep: the recursion, the band and
+    its elimination, the factorisation, Mehrotra's predictor and the corrector, the steps to the boundary), the
+    default solver's iterates on ALGAMES's merges and intersections and the overtaking game are the numpy code's bit
+    for bit, every one of them; the compiled step is taken, and where its case does not hold (a player's block not
+    positive definite) the numpy code takes the step."""
+    from benchmarks.problems import trajectory
+    from gnerun.game import banded
+
+    if banded.status() != "compiled":
+        pytest.skip(f"nothing compiled here: {banded.status()}")
+    problems = {"merge": lambda: trajectory.merge_problems(4),
+                "intersection": lambda: trajectory.intersection_problems(2),
+                "overtaking": lambda: trajectory.overtaking_problems()[:2]}[family]()
+    compiled, answers = _iterates(problems, True, monkeypatch)
+    numpy_only, none = _iterates(problems, False, monkeypatch)
+    assert not none and answers.get(0, 0) > 10
+    if family != "intersection":  # (the intersections' blocks are positive definite throughout)
+        assert answers.get(1, 0) > 0
+    assert len(compiled) == len(numpy_only)
+    for a, b in zip(compiled, numpy_only, strict=True):
+        assert np.array_equal(a, b)
+
+
+def test_the_compiled_interior_step_leaves_its_other_cases_to_numpy(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Where an eliminated entry of D is below 1e-6 (the solve would be refined) or the matrix cannot be factorised
+    (a NaN in K), the compiled step says so and the numpy code takes the step, as without it; where every block is
+    positive definite and D is moderate, it takes the numpy code's step to the bit, with and without the predictor."""
+    from gnerun.game import banded
+
+    if banded.status() != "compiled":
+        pytest.skip(f"nothing compiled here: {banded.status()}")
+    game, solver, state = _merge_system()
+    ip = solver.interior
+    n, I = ip.n, ip.I
+    lam = np.full(I.size, 1.0)
+    z = state.z.copy()
+    z[n + I] = lam
+    parts = state.parts
+    c = parts.c.copy()
+    step = ip.linear._step()
+    assert step is not None
+
+    def both(w, data, predict):
+        it = interior_point.InteriorIterate(z, w, parts.L, c, 1e-3, 1.0, predict)
+        D = w / lam
+        found = step(data, parts.F, c, z, w, lam, D, 1e-3, predict)
+        monkeypatch.setattr(interior_point, "FUSED", False)
+        ip.linear._held = None
+        reference = ip.step(it, parts if data is parts.J else parts._replace(J=data))
+        monkeypatch.undo()
+        return found, reference
+
+    for predict in (False, True):
+        found, reference = both(np.full(I.size, 0.5), parts.J, predict)
+        if isinstance(found, int):
+            assert found == 1  # (this point's blocks: not all positive definite)
+            continue
+        assert np.array_equal(found[0], reference[0]) and np.array_equal(found[1], reference[1])
+        assert found[2] == reference[2] and np.isnan(reference[3])
+    w = np.full(I.size, 0.5)
+    w[3] = 1e-9  # D = 1e-9: the solve would be refined
+    found, reference = both(w, parts.J, False)
+    assert found in (1, 3) and reference[0] is not None
+    bad = parts.J.copy()
+    bad[np.flatnonzero(bad)[5]] = np.nan
+    found, _ = both(np.full(I.size, 0.5), bad, False)
+    assert isinstance(found, int)
 
 
 def test_only_a_diagonal_block_is_eliminated() -> None:

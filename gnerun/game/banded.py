@@ -57,7 +57,9 @@ FLAGS = ("-O3", "-fPIC", "-shared", "-ffp-contract=off")  # no contraction: the 
 
 _SOURCE = r"""
 #include <immintrin.h>
+#include <math.h>
 #include <stddef.h>
+#include <stdlib.h>
 
 #define CHUNK 64 /* right-hand sides per pass of the transposed solve's dot products */
 
@@ -783,6 +785,165 @@ double players_shifts(int agents, const long long *rows, const long long *decisi
     }
     return scale_of(nan, largest);
 }
+
+/* ---- one interior-point step of the sparse barrier, whole (gnerun.solvers.interior_point.InteriorPoint.step) ---- */
+
+/* numpy's sum of x (DOUBLE_pairwise_sum from zero, as abs_sum) */
+static double plain_sum(const double *x, long n) {
+    if (n < 8) {
+        double res = 0.0;
+        for (long i = 0; i < n; i++) res += x[i];
+        return res;
+    }
+    if (n <= 128) {
+        double r[8];
+        long i;
+        for (int k = 0; k < 8; k++) r[k] = x[k];
+        for (i = 8; i < n - (n % 8); i += 8)
+            for (int k = 0; k < 8; k++) r[k] += x[i + k];
+        double res = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]));
+        for (; i < n; i++) res += x[i];
+        return res;
+    }
+    long n2 = n / 2;
+    n2 -= n2 % 8;
+    return plain_sum(x, n2) + plain_sum(x + n2, n - n2);
+}
+
+/* interior_point._to_boundary: fraction times the least -v_i / dv_i over dv_i < 0 (numpy's min: a NaN wins), and
+   Python's min(1.0, .); 1 where no dv_i < 0 */
+static double to_boundary(const double *v, const double *dv, long n, double fraction) {
+    int any = 0;
+    double least = 0.0;
+    for (long i = 0; i < n; i++) {
+        if (!(dv[i] < 0)) continue;
+        double r = -v[i] / dv[i];
+        if (!any) { least = r; any = 1; } else if (r != r) least = r; else if (r < least) least = r;
+    }
+    if (!any) return 1.0;
+    double y = fraction * least;
+    return y < 1.0 ? y : 1.0;
+}
+
+typedef struct {
+    long long n, size, lam0, nk, nI, nE, n_rest, n_out;
+    const long long *keep, *I, *E, *edims, *const *eix;
+    const double *F, *c, *diag, *re, *er, *ab;
+    const int *ipiv;
+    double *rhs, *b, *x, *work;
+} step_t;
+
+/* SparseBarrier.direction's solve at delta = 0 for the inequality rows' right-hand side rhs_I: rhs = -F, rhs_I and
+   -c_E on the multipliers' rows, over keep; the eliminated solve; the solution over the whole system (zeros where not
+   kept). 0, or 1 where it is not finite. */
+static int barrier_direction(const step_t *s, const double *rhs_I, double *sol) {
+    for (long long i = 0; i < s->size; i++) s->rhs[i] = -s->F[i];
+    for (long long i = 0; i < s->nI; i++) s->rhs[s->lam0 + s->I[i]] = rhs_I[i];
+    for (long long i = 0; i < s->nE; i++) s->rhs[s->lam0 + s->E[i]] = -s->c[s->E[i]];
+    for (long long k = 0; k < s->nk; k++) s->b[k] = s->rhs[s->keep[k]];
+    eliminated_solve(s->edims, s->eix, s->diag, s->re, s->er, s->ab, s->ipiv, s->b, s->x, s->work);
+    for (long long i = 0; i < s->size; i++) sol[i] = 0.0;
+    for (long long k = 0; k < s->nk; k++) {
+        if (!(s->x[k] - s->x[k] == 0.0)) return 1;
+        sol[s->keep[k]] = s->x[k];
+    }
+    return 0;
+}
+
+/* InteriorPoint.step where the sparse barrier's common case holds: every player's block positive definite by the
+   stage recursion (no shift), the band of the complement (the inequality multipliers eliminated) factorised at
+   delta = 0 with no refinement, finite solutions. The same operations in the same order as the numpy code (its
+   band, the elimination's bincount, Mehrotra's target with numpy's means, the steps to the boundary), so the same
+   values to the bit. Returns 0 with z_new, w_new and t_out[0] (the step length), or where the numpy code must take
+   the step: 1 (a block not positive definite, or the recursion cannot tell), 2 (the factorisation failed or met a
+   value that is not finite), 3 (the solve would be refined), 4 (a direction is not finite), 5 (no memory).
+   dims: n, size, lam0, nk, nI, nE, the layout's nonzeros, diagonal additions and fill entries, the elimination's
+   pairs, n_out, n_re, n_er, n_rest, kl, ku, ld, the players (recursion), its work, predict, n + nI, m; ix: keep, I,
+   E, the layout's nonzeros, flat, flat_at, flat_fill, add_kept, diagonal_at, pair_re, pair_er, pair_out, pair_entry,
+   K_re's and K_er's data positions, rest, out, K_re's rows and columns, K_er's rows and columns, the band's row and
+   column orders; scal: eps, BOUNDARY, PREDICTED, CENTERING, REFINE_FROM. */
+__attribute__((target("avx2,fma")))
+int interior_step(const long long *dims, const long long *const *ix, const long long *def_dims,
+                  const long long *const *def_ix, const double *scal, const double *data, const double *F,
+                  const double *c, const double *z, const double *w, const double *lam, const double *D,
+                  double *z_new, double *w_new, double *t_out) {
+    long long n = dims[0], size = dims[1], lam0 = dims[2], nk = dims[3], nI = dims[4], nE = dims[5], nnz = dims[6],
+              n_at = dims[7], nfill = dims[8], npairs = dims[9], n_out = dims[10], n_re = dims[11], n_er = dims[12],
+              n_rest = dims[13], def_work = dims[18], n_add = dims[20], m = dims[21];
+    int kl = (int)dims[14], ku = (int)dims[15], ld = (int)dims[16], agents = (int)dims[17], predict = (int)dims[19];
+    const long long *keep = ix[0], *I = ix[1], *E = ix[2], *nonzeros = ix[3], *flat = ix[4], *flat_at = ix[5],
+                    *flat_fill = ix[6], *add_kept = ix[7], *diagonal_at = ix[8], *pair_re = ix[9], *pair_er = ix[10],
+                    *pair_out = ix[11], *pair_entry = ix[12], *re0 = ix[13], *er0 = ix[14];
+    double eps = scal[0], boundary = scal[1], predicted = scal[2], centering = scal[3], refine_from = scal[4];
+    long long edims[7] = {n_rest, n_out, n_re, n_er, kl, ku, ld};
+    const long long *eix[8] = {ix[15], ix[16], ix[17], ix[18], ix[19], ix[20], ix[21], ix[22]};
+    size_t doubles = (size_t)n_rest * ld + (size_t)def_work + n_add + nfill + n_out + n_re + n_er + 2 * size
+                     + 2 * nk + 2 * nk + 6 * nI + n_out;
+    double *mem = (double *)calloc(doubles, sizeof(double));
+    int *ipiv = (int *)malloc((size_t)(n_rest > 0 ? n_rest : 1) * sizeof(int));
+    if (!mem || !ipiv) { free(mem); free(ipiv); return 5; }
+    double *ab = mem, *def = ab + (size_t)n_rest * ld, *add = def + def_work, *fill = add + n_add, *diag = fill + nfill,
+           *re = diag + n_out, *er = re + n_re, *rhs = er + n_er, *sol = rhs + size, *b = sol + size, *x = b + nk,
+           *work = x + nk, *rhs_I = work + 2 * nk, *dw = rhs_I + nI, *comp = dw + nI, *tmp = comp + nI,
+           *dlam = tmp + nI, *inverse = dlam + 2 * nI;
+    int code = 0, target = 0;
+    if (players_definite(agents, def_dims, def_ix, data, D, def) != 1) { code = 1; goto done; }
+    /* the matrix: the shifts (zeros) and -D added to the diagonal; its band as KeptLayout.band fills it */
+    for (long long i = 0; i < n; i++) add[i] = 0.0;
+    for (long long i = 0; i < nI; i++) add[n + i] = -D[i];
+    for (long long k = 0; k < nnz; k++) ab[flat[k]] = data[nonzeros[k]];
+    for (long long e = 0; e < n_out; e++) inverse[e] = -1.0 / add[diagonal_at[e]];
+    for (long long p = 0; p < npairs; p++)
+        fill[pair_entry[p]] += data[pair_re[p]] * data[pair_er[p]] * inverse[pair_out[p]];
+    for (long long k = 0; k < nfill; k++) ab[flat_fill[k]] += fill[k];
+    for (long long k = 0; k < n_at; k++) ab[flat_at[k]] += add[add_kept[k]];
+    if (band_lu((int)n_rest, kl, ku, ab, ld, ipiv) != 0) { code = 2; goto done; }
+    for (long long e = 0; e < n_out; e++) {
+        diag[e] = add[diagonal_at[e]];
+        if (__builtin_fabs(diag[e]) * refine_from <= 1.0) { code = 3; goto done; }
+    }
+    for (long long k = 0; k < n_re; k++) re[k] = data[re0[k]];
+    for (long long k = 0; k < n_er; k++) er[k] = data[er0[k]];
+    step_t s = {n, size, lam0, nk, nI, nE, n_rest, n_out, keep, I, E, edims, eix, F, c, diag, re, er, ab, ipiv,
+                rhs, b, x, work};
+    if (predict) {  /* InteriorPoint._target: Mehrotra's predictor */
+        for (long long i = 0; i < nI; i++) rhs_I[i] = -c[I[i]];
+        if (barrier_direction(&s, rhs_I, sol)) { code = 4; goto done; }
+        for (long long i = 0; i < nI; i++) {
+            dlam[i] = sol[lam0 + I[i]];
+            dw[i] = -w[i] - D[i] * dlam[i];
+        }
+        double t_p = to_boundary(w, dw, nI, 1.0), t_d = to_boundary(lam, dlam, nI, 1.0);
+        if (!((t_d < t_p ? t_d : t_p) < predicted)) {
+            for (long long i = 0; i < nI; i++) tmp[i] = lam[i] * w[i];
+            double mu = plain_sum(tmp, nI) / (double)nI;
+            for (long long i = 0; i < nI; i++) tmp[i] = (w[i] + t_p * dw[i]) * (lam[i] + t_d * dlam[i]);
+            double mu_aff = plain_sum(tmp, nI) / (double)nI;
+            double cube = pow(mu_aff / mu, 3.0);
+            double sigma = cube > centering ? cube : centering;
+            sigma = sigma < 1.0 ? sigma : 1.0;
+            for (long long i = 0; i < nI; i++) comp[i] = sigma * mu - dlam[i] * dw[i];
+            target = 1;
+        }
+    }
+    for (long long i = 0; i < nI; i++) rhs_I[i] = -(c[I[i]] + (target ? comp[i] : eps) / lam[i]);
+    if (barrier_direction(&s, rhs_I, sol)) { code = 4; goto done; }
+    for (long long i = 0; i < nI; i++) {
+        dlam[i] = sol[lam0 + I[i]];
+        dw[i] = (target ? comp[i] : eps) / lam[i] - w[i] - D[i] * dlam[i];
+    }
+    double t_p = to_boundary(w, dw, nI, boundary), t_d = to_boundary(lam, dlam, nI, boundary);
+    for (long long j = 0; j < n + m; j++) z_new[j] = z[j];
+    for (long long j = 0; j < n; j++) z_new[j] += t_p * sol[j];
+    for (long long i = 0; i < nI; i++) z_new[n + I[i]] += t_d * dlam[i];
+    for (long long i = 0; i < nE; i++) z_new[n + E[i]] += t_d * sol[lam0 + E[i]];
+    for (long long i = 0; i < nI; i++) w_new[i] = w[i] + t_p * dw[i];
+    t_out[0] = t_d < t_p ? t_d : t_p;
+done:
+    free(mem);
+    free(ipiv);
+    return code;
+}
 """
 
 
@@ -925,6 +1086,54 @@ def players_definite(dims: np.ndarray, ix: list[np.ndarray], work: int) -> Playe
     return PlayersDefinite(kernels[7], dims, ix, work)
 
 
+class InteriorStep:
+    """The compiled form of :meth:`gnerun.solvers.interior_point.InteriorPoint.step` on a sparse barrier's common case
+    (C's ``interior_step``): the stage recursion finds every player's block positive definite, the complement's band
+    (the inequality multipliers eliminated) factorises at delta = 0 without refinement, and the directions are finite.
+    The same operations in the same order as the numpy code, so the same step to the bit; where the case does not
+    hold, a code that says why (the numpy code then takes the step, from the start). ``dims`` and ``ix`` as
+    ``interior_step`` reads them (the predictor's flag left 0), ``definite``: the barrier's :class:`PlayersDefinite`,
+    ``constants``: BOUNDARY, PREDICTED, CENTERING, REFINE_FROM."""
+
+    def __init__(self, function, dims: list[int], ix: list[np.ndarray], definite: PlayersDefinite,
+                 constants: tuple[float, ...]) -> None:
+        self._function = function
+        self._dims = np.array(dims, dtype=np.int64)
+        self._predict = self._dims.copy()
+        self._predict[19] = 1
+        self._ix = [np.ascontiguousarray(v, dtype=np.int64) for v in ix]  # held: the pointers point into them
+        self._pointers = (ctypes.c_void_p * len(self._ix))(*[v.ctypes.data for v in self._ix])
+        self._definite = definite  # held: its arrays are read
+        self._constants = constants
+        self._sizes = (int(dims[0]) + int(dims[21]), int(dims[4]))  # z's and w's
+        self._fixed = (ctypes.addressof(self._pointers), definite._dims.ctypes.data,
+                       ctypes.addressof(definite._pointers))
+
+    def __call__(self, data: np.ndarray, F: np.ndarray, c: np.ndarray, z: np.ndarray, w: np.ndarray,
+                 lam: np.ndarray, D: np.ndarray, eps: float,
+                 predict: bool) -> tuple[np.ndarray, np.ndarray, float] | int:
+        """(z, w, t) after the step from (z, w) (lambda_I = ``lam``, D = w / lambda_I), J's nonzeros ``data``, F, c;
+        with Mehrotra's predictor where ``predict``; or, where the numpy code must take it, why (``interior_step``'s
+        code: 1 where the stage recursion does not find every block positive definite)."""
+        data, F, c, z, w, lam, D = (np.ascontiguousarray(v, dtype=np.float64) for v in (data, F, c, z, w, lam, D))
+        z_new, w_new = np.empty(self._sizes[0]), np.empty(self._sizes[1])
+        scal = np.array([eps, *self._constants])
+        t = np.empty(1)
+        dims = self._predict if predict else self._dims
+        code = self._function(dims.ctypes.data, *self._fixed, scal.ctypes.data, data.ctypes.data, F.ctypes.data,
+                              c.ctypes.data, z.ctypes.data, w.ctypes.data, lam.ctypes.data, D.ctypes.data,
+                              z_new.ctypes.data, w_new.ctypes.data, t.ctypes.data)
+        return (z_new, w_new, float(t[0])) if code == 0 else code
+
+
+def interior_step(dims: list[int], ix: list[np.ndarray], definite, constants: tuple[float, ...]) -> InteriorStep | None:
+    """The compiled interior step for these positions, or None where nothing is compiled (or no recursion)."""
+    kernels = _lu_kernels()
+    if kernels is None or not isinstance(definite, PlayersDefinite):
+        return None
+    return InteriorStep(kernels[8], dims, ix, definite, constants)
+
+
 def one_norm(ab: np.ndarray) -> float | None:
     """``float(np.abs(ab).sum(axis=0).max())`` of a Fortran-ordered band (numpy's pairwise sums, the same number),
     without its temporary arrays; None where nothing is compiled."""
@@ -1056,8 +1265,11 @@ def _load():
     definite = lib.players_definite
     definite.restype = ctypes.c_int
     definite.argtypes = [ctypes.c_int] + [ctypes.c_void_p] * 5
+    step = lib.interior_step
+    step.restype = ctypes.c_int
+    step.argtypes = [ctypes.c_void_p] * 15
     return kernel, (factor, solve_lu, inverse_norm, norm, complement, (shifts, _potrf()), eliminated,
-                    definite), "compiled"
+                    definite, step), "compiled"
 
 
 def _potrf() -> int | None:

@@ -975,6 +975,11 @@ class Elimination:
         self.pair_entry = self.pair_entry.reshape(-1)
         self._compiled = None  # the compiled solve (see compiled)
 
+    @property
+    def refine_from(self) -> float:
+        """``REFINE_FROM``: a solve is refined where an eliminated diagonal entry is at most its reciprocal."""
+        return REFINE_FROM
+
     def compiled(self, layout: KeptLayout):
         """The compiled solve (:class:`gnerun.game.banded.EliminatedSolve`) with the band ``layout`` of the complement
         (built once; False where nothing is compiled)."""

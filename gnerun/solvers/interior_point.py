@@ -94,6 +94,9 @@ PREDICTED = 0.05  # predictor-corrector step where the predictor goes at least t
 CENTERING = 0.1  # its centering parameter sigma is at least this
 # the sparse form factorises K with its inequality multipliers eliminated (a narrower band; False: K as it is)
 ELIMINATE = True
+# the sparse form's step in one compiled call where its common case holds (gnerun.game.banded.InteriorStep: the same
+# step to the bit; False: the numpy code always)
+FUSED = True
 
 
 @dataclass(slots=True)
@@ -193,8 +196,12 @@ class InteriorPoint:
         z, w = it.z, it.w
         lam = z[n + I]
         D = w / lam
+        predict = bool(I.size and it.predict and it.t >= PREDICT_AFTER)
+        fused = self.linear.fused(parts, it, lam, D, predict) if FUSED else None
+        if fused is not None:
+            return fused
         comp = it.eps  # the target of lambda_I o w, less a second-order correction
-        if I.size and it.predict and it.t >= PREDICT_AFTER:
+        if predict:
             target = self._target(parts, it, D)
             if isinstance(target, str):
                 return None, target
@@ -363,6 +370,10 @@ class DenseBarrier:
         self._held = _Factored(parts, parts.dL_dz, D.copy(), diag, scale, {}, convex, M)
         return self._held
 
+    def fused(self, parts, it: InteriorIterate, lam: np.ndarray, D: np.ndarray, predict: bool) -> None:
+        """The condensed form has no compiled step (see :meth:`SparseBarrier.fused`)."""
+        return None
+
     def direction(self, parts, it: InteriorIterate, D: np.ndarray, rhs_I: np.ndarray):
         ip = self.ip
         n, I, E = ip.n, ip.I, ip.E
@@ -431,6 +442,8 @@ class SparseBarrier:
         self._diagonal: np.ndarray | None = None
         self._held: _Factored | None = None  # the last matrix factorised (see _factored)
         self._layouts: dict[bool, object] = {}  # per ELIMINATE, the matrix's layout (see _layout)
+        self._steps: dict[bool, object] = {}  # per ELIMINATE, the compiled step (see _step; False: none)
+        self._undecided: tuple | None = None  # (J's nonzeros, D) where the compiled step's recursion said "not all"
 
     def _layout(self):
         """The layout of the matrix factorised (:meth:`~gnerun.game.sparse.SparseKKT.layout`), held: its rows,
@@ -494,7 +507,11 @@ class SparseBarrier:
         the largest diagonal entry of the shifted complement (the condensed form's scale); ``None`` if a
         dynamics block is singular (then no shift). ``data``: K's nonzeros without -D."""
         ip = self.ip
-        found = self._blocks().shifts(data, D)
+        undecided = self._undecided
+        self._undecided = None
+        # (where the compiled step's recursion has just said "not every block", the dense blocks at once)
+        found = self._blocks().shifts(data, D, recursion=not (undecided is not None and undecided[0] is data
+                                                               and undecided[1] is D))
         if found is None:
             return None
         deltas, scale = found
@@ -520,6 +537,53 @@ class SparseBarrier:
         convex = found is not None and not shifts.any()
         self._held = _Factored(parts, parts.J, D.copy(), shifts, scale, {}, convex)
         return self._held
+
+    def fused(self, parts, it: InteriorIterate, lam: np.ndarray, D: np.ndarray,
+              predict: bool) -> tuple[np.ndarray, np.ndarray, float, float] | None:
+        """:meth:`InteriorPoint.step`'s result (z, w, t, rcond: NaN, as the step's factorisation makes no estimate) by
+        one compiled call (:class:`gnerun.game.banded.InteriorStep`), the same to the bit; None where its common case
+        does not hold or nothing is compiled (the numpy code takes the step). The matrix it factorised is held as
+        :meth:`_factored` holds it (no shifts), its factors not kept: a later direction with it factorises again,
+        to the same values."""
+        step = self._step()
+        held = self._held
+        if step is None or (held is not None and held.holds(parts, parts.J, D)):
+            return None
+        found = step(parts.J, parts.F, it.c, it.z, it.w, lam, D, it.eps, predict)
+        if isinstance(found, int):
+            # the recursion did not find every block positive definite: the numpy code's blocks decide at once
+            self._undecided = (parts.J, D) if found == 1 else None
+            return None
+        self._held = _Factored(parts, parts.J, D.copy(), np.zeros(self.ip.n), None, {}, True)
+        z, w, t = found
+        return z, w, t, math.nan
+
+    def _step(self):
+        """The compiled step for this barrier's layout (built once; None where there is none: no compiler, no stage
+        recursion, SuperLU's layout, no inequality rows, or K factorised as it is)."""
+        step = self._steps.get(ELIMINATE)
+        if step is None:
+            step = self._steps[ELIMINATE] = self._build_step() or False
+        return step or None
+
+    def _build_step(self):
+        ip, system = self.ip, self.system
+        if not ELIMINATE or not ip.I.size:
+            return None
+        definite = self._blocks()._definite
+        layout = self._layout()
+        e = layout.elimination
+        if definite is None or not layout.banded or e is None or not layout.size or (
+                layout.lower >= 32 and layout.upper > 64):
+            return None
+        ix = [self.keep, ip.I, ip.E, layout.nonzeros, layout.flat, layout.flat_at, layout.flat_fill, e.add_kept,
+              e.diagonal_at, e.pair_re, e.pair_er, e.pair_out, e.pair_entry, e.re[0], e.er[0], e.rest, e.out,
+              e.re[1], e.re[2], e.er[1], e.er[2], layout.row_order, layout.col_order]
+        dims = [ip.n, system.size, self.lam0, self.keep.size, ip.I.size, ip.E.size, layout.nonzeros.size,
+                layout.flat_at.size, e.fill_r.size, e.pair_entry.size, e.out.size, e.re[0].size, e.er[0].size,
+                e.rest.size, layout.lower, layout.upper, layout.ld, definite._agents, definite._work, 0,
+                ip.n + ip.I.size, system.m]
+        return banded.interior_step(dims, ix, definite, (BOUNDARY, PREDICTED, CENTERING, e.refine_from))
 
     def direction(self, parts, it: InteriorIterate, D: np.ndarray, rhs_I: np.ndarray):
         ip, system = self.ip, self.system
