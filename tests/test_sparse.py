@@ -656,27 +656,37 @@ def test_the_compiled_eliminated_solve_is_numpys(monkeypatch: pytest.MonkeyPatch
 
 
 def _iterates(problems, fused: bool, monkeypatch: pytest.MonkeyPatch) -> tuple[list[np.ndarray], dict[int, int]]:
-    """Every iterate (z, then ||Phi||) of the default solver's solves of these problems, with the compiled interior
-    step (``fused``) or the numpy code alone; and what the compiled step answered (0: its step, else why not)."""
+    """Every iterate (z, ||Phi||, rcond) of the default solver's solves of these problems, with the compiled interior
+    step and Newton point (``fused``) or the numpy code alone; what the compiled step answered (0: its step, else why
+    not) and how many Newton points were compiled ("point")."""
     from gnerun.game import banded
+    from gnerun.solvers import reduced
 
-    answers: dict[int, int] = {}
-    call = banded.InteriorStep.__call__
+    answers: dict = {}
+    step, point = banded.InteriorStep.__call__, banded.ReducedPoint.__call__
 
     def counted(self, *args):
-        found = call(self, *args)
+        found = step(self, *args)
         code = found if isinstance(found, int) else 0
         answers[code] = answers.get(code, 0) + 1
         return found
 
+    def points(self, *args):
+        found = point(self, *args)
+        answers["point"] = answers.get("point", 0) + (found is not None)
+        return found
+
     monkeypatch.setattr(banded.InteriorStep, "__call__", counted)
+    monkeypatch.setattr(banded.ReducedPoint, "__call__", points)
     monkeypatch.setattr(interior_point, "FUSED", fused)
+    monkeypatch.setattr(reduced, "FUSED", fused)
     out = []
     for p in problems:
         cfg = load_config(text=p.config_yaml)
         game = compile_game(cfg)
         solver = make_solver(cfg, game)
-        final = iterate(solver, solver.init(), on_iterate=lambda s: out.extend([s.z, np.array([s.residual_norm])]))
+        final = iterate(solver, solver.init(),
+                        on_iterate=lambda s: out.extend([s.z, np.array([s.residual_norm, s.rcond])]))
         out.append(np.array([final.k]))
     monkeypatch.undo()
     return out, answers
@@ -685,10 +695,11 @@ def _iterates(problems, fused: bool, monkeypatch: pytest.MonkeyPatch) -> tuple[l
 @pytest.mark.parametrize("family", ["merge", "intersection", "overtaking"])
 def test_the_compiled_interior_step_takes_numpys_steps(family: str, monkeypatch: pytest.MonkeyPatch) -> None:
     """With the interior-point step in one compiled call (gnerun.game.banded.InteriorStep: the recursion, the band and
-    its elimination, the factorisation, Mehrotra's predictor and the corrector, the steps to the boundary), the
-    default solver's iterates on ALGAMES's merges and intersections and the overtaking game are the numpy code's bit
-    for bit, every one of them; the compiled step is taken, and where its case does not hold (a player's block not
-    positive definite) the numpy code takes the step."""
+    its elimination, the factorisation, Mehrotra's predictor and the corrector, the steps to the boundary) and the
+    min-map Newton point in another (gnerun.game.banded.ReducedPoint: the band, dgbtrf, the condition estimate, the
+    solve, z^+), the default solver's iterates on ALGAMES's merges and intersections and the overtaking game are the
+    numpy code's bit for bit, every one of them (z, ||Phi||, the estimate); both compiled calls are taken, and where
+    the step's case does not hold (a player's block not positive definite) the numpy code takes the step."""
     from benchmarks.problems import trajectory
     from gnerun.game import banded
 
@@ -699,12 +710,12 @@ def test_the_compiled_interior_step_takes_numpys_steps(family: str, monkeypatch:
                 "overtaking": lambda: trajectory.overtaking_problems()[:2]}[family]()
     compiled, answers = _iterates(problems, True, monkeypatch)
     numpy_only, none = _iterates(problems, False, monkeypatch)
-    assert not none and answers.get(0, 0) > 10
+    assert not none and answers.get(0, 0) > 10 and answers.get("point", 0) > 3
     if family != "intersection":  # (the intersections' blocks are positive definite throughout)
         assert answers.get(1, 0) > 0
     assert len(compiled) == len(numpy_only)
     for a, b in zip(compiled, numpy_only, strict=True):
-        assert np.array_equal(a, b)
+        assert np.array_equal(a, b, equal_nan=True)
 
 
 def test_the_compiled_interior_step_leaves_its_other_cases_to_numpy(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -786,6 +786,41 @@ double players_shifts(int agents, const long long *rows, const long long *decisi
     return scale_of(nan, largest);
 }
 
+/* ---- the min-map Newton point of the reduced system, whole (gnerun.solvers.reduced.SparseReduced.point) ---- */
+
+/* SparseReduced.point on a nonlinear game's banded kept matrix (KeptLayout.factor without diagonal additions or an
+   elimination, then BandLU.solve and SparseKKT.new_iterate): the band zeroed and the pattern's values scattered into
+   it, its 1-norm where the estimate is made, dgbtrf, the estimate, the solve of -F0 over keep, z^+. The same
+   operations in the same order, so the same values to the bit. Returns 0 with ab and ipiv (the factors), rcond[0]
+   (NaN without the estimate) and z_new; or 1 where the factorisation met a value that is not finite or a zero
+   pivot (the numpy code then makes the point). dims: n, z's size, nk (keep's size), the layout's nonzeros, kl, ku,
+   ld, lam0 (where keep's multipliers begin), estimate; ix: keep, the layout's nonzeros and flat positions, the
+   band's row and column orders; work: 3 nk doubles. */
+__attribute__((target("avx2,fma")))
+int reduced_point(const long long *dims, const long long *const *ix, const double *data, const double *F0,
+                  const double *z, double *ab, int *ipiv, double *work, double *z_new, double *rcond) {
+    long long n = dims[0], nz = dims[1], nk = dims[2], nnz = dims[3], lam0 = dims[7];
+    int kl = (int)dims[4], ku = (int)dims[5], ld = (int)dims[6], estimate = (int)dims[8];
+    const long long *keep = ix[0], *nonzeros = ix[1], *flat = ix[2], *row_order = ix[3], *col_order = ix[4];
+    double *y = work, *x = work + nk, *scratch = work + nk;  /* (the estimate's 2 nk before x is needed) */
+    for (size_t k = 0; k < (size_t)nk * ld; k++) ab[k] = 0.0;
+    for (long long k = 0; k < nnz; k++) ab[flat[k]] = data[nonzeros[k]];
+    double norm = estimate ? band_one_norm((int)nk, ab, ld) : 0.0;
+    if (band_lu((int)nk, kl, ku, ab, ld, ipiv) != 0) return 1;
+    rcond[0] = NAN;
+    if (estimate) {
+        double inverse = band_lu_inverse_norm((int)nk, kl, ku, ab, ld, ipiv, scratch);
+        rcond[0] = (inverse - inverse == 0.0 && inverse > 0) ? 1.0 / (norm * inverse) : 0.0;
+    }
+    for (long long i = 0; i < nk; i++) y[i] = -F0[keep[row_order[i]]];
+    band_lu_solve((int)nk, kl, ku, ab, ld, ipiv, 1, y, 0);
+    for (long long i = 0; i < nk; i++) x[col_order[i]] = y[i];
+    for (long long j = 0; j < nz; j++) z_new[j] = 0.0;
+    for (long long j = 0; j < n; j++) z_new[j] = z[j] + x[j];
+    for (long long k = lam0; k < nk; k++) z_new[n + keep[k] - lam0] = x[k];
+    return 0;
+}
+
 /* ---- one interior-point step of the sparse barrier, whole (gnerun.solvers.interior_point.InteriorPoint.step) ---- */
 
 /* numpy's sum of x (DOUBLE_pairwise_sum from zero, as abs_sum) */
@@ -1134,6 +1169,46 @@ def interior_step(dims: list[int], ix: list[np.ndarray], definite, constants: tu
     return InteriorStep(kernels[8], dims, ix, definite, constants)
 
 
+class ReducedPoint:
+    """The compiled form of :meth:`gnerun.solvers.reduced.SparseReduced.point` for one banded kept matrix of a
+    nonlinear game (C's ``reduced_point``: the band, its norm, dgbtrf, the estimate, the solve, z^+; the same values to
+    the bit). ``keep``: the rows and columns kept (the unknowns but the multipliers, then from ``lam0`` on the
+    multipliers of the rows kept); ``layout``: their :class:`~gnerun.game.sparse.KeptLayout` (banded, no diagonal
+    additions, no elimination); ``n``: the decisions; ``nz``: the iterate's size."""
+
+    def __init__(self, function, layout, keep: np.ndarray, n: int, nz: int, lam0: int) -> None:
+        self._function, self.layout = function, layout
+        self._ix = [np.ascontiguousarray(v, dtype=np.int64) for v in (keep, layout.nonzeros, layout.flat,
+                                                                       layout.row_order, layout.col_order)]
+        self._pointers = (ctypes.c_void_p * len(self._ix))(*[v.ctypes.data for v in self._ix])  # (held arrays)
+        dims = [n, nz, layout.size, layout.nonzeros.size, layout.lower, layout.upper, layout.ld, lam0]
+        self._dims = (np.array([*dims, 0], dtype=np.int64), np.array([*dims, 1], dtype=np.int64))
+        self._shape, self._nz = (layout.size, layout.ld), nz
+
+    def __call__(self, data: np.ndarray, F0: np.ndarray, z: np.ndarray,
+                 estimate: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray, float] | None:
+        """(z^+, the factors' band (Fortran-ordered, as dgbtrf leaves it), the pivots, rcond: NaN without
+        ``estimate``), or None where the numpy code must make the point (a value that is not finite, a zero pivot)."""
+        data, F0, z = (np.ascontiguousarray(v, dtype=np.float64) for v in (data, F0, z))
+        ab = np.empty(self._shape)  # C's zeros; the transpose of the Fortran-ordered band
+        piv = np.empty(self._shape[0], dtype=np.int32)
+        work, z_new, rcond = np.empty(3 * self._shape[0]), np.empty(self._nz), np.empty(1)
+        code = self._function(self._dims[estimate].ctypes.data, ctypes.addressof(self._pointers), data.ctypes.data,
+                              F0.ctypes.data, z.ctypes.data, ab.ctypes.data, piv.ctypes.data, work.ctypes.data,
+                              z_new.ctypes.data, rcond.ctypes.data)
+        return (z_new, ab.T, piv, float(rcond[0])) if code == 0 else None
+
+
+def reduced_point(layout, keep: np.ndarray, n: int, nz: int, lam0: int) -> ReducedPoint | None:
+    """The compiled reduced point for this layout, or None where nothing is compiled or it does not apply (SuperLU's
+    layout, an elimination, an empty matrix, dgbtrf's blocked path)."""
+    kernels = _lu_kernels()
+    if (kernels is None or not layout.banded or layout.elimination is not None or not layout.size or layout.at.size
+            or (layout.lower >= 32 and layout.upper > 64)):
+        return None
+    return ReducedPoint(kernels[9], layout, keep, n, nz, lam0)
+
+
 def one_norm(ab: np.ndarray) -> float | None:
     """``float(np.abs(ab).sum(axis=0).max())`` of a Fortran-ordered band (numpy's pairwise sums, the same number),
     without its temporary arrays; None where nothing is compiled."""
@@ -1268,8 +1343,11 @@ def _load():
     step = lib.interior_step
     step.restype = ctypes.c_int
     step.argtypes = [ctypes.c_void_p] * 15
+    point = lib.reduced_point
+    point.restype = ctypes.c_int
+    point.argtypes = [ctypes.c_void_p] * 10
     return kernel, (factor, solve_lu, inverse_norm, norm, complement, (shifts, _potrf()), eliminated,
-                    definite, step), "compiled"
+                    definite, step, point), "compiled"
 
 
 def _potrf() -> int | None:

@@ -205,6 +205,25 @@ class SparseKKT:
         lu, rcond = self.orderings[kind].factor(layout.csc(data, add), estimate)
         return layout.eliminated(lu, data, add), rcond
 
+    def point_kept(self, parts: SparseParts, z: np.ndarray, keep: np.ndarray,
+                   estimate: bool) -> tuple[BandLU, np.ndarray, float] | None:
+        """The min-map Newton point for the rows and columns ``keep`` (:meth:`kept`) in one compiled call where its
+        matrix is banded (:class:`gnerun.game.banded.ReducedPoint`): the factors :meth:`factor_kept` makes, the point
+        :meth:`new_iterate` makes from their solution of :meth:`rhs`, and the estimate (NaN without ``estimate``), the
+        same values to the bit; None where it does not apply or nothing is compiled (the numpy code makes them)."""
+        layout = self.layout(keep)
+        compiled = layout.compiled_point
+        if compiled is None:
+            compiled = layout.compiled_point = banded.reduced_point(layout, keep, self.n, self.n + self.m,
+                                                                    self._lam0) or False
+        if not compiled:
+            return None
+        found = compiled(parts.J, parts.F0, z, estimate)
+        if found is None:
+            return None
+        z_new, lu, piv, rcond = found
+        return BandLU(layout, lu, piv), z_new, rcond
+
     def rcond_kept(self, factors, data: np.ndarray, keep: np.ndarray, at: np.ndarray | None = None,
                    add: np.ndarray | None = None, eliminate: np.ndarray | None = None) -> float:
         """The condition estimate :meth:`factor_kept` returns with ``estimate``, from the factors it made without."""
@@ -849,6 +868,7 @@ class KeptLayout:
             self.nnz = unique.size
         self.flat, self.flat_at, self.flat_fill = (positions[:r.size], positions[r.size:r.size + at.size],
                                                    positions[r.size + at.size:])
+        self.compiled_point = None  # the compiled Newton point (SparseKKT.point_kept; False: none)
 
     def _fill(self, out: np.ndarray, data: np.ndarray, add: np.ndarray | None) -> None:
         """The matrix's entries into the flat storage ``out`` (zeros)."""

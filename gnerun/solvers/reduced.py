@@ -21,6 +21,10 @@ from scipy.linalg import lapack
 
 from .linalg import factor, levenberg_marquardt
 
+# a nonlinear game's sparse Newton point in one compiled call where its matrix is banded
+# (gnerun.game.banded.ReducedPoint: the same values to the bit; False: the numpy code always)
+FUSED = True
+
 
 def active_rows(active: np.ndarray, eq: np.ndarray, has_equalities: bool) -> np.ndarray:
     """The rows A of the reduced system: the g-branch rows, and the equality rows."""
@@ -125,6 +129,13 @@ class SparseReduced:
             if entry is None:
                 entry = self._lus.keep(key, system.factor_kept("newton", self._J, keep))
         else:
+            found = system.point_kept(parts, z, keep, estimate) if FUSED else None
+            if found is not None:  # factors, point and estimate in one compiled call (the same values)
+                lu, z_new, rcond = found
+                self._unestimated = None if estimate else (lu, parts.J, keep)
+                if not (rcond >= self.min_rcond or math.isnan(rcond) and not estimate):
+                    return None, rcond
+                return z_new, rcond
             entry = system.factor_kept("newton", parts.J, keep, estimate=estimate)
             self._unestimated = None if estimate else (entry[0], parts.J, keep)
         lu, rcond = entry
