@@ -382,7 +382,7 @@ def test_a_factorisation_the_compiled_lu_declines_is_lapacks(compiled, monkeypat
     from gnerun.game.compile import compile_game
     from gnerun.language.config import load_config
     from gnerun.runs.solving import make_solver
-    from gnerun.solvers import hybrid
+    from gnerun.solvers import hybrid, reduced
 
     cfg = load_config(text=trajectory.merge_problems(1)[0].config_yaml)
     game = compile_game(cfg)
@@ -396,6 +396,7 @@ def test_a_factorisation_the_compiled_lu_declines_is_lapacks(compiled, monkeypat
 
     monkeypatch.setattr(sparse.KeptLayout, "factor", first)
     monkeypatch.setattr(hybrid, "DECOUPLE_ABOVE", np.inf)  # the first step a Newton step (not the decoupled plans)
+    monkeypatch.setattr(reduced, "FUSED", False)  # its factorisation by KeptLayout.factor, not in one compiled call
     solver = make_solver(cfg, game)
     solver.step(solver.init())
     monkeypatch.setattr(sparse.KeptLayout, "factor", factor)

@@ -764,6 +764,51 @@ def test_the_compiled_interior_step_leaves_its_other_cases_to_numpy(monkeypatch:
     assert isinstance(found, int)
 
 
+@pytest.mark.parametrize("family", ["merge", "intersection"])
+def test_the_compiled_layouts_are_numpys(family: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The kept matrices' layouts made by the compiled index arithmetic (gnerun.game.banded.KeptLayouts) are the numpy
+    code's, array for array and dtype for dtype, on every layout the solves of ALGAMES's merges and an intersection
+    make without an elimination, with diagonal additions, and with banded LU forced (the SuperLU layout, forced or
+    chosen, stays numpy's)."""
+    from benchmarks.problems import trajectory
+    from gnerun.game import banded, sparse
+
+    if banded.status() != "compiled":
+        pytest.skip(f"nothing compiled here: {banded.status()}")
+    problems = trajectory.merge_problems(3) if family == "merge" else trajectory.intersection_problems(1)
+    made = []
+    init = sparse.KeptLayout.__init__
+
+    def recorded(self, order, keep, at, banded=None, eliminate=None):
+        if eliminate is None:
+            made.append((order, keep.copy(), None if at is None else at.copy()))
+        init(self, order, keep, at, banded, eliminate)
+
+    monkeypatch.setattr(sparse.KeptLayout, "__init__", recorded)
+    for p in problems:
+        cfg = load_config(text=p.config_yaml)
+        solver = make_solver(cfg, compile_game(cfg))
+        iterate(solver, solver.init())
+    monkeypatch.undo()
+    order = made[0][0]
+    cases = [(keep, at, None) for _, keep, at in made]
+    cases += [(made[0][1], np.arange(0, made[0][1].size, 7), None), (made[0][1], None, True),
+              (made[0][1], None, False)]
+    compiled = order.compiled_layouts
+    assert compiled and len(made) >= 2
+    for keep, at, band in cases:
+        order.compiled_layouts = compiled
+        ours = sparse.KeptLayout(order, keep, at, band)
+        order.compiled_layouts = False
+        theirs = sparse.KeptLayout(order, keep, at, band)
+        names = ["nonzeros", "at", "size", "row_order", "col_order", "lower", "upper", "banded", "flat", "flat_at",
+                 "flat_fill"] + (["ld"] if theirs.banded else ["indices", "indptr", "nnz"])
+        for name in names:
+            a, b = getattr(ours, name), getattr(theirs, name)
+            assert (np.array_equal(a, b) and a.dtype == b.dtype) if isinstance(b, np.ndarray) else a == b, name
+    order.compiled_layouts = compiled
+
+
 def test_only_a_diagonal_block_is_eliminated() -> None:
     """Unknowns whose block has off-diagonal entries (the decisions': a player's Hessian) or no diagonal addition
     are refused with the reason."""

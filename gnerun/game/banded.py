@@ -786,6 +786,75 @@ double players_shifts(int agents, const long long *rows, const long long *decisi
     return scale_of(nan, largest);
 }
 
+/* ---- where a kept matrix's nonzeros go (gnerun.game.sparse.KeptLayout, without an elimination) ---- */
+
+/* KeptLayout's index arithmetic for the rows and columns keep of the full system (integers: the same numbers): which
+   of the pattern's nonzeros are in the kept matrix (in data order), the band's row and column orders (the kept rows
+   sorted stably by their stage keys, by counting), every entry's band row i and column j (the nonzeros', then the
+   diagonal additions' at), the band (kl, ku), whether it is factorised banded, and then each entry's place in the
+   band's storage. dims: the full size, nk, the pattern's nonzeros, the additions, banded (1, 0, or -1: where the
+   band is at most a fraction of the size), that fraction times 2^20; fixed: the pattern's rows and columns, the row
+   and column keys (of the full system: >= 0); varying: keep, at; out: kl, ku, banded, then nonzeros (the pattern's
+   count), i (or the places) and j (as many and the additions), row_order, col_order (nk each). Returns the number
+   of nonzeros kept, or -1 (no memory). */
+long long kept_layout(const long long *dims, const long long *const *fixed, const long long *const *varying,
+                      long long *out) {
+    long long size = dims[0], nk = dims[1], nnz = dims[2], n_at = dims[3];
+    const long long *rows = fixed[0], *cols = fixed[1], *row_key = fixed[2], *col_key = fixed[3];
+    const long long *keep = varying[0], *at = varying[1];
+    long long *band = out, *nonzeros = out + 3, *iv = nonzeros + nnz, *jv = iv + nnz + n_at;
+    long long *row_order = jv + nnz + n_at, *col_order = row_order + nk;
+    long long top = 0;
+    for (long long k = 0; k < nk; k++) {
+        if (row_key[keep[k]] > top) top = row_key[keep[k]];
+        if (col_key[keep[k]] > top) top = col_key[keep[k]];
+    }
+    long long *where = (long long *)malloc(sizeof(long long) * (size_t)(size + 2 * nk + top + 2));
+    if (!where) return -1;
+    long long *ir = where + size, *ic = ir + nk, *count = ic + nk;
+    for (long long g = 0; g < size; g++) where[g] = -1;
+    for (long long k = 0; k < nk; k++) where[keep[k]] = k;
+    for (int pass = 0; pass < 2; pass++) {  /* a stable counting sort of the kept keys; the inverse */
+        const long long *key = pass ? col_key : row_key;
+        long long *order = pass ? col_order : row_order, *inverse = pass ? ic : ir;
+        for (long long v = 0; v <= top + 1; v++) count[v] = 0;
+        for (long long k = 0; k < nk; k++) count[key[keep[k]] + 1]++;
+        for (long long v = 0; v <= top; v++) count[v + 1] += count[v];
+        for (long long k = 0; k < nk; k++) order[count[key[keep[k]]]++] = k;
+        for (long long b = 0; b < nk; b++) inverse[order[b]] = b;
+    }
+    long long kept = 0, lo = 0, hi = 0;
+    for (long long k = 0; k < nnz; k++) {
+        long long r = where[rows[k]], c = where[cols[k]];
+        if (r < 0 || c < 0) continue;
+        nonzeros[kept] = k;
+        iv[kept] = ir[r];
+        jv[kept] = ic[c];
+        kept++;
+    }
+    for (long long k = 0; k < n_at; k++) {
+        iv[kept + k] = ir[at[k]];
+        jv[kept + k] = ic[at[k]];
+    }
+    for (long long k = 0; k < kept + n_at; k++) {
+        long long d = iv[k] - jv[k];
+        if (d > hi) hi = d;
+        if (d < lo) lo = d;
+    }
+    band[0] = hi;
+    band[1] = -lo;
+    free(where);
+    /* banded: dims[4] = 1, or dims[4] = -1 and the band at most dims[5] / 2^20 of the size (sparse.banded_wins); then
+       each entry's place in the band's storage, j ld + kl + ku + (i - j) (ld = 2 kl + ku + 1), in i's place */
+    double fraction = (double)dims[5] / 1048576.0;
+    int banded = dims[4] == 1 || (dims[4] == -1 && (double)(hi - lo + 1) <= fraction * (double)nk);
+    if (banded)
+        for (long long k = 0; k < kept + n_at; k++)
+            iv[k] = jv[k] * (2 * hi - lo + 1) + (hi - lo) + (iv[k] - jv[k]);
+    band[2] = banded;
+    return kept;
+}
+
 /* ---- the min-map Newton point of the reduced system, whole (gnerun.solvers.reduced.SparseReduced.point) ---- */
 
 /* SparseReduced.point on a nonlinear game's banded kept matrix (KeptLayout.factor without diagonal additions or an
@@ -1209,6 +1278,52 @@ def reduced_point(layout, keep: np.ndarray, n: int, nz: int, lam0: int) -> Reduc
     return ReducedPoint(kernels[9], layout, keep, n, nz, lam0)
 
 
+class KeptLayouts:
+    """:class:`gnerun.game.sparse.KeptLayout`'s indices without an elimination, compiled (C's ``kept_layout``: the same
+    integers), for one full system's pattern (``rows``, ``cols``: its nonzeros' rows and columns, in data order) and
+    stage keys (``row_key``, ``col_key``), whose addresses are taken once."""
+
+    def __init__(self, function, size: int, rows: np.ndarray, cols: np.ndarray, row_key: np.ndarray,
+                 col_key: np.ndarray, fraction: float) -> None:
+        self._function, self._size = function, size
+        self._fraction = int(round(fraction * 2 ** 20))  # (sparse.BAND_FRACTION, exactly: 0.25)
+        if self._fraction != fraction * 2 ** 20:
+            raise ValueError("the band's fraction must be a multiple of 2^-20")
+        self._held = [np.ascontiguousarray(v, dtype=np.int64) for v in (rows, cols, row_key, col_key)]
+        self._fixed = (ctypes.c_void_p * 4)(*[v.ctypes.data for v in self._held])  # (held arrays)
+        self._nnz = self._held[0].size
+
+    def __call__(self, keep: np.ndarray, at: np.ndarray, banded: bool | None) -> tuple | None:
+        """For the rows and columns ``keep`` and the diagonal additions at ``at`` (positions in ``keep``): the pattern's
+        nonzeros in the kept matrix, each entry's place in the band's storage (the nonzeros', then the additions'),
+        the band's row and column orders, kl, ku, and whether the matrix is factorised banded (``banded``, or where
+        :func:`gnerun.game.sparse.banded_wins`; without, the places are not made); None where memory ran out."""
+        keep, at = (np.ascontiguousarray(v, dtype=np.int64) for v in (keep, at))
+        nk, n_at, nnz = keep.size, at.size, self._nnz
+        out = np.empty(3 + 3 * nnz + 2 * n_at + 2 * nk, dtype=np.int64)
+        dims = np.array([self._size, nk, nnz, n_at, -1 if banded is None else int(banded), self._fraction],
+                        dtype=np.int64)
+        varying = (ctypes.c_void_p * 2)(keep.ctypes.data, at.ctypes.data)
+        kept = self._function(dims.ctypes.data, ctypes.addressof(self._fixed), ctypes.addressof(varying),
+                              out.ctypes.data)
+        if kept < 0:
+            return None
+        i0 = 3 + nnz
+        r0 = i0 + 2 * (nnz + n_at)
+        return (out[3:3 + kept], out[i0:i0 + kept + n_at], out[r0:r0 + nk], out[r0 + nk:r0 + 2 * nk], int(out[0]),
+                int(out[1]), bool(out[2]))
+
+
+def kept_layouts(size: int, rows: np.ndarray, cols: np.ndarray, row_key: np.ndarray, col_key: np.ndarray,
+                 fraction: float) -> KeptLayouts | None:
+    """The compiled layout arithmetic for this pattern and these keys (``fraction``: sparse.BAND_FRACTION), or None
+    where nothing is compiled."""
+    kernels = _lu_kernels()
+    if kernels is None:
+        return None
+    return KeptLayouts(kernels[10], size, rows, cols, row_key, col_key, fraction)
+
+
 def one_norm(ab: np.ndarray) -> float | None:
     """``float(np.abs(ab).sum(axis=0).max())`` of a Fortran-ordered band (numpy's pairwise sums, the same number),
     without its temporary arrays; None where nothing is compiled."""
@@ -1346,8 +1461,11 @@ def _load():
     point = lib.reduced_point
     point.restype = ctypes.c_int
     point.argtypes = [ctypes.c_void_p] * 10
+    layout = lib.kept_layout
+    layout.restype = ctypes.c_longlong
+    layout.argtypes = [ctypes.c_void_p] * 4
     return kernel, (factor, solve_lu, inverse_norm, norm, complement, (shifts, _potrf()), eliminated,
-                    definite, step, point), "compiled"
+                    definite, step, point, layout), "compiled"
 
 
 def _potrf() -> int | None:

@@ -795,6 +795,7 @@ class StageOrder:
         self.size = system.size
         self.layouts: dict = {}
         self.banded: bool | None = None  # None: banded LU where banded_wins; True or False: always that (benchmarks)
+        self.compiled_layouts = None  # the compiled layout arithmetic (KeptLayout._compiled; False: none)
 
 
 def _narrowest(row_stage: np.ndarray, row_kind: np.ndarray, col_stage: np.ndarray, col_kind: np.ndarray,
@@ -827,6 +828,9 @@ class KeptLayout:
 
     def __init__(self, order: StageOrder, keep: np.ndarray, at: np.ndarray | None, banded: bool | None = None,
                  eliminate: np.ndarray | None = None) -> None:
+        self.compiled_point = None  # the compiled Newton point (SparseKKT.point_kept; False: none)
+        if eliminate is None and self._compiled(order, keep, at, banded):
+            return
         where = np.full(order.size, -1)
         where[keep] = np.arange(keep.size)
         r, c = where[order.rows], where[order.cols]
@@ -868,7 +872,28 @@ class KeptLayout:
             self.nnz = unique.size
         self.flat, self.flat_at, self.flat_fill = (positions[:r.size], positions[r.size:r.size + at.size],
                                                    positions[r.size + at.size:])
-        self.compiled_point = None  # the compiled Newton point (SparseKKT.point_kept; False: none)
+
+    def _compiled(self, order: StageOrder, keep: np.ndarray, at: np.ndarray | None, banded: bool | None) -> bool:
+        """The banded layout without an elimination from the compiled index arithmetic
+        (:func:`gnerun.game.banded.kept_layout`: the same integers as the numpy code below, a tenth of its time); False
+        where nothing is compiled or the matrix goes to SuperLU (the numpy code then makes the layout)."""
+        compiled = order.compiled_layouts
+        if compiled is None:
+            compiled = order.compiled_layouts = banded_code.kept_layouts(
+                order.size, order.rows, order.cols, order.row_key, order.col_key, BAND_FRACTION) or False
+        if not compiled:
+            return False
+        at = np.zeros(0, dtype=np.int64) if at is None else at.astype(np.int64)
+        found = compiled(keep, at, banded)
+        if found is None or not found[6]:
+            return False
+        nonzeros, positions, row_order, col_order, kl, ku, _ = found
+        self.elimination = None
+        self.nonzeros, self.at, self.size = nonzeros, at, keep.size
+        self.row_order, self.col_order, self.lower, self.upper = row_order, col_order, kl, ku
+        self.banded, self.ld = True, 2 * kl + ku + 1
+        self.flat, self.flat_at, self.flat_fill = positions[:nonzeros.size], positions[nonzeros.size:], positions[:0]
+        return True
 
     def _fill(self, out: np.ndarray, data: np.ndarray, add: np.ndarray | None) -> None:
         """The matrix's entries into the flat storage ``out`` (zeros)."""
@@ -1114,6 +1139,9 @@ def inverse_norm(solve: Callable[[np.ndarray], np.ndarray], solve_T: Callable[[n
 
 
 BAND_FRACTION = 0.25  # banded LU where the band (kl + ku + 1) is at most this fraction of the matrix's size
+
+
+banded_code = banded  # (KeptLayout's own argument ``banded`` hides the module)
 
 
 def banded_wins(size: int, lower: int, upper: int) -> bool:
