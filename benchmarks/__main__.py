@@ -345,7 +345,10 @@ def robust_rows(row, reps: int, quick: bool) -> None:
 
 
 # the calls of one iteration into compiled code (gnerun.game.banded's C, the CasADi kernels), by what they compute
-_COMPILED = (("LU", "gnerun.game.banded", None, "lu_factor"), ("solves", "gnerun.game.banded", None, "lu_solve"),
+_COMPILED = (("interior step", "gnerun.game.banded", "InteriorStep", "__call__"),
+             ("Newton point", "gnerun.game.banded", "ReducedPoint", "__call__"),
+             ("layouts", "gnerun.game.banded", "KeptLayouts", "__call__"),
+             ("LU", "gnerun.game.banded", None, "lu_factor"), ("solves", "gnerun.game.banded", None, "lu_solve"),
              ("solves", "gnerun.game.banded", "EliminatedSolve", "__call__"),
              ("estimate", "gnerun.game.banded", None, "lu_inverse_norm"),
              ("complement", "gnerun.game.banded", "PlayersComplement", "__call__"),
@@ -501,10 +504,13 @@ def factorization_rows(row, quick: bool) -> None:
 def elimination_rows(row, quick: bool) -> None:
     """The interior step's matrix factorised with its inequality multipliers eliminated (``interior_point.ELIMINATE``)
     against K as it is: time per iteration on the merge and the intersection in the sparse formulation, one solver,
-    the two alternating per initial state (which goes first too), after a round that warms up both."""
+    the two alternating per initial state (which goes first too), after a round that warms up both. Both take their
+    interior steps by the numpy code (``interior_point.FUSED`` off: the compiled step is for the eliminated matrix
+    only, and the row is about the elimination)."""
     from .problems import trajectory
 
-    before = interior_point.ELIMINATE
+    before, fused = interior_point.ELIMINATE, interior_point.FUSED
+    interior_point.FUSED = False
     for label, problems in (("ALGAMES merge", trajectory.merge_problems(3 if quick else 10)),
                             ("ALGAMES intersection", trajectory.intersection_problems(2 if quick else 5))):
         cfg = load_config(text=problems[0].config_yaml)
@@ -524,10 +530,12 @@ def elimination_rows(row, quick: bool) -> None:
                         per[eliminate].append((time.perf_counter() - t0) / max(state.k, 1))
                         its[eliminate].append(state.k)
         interior_point.ELIMINATE = before
-        row(f"{label} ({game.size} unknowns, sparse): one iteration, inequality multipliers eliminated vs not",
+        row(f"{label} ({game.size} unknowns, sparse): one iteration, inequality multipliers eliminated vs not "
+            "(the interior step by numpy in both)",
             statistics.median(per[True]), "not eliminated", statistics.median(per[False]),
             note=f"median over {len(problems)} random initial states, iterations {its[True]} "
                  f"(not eliminated {its[False]})")
+    interior_point.FUSED = fused
 
 
 def merge_compile_rows(row, cars: tuple[int, ...]) -> None:

@@ -27,6 +27,7 @@ from scipy.linalg import lapack  # noqa: E402
 from gnerun.game.compile import compile_game  # noqa: E402
 from gnerun.game.sparse import KeptLayout, Ordering, SparseKKT  # noqa: E402
 from gnerun.language.config import load_config  # noqa: E402
+from gnerun.solvers import interior_point, reduced  # noqa: E402
 from gnerun.solvers.driver import iterate  # noqa: E402
 from gnerun.solvers.factory import make_solver  # noqa: E402
 
@@ -77,10 +78,15 @@ def record(case: Case, limit: int = 400) -> tuple[SparseKKT, list[tuple], int]:
         return factor(kind, data, keep, at, add, estimate, eliminate)
 
     system.factor_kept = recording
+    fused = interior_point.FUSED, reduced.FUSED
+    interior_point.FUSED = reduced.FUSED = False  # every matrix through factor_kept (the compiled steps: the same)
     iterations = 0
-    for x0 in case.starts or [None]:
-        state = iterate(solver, solver.init(None, x0))
-        iterations += state.k
+    try:
+        for x0 in case.starts or [None]:
+            state = iterate(solver, solver.init(None, x0))
+            iterations += state.k
+    finally:
+        interior_point.FUSED, reduced.FUSED = fused
     del system.factor_kept
     return system, seen, iterations
 

@@ -1051,6 +1051,23 @@ done:
 """
 
 
+_buffer, _address = ctypes.c_char.from_buffer, ctypes.addressof
+
+
+def _at(a: np.ndarray) -> int:
+    """The address of an array's data, for a call into the compiled code: ctypes' view of a writable C-ordered array's
+    buffer, or of a Fortran-ordered one's transpose (a third of the time of ``a.ctypes.data``, which builds an object
+    per call; these calls pass a dozen arrays each), else ``a.ctypes.data`` (a read-only or empty array)."""
+    try:
+        return _address(_buffer(a))
+    except (TypeError, ValueError, BufferError):
+        pass
+    try:
+        return _address(_buffer(a.T))
+    except (TypeError, ValueError, BufferError):
+        return a.ctypes.data
+
+
 def solve(band: np.ndarray, b: np.ndarray, transpose: bool = False) -> int:
     """Solve L Y = B (or L^T Y = B) in place of ``b`` (n x m, C-ordered, float64), L lower triangular with ``k`` =
     ``band.shape[1] - 1`` diagonals below its own, given as ``band`` (n x (k + 1), C-ordered): ``band[i, 0]`` =
@@ -1067,7 +1084,7 @@ def solve(band: np.ndarray, b: np.ndarray, transpose: bool = False) -> int:
     n, width = band.shape
     if b.shape[0] != n:
         raise ValueError(f"{b.shape[0]} rows of right-hand sides for a band of {n} rows")
-    return kernel(n, width - 1, band.ctypes.data, b.shape[1] if b.ndim == 2 else 1, b.ctypes.data, int(transpose))
+    return kernel(n, width - 1, _at(band), b.shape[1] if b.ndim == 2 else 1, _at(b), int(transpose))
 
 
 def lu_factor(ab: np.ndarray, kl: int, ku: int) -> tuple[np.ndarray, np.ndarray, int] | None:
@@ -1086,7 +1103,7 @@ def lu_factor(ab: np.ndarray, kl: int, ku: int) -> tuple[np.ndarray, np.ndarray,
     if not (ab.flags.f_contiguous and ab.dtype == np.float64 and ab.shape[0] == 2 * kl + ku + 1):
         raise ValueError("the band must be a Fortran-ordered array of float64 with 2 kl + ku + 1 rows")
     piv = np.empty(n, dtype=np.int32)
-    info = kernels[0](n, kl, ku, ab.ctypes.data, ab.shape[0], piv.ctypes.data)
+    info = kernels[0](n, kl, ku, _at(ab), ab.shape[0], _at(piv))
     return None if info < 0 else (ab, piv, info)
 
 
@@ -1104,7 +1121,7 @@ def lu_solve(lu: np.ndarray, kl: int, ku: int, piv: np.ndarray, b: np.ndarray, t
     if b.shape[0] != n:
         raise ValueError(f"{b.shape[0]} rows of right-hand sides for a matrix of {n} rows")
     x = np.array(b, dtype=np.float64, order="F")
-    kernels[1](n, kl, ku, lu.ctypes.data, lu.shape[0], piv.ctypes.data, m, x.ctypes.data, int(bool(trans)))
+    kernels[1](n, kl, ku, _at(lu), lu.shape[0], _at(piv), m, _at(x), int(bool(trans)))
     return x
 
 
@@ -1119,7 +1136,7 @@ def lu_inverse_norm(lu: np.ndarray, kl: int, ku: int, piv: np.ndarray) -> float 
     if not (lu.flags.f_contiguous and lu.dtype == np.float64 and piv.dtype == np.int32 and piv.flags.c_contiguous):
         raise ValueError("the factors must be a Fortran-ordered array of float64 and the pivots of int32")
     work = np.empty(2 * n)
-    return kernels[2](n, kl, ku, lu.ctypes.data, lu.shape[0], piv.ctypes.data, work.ctypes.data)
+    return kernels[2](n, kl, ku, _at(lu), lu.shape[0], _at(piv), _at(work))
 
 
 class EliminatedSolve:
@@ -1148,8 +1165,8 @@ class EliminatedSolve:
         diagonal, re, er = (np.ascontiguousarray(v, dtype=np.float64) for v in (diagonal, re, er))
         x = np.empty(self._size)
         work = np.empty(2 * self._size)
-        self._function(*self._fixed, diagonal.ctypes.data, re.ctypes.data, er.ctypes.data, lu.ctypes.data,
-                       piv.ctypes.data, b.ctypes.data, x.ctypes.data, work.ctypes.data)
+        self._function(*self._fixed, _at(diagonal), _at(re), _at(er), _at(lu),
+                       _at(piv), _at(b), _at(x), _at(work))
         return x
 
 
@@ -1179,7 +1196,7 @@ class PlayersDefinite:
         data = np.ascontiguousarray(data, dtype=np.float64)
         D = np.ascontiguousarray(D, dtype=np.float64)
         work = np.empty(self._work)  # per call: ctypes lets go of the GIL, and two threads may share a system
-        return self._function(*self._fixed, data.ctypes.data, D.ctypes.data, work.ctypes.data)
+        return self._function(*self._fixed, _at(data), _at(D), _at(work))
 
 
 def players_definite(dims: np.ndarray, ix: list[np.ndarray], work: int) -> PlayersDefinite | None:
@@ -1224,9 +1241,9 @@ class InteriorStep:
         scal = np.array([eps, *self._constants])
         t = np.empty(1)
         dims = self._predict if predict else self._dims
-        code = self._function(dims.ctypes.data, *self._fixed, scal.ctypes.data, data.ctypes.data, F.ctypes.data,
-                              c.ctypes.data, z.ctypes.data, w.ctypes.data, lam.ctypes.data, D.ctypes.data,
-                              z_new.ctypes.data, w_new.ctypes.data, t.ctypes.data)
+        code = self._function(_at(dims), *self._fixed, _at(scal), _at(data), _at(F),
+                              _at(c), _at(z), _at(w), _at(lam), _at(D),
+                              _at(z_new), _at(w_new), _at(t))
         return (z_new, w_new, float(t[0])) if code == 0 else code
 
 
@@ -1262,9 +1279,9 @@ class ReducedPoint:
         ab = np.empty(self._shape)  # C's zeros; the transpose of the Fortran-ordered band
         piv = np.empty(self._shape[0], dtype=np.int32)
         work, z_new, rcond = np.empty(3 * self._shape[0]), np.empty(self._nz), np.empty(1)
-        code = self._function(self._dims[estimate].ctypes.data, ctypes.addressof(self._pointers), data.ctypes.data,
-                              F0.ctypes.data, z.ctypes.data, ab.ctypes.data, piv.ctypes.data, work.ctypes.data,
-                              z_new.ctypes.data, rcond.ctypes.data)
+        code = self._function(_at(self._dims[estimate]), ctypes.addressof(self._pointers), _at(data),
+                              _at(F0), _at(z), _at(ab), _at(piv), _at(work),
+                              _at(z_new), _at(rcond))
         return (z_new, ab.T, piv, float(rcond[0])) if code == 0 else None
 
 
@@ -1303,9 +1320,9 @@ class KeptLayouts:
         out = np.empty(3 + 3 * nnz + 2 * n_at + 2 * nk, dtype=np.int64)
         dims = np.array([self._size, nk, nnz, n_at, -1 if banded is None else int(banded), self._fraction],
                         dtype=np.int64)
-        varying = (ctypes.c_void_p * 2)(keep.ctypes.data, at.ctypes.data)
-        kept = self._function(dims.ctypes.data, ctypes.addressof(self._fixed), ctypes.addressof(varying),
-                              out.ctypes.data)
+        varying = (ctypes.c_void_p * 2)(_at(keep), _at(at))
+        kept = self._function(_at(dims), ctypes.addressof(self._fixed), ctypes.addressof(varying),
+                              _at(out))
         if kept < 0:
             return None
         i0 = 3 + nnz
@@ -1332,7 +1349,7 @@ def one_norm(ab: np.ndarray) -> float | None:
         return None
     if not (ab.flags.f_contiguous and ab.dtype == np.float64):
         raise ValueError("the band must be a Fortran-ordered array of float64")
-    return kernels[3](ab.shape[1], ab.ctypes.data, ab.shape[0])
+    return kernels[3](ab.shape[1], _at(ab), ab.shape[0])
 
 
 class PlayersComplement:
@@ -1364,7 +1381,7 @@ class PlayersComplement:
         D = np.ascontiguousarray(D, dtype=np.float64)
         work = np.empty(self._work)  # per call: a system's blocks may serve several solves at once
         K = np.empty(self._shape)
-        code = self._function(*self._fixed, data.ctypes.data, D.ctypes.data, work.ctypes.data, K.ctypes.data)
+        code = self._function(*self._fixed, _at(data), _at(D), _at(work), _at(K))
         return K if code == 0 else (None if code == 1 else False)
 
     def shifts(self, K: np.ndarray) -> tuple[list[float], float] | None:
@@ -1378,8 +1395,8 @@ class PlayersComplement:
         m, players = self._shape[1], self._decisions.size
         S = K[self._shape[0] - int(self._decisions.sum()):]
         deltas, work = np.empty(players), np.empty(2 * m * m)
-        scale = function(players, self._rows.ctypes.data, self._decisions.ctypes.data, m, S.ctypes.data, potrf,
-                         work.ctypes.data, deltas.ctypes.data)
+        scale = function(players, _at(self._rows), _at(self._decisions), m, _at(S), potrf,
+                         _at(work), _at(deltas))
         return deltas.tolist(), float(scale)
 
 
