@@ -764,6 +764,47 @@ def test_the_compiled_interior_step_leaves_its_other_cases_to_numpy(monkeypatch:
     assert isinstance(found, int)
 
 
+def test_the_compiled_bookkeeping_of_the_interior_phase_is_numpys(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The interior phase's error of H_eps (``InteriorPoint.measure``) and its slack reset, compiled
+    (gnerun.game.banded.Barrier), give numpy's numbers: on random points of the merge's sizes with NaNs, infinities and
+    signed zeros among them, the error bit for bit (a NaN where numpy's is) and the reset's z and w array for array,
+    the same objects where no row is reset."""
+    from gnerun.game import banded
+
+    if banded.status() != "compiled":
+        pytest.skip(f"nothing compiled here: {banded.status()}")
+    game, solver, state = _merge_system()
+    ip = solver.interior
+    n, I, E = ip.n, ip.I, ip.E
+    compiled = ip._compiled()
+    assert compiled
+    rng = np.random.default_rng(3)
+    resets = 0
+    for trial in range(200):
+        z = rng.standard_normal(n + game.m)
+        w = np.abs(rng.standard_normal(I.size))
+        L, c = rng.standard_normal(n), rng.standard_normal(game.m)
+        if trial % 4 == 1:
+            for v in (z, w, L, c):
+                v[rng.integers(v.size)] = [np.nan, np.inf, -np.inf, -0.0][trial % 16 // 4]
+        eps = 10.0 ** rng.uniform(-8, 0)
+        reference = max(float(np.abs(L).max()), float(np.abs(c[I] + w).max()),
+                        float(np.abs(c[E]).max()) if E.size else 0.0, float(np.abs(z[n + I] * w - eps).max()))
+        ours = compiled.error(L, c, z, w, eps)
+        assert ours == reference or (np.isnan(ours) and np.isnan(reference))
+        monkeypatch.setattr(interior_point, "FUSED", False)
+        expected = ip.reset_slacks(z, w, c)
+        monkeypatch.undo()
+        found = ip.reset_slacks(z, w, c)
+        if expected[0] is z:
+            assert found[0] is z and found[1] is w
+        else:
+            resets += 1
+            assert np.array_equal(found[0], expected[0], equal_nan=True)
+            assert np.array_equal(found[1], expected[1], equal_nan=True)
+    assert resets > 20
+
+
 @pytest.mark.parametrize("family", ["merge", "intersection"])
 def test_the_compiled_layouts_are_numpys(family: str, monkeypatch: pytest.MonkeyPatch) -> None:
     """The kept matrices' layouts made by the compiled index arithmetic (gnerun.game.banded.KeptLayouts) are the numpy

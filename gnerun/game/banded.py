@@ -786,6 +786,70 @@ double players_shifts(int agents, const long long *rows, const long long *decisi
     return scale_of(nan, largest);
 }
 
+/* ---- the interior phase's bookkeeping (gnerun.solvers.interior_point.InteriorPoint.measure and reset_slacks) ---- */
+
+/* linalg.largest: numpy's max of |v| (a NaN wins), 0 for an empty v */
+static double largest_abs(const double *v, const long long *index, long long n, long long offset) {
+    double best = 0.0;
+    for (long long k = 0; k < n; k++) {
+        double a = __builtin_fabs(v[offset + (index ? index[k] : k)]);
+        if (a != a) return a;
+        if (k == 0 || a > best) best = a;
+    }
+    return best;
+}
+
+/* Python's max(a, b): b where b > a (a NaN first stays) */
+static double py_max(double a, double b) { return b > a ? b : a; }
+
+/* InteriorPoint.measure's error of H_eps at (z, w) given L and c: max(largest(L), largest(c_I + w), largest(c_E),
+   largest(lambda_I w - eps)), the same number. dims: n, nI, nE; ix: I, E. */
+double barrier_error(const long long *dims, const long long *const *ix, const double *L, const double *c,
+                     const double *z, const double *w, double eps) {
+    long long n = dims[0], nI = dims[1], nE = dims[2];
+    const long long *I = ix[0], *E = ix[1];
+    double err = largest_abs(L, 0, n, 0), part = 0.0;
+    for (long long k = 0; k < nI; k++) {
+        double a = __builtin_fabs(c[I[k]] + w[k]);
+        if (a != a) { part = a; break; }
+        if (k == 0 || a > part) part = a;
+    }
+    err = py_max(err, part);
+    err = py_max(err, largest_abs(c, E, nE, 0));
+    part = 0.0;
+    for (long long k = 0; k < nI; k++) {
+        double a = __builtin_fabs(z[n + I[k]] * w[k] - eps);
+        if (a != a) { part = a; break; }
+        if (k == 0 || a > part) part = a;
+    }
+    return py_max(err, part);
+}
+
+/* InteriorPoint.reset_slacks: the rows guessed inactive (lambda_j <= w_j) whose constraint lies further inside than
+   the slack (-c_j > w_j, finite) get w_j = -c_j, their multiplier times the old slack over the new. Returns 0 where no
+   row is reset (z_new and w_new not written), else 1 with the new z and w. dims: n, nI, z's size; ix: I. */
+int slack_reset(const long long *dims, const long long *const *ix, const double *c, const double *z, const double *w,
+                double *z_new, double *w_new) {
+    long long n = dims[0], nI = dims[1], nz = dims[2];
+    const long long *I = ix[0];
+    int any = 0;
+    for (long long k = 0; k < nI; k++) {
+        double inside = -c[I[k]];
+        if (inside > w[k] && z[n + I[k]] <= w[k] && inside - inside == 0.0) { any = 1; break; }
+    }
+    if (!any) return 0;
+    for (long long j = 0; j < nz; j++) z_new[j] = z[j];
+    for (long long k = 0; k < nI; k++) {
+        double inside = -c[I[k]];
+        w_new[k] = w[k];
+        if (inside > w[k] && z[n + I[k]] <= w[k] && inside - inside == 0.0) {
+            z_new[n + I[k]] = z[n + I[k]] * (w[k] / inside);
+            w_new[k] = inside;
+        }
+    }
+    return 1;
+}
+
 /* ---- where a kept matrix's nonzeros go (gnerun.game.sparse.KeptLayout, without an elimination) ---- */
 
 /* KeptLayout's index arithmetic for the rows and columns keep of the full system (integers: the same numbers): which
@@ -1341,6 +1405,45 @@ def kept_layouts(size: int, rows: np.ndarray, cols: np.ndarray, row_key: np.ndar
     return KeptLayouts(kernels[10], size, rows, cols, row_key, col_key, fraction)
 
 
+class Barrier:
+    """The interior phase's bookkeeping for one set of inequality rows ``I`` and equality rows ``E`` of a game with
+    ``n`` decisions and iterates of ``size`` entries, compiled (C's ``barrier_error`` and ``slack_reset``: the same
+    numbers as :meth:`gnerun.solvers.interior_point.InteriorPoint.measure` and ``reset_slacks``)."""
+
+    def __init__(self, functions, n: int, I: np.ndarray, E: np.ndarray, size: int) -> None:
+        self._error, self._reset = functions
+        self._ix = [np.ascontiguousarray(v, dtype=np.int64) for v in (I, E)]
+        self._pointers = (ctypes.c_void_p * 2)(*[v.ctypes.data for v in self._ix])  # (held arrays)
+        self._dims = np.array([n, self._ix[0].size, self._ix[1].size], dtype=np.int64)
+        self._reset_dims = np.array([n, self._ix[0].size, size], dtype=np.int64)
+        self._fixed = (self._dims.ctypes.data, ctypes.addressof(self._pointers))
+        self._reset_fixed = (self._reset_dims.ctypes.data, ctypes.addressof(self._pointers))
+        self._size = size
+
+    def error(self, L: np.ndarray, c: np.ndarray, z: np.ndarray, w: np.ndarray, eps: float) -> float:
+        """max(largest(L), largest(c_I + w), largest(c_E), largest(lambda_I w - eps))."""
+        L, c, z, w = (np.ascontiguousarray(v, dtype=np.float64) for v in (L, c, z, w))
+        return self._error(*self._fixed, _at(L), _at(c), _at(z), _at(w), eps)
+
+    def reset(self, c: np.ndarray, z: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(z, w) after the slack reset: new arrays where a row is reset, else ``z`` and ``w`` themselves."""
+        c, zc, wc = (np.ascontiguousarray(v, dtype=np.float64) for v in (c, z, w))
+        if zc.size != self._size or wc.size != self._dims[1]:
+            raise ValueError("the iterate does not fit these rows")
+        z_new, w_new = np.empty(self._size), np.empty(wc.size)
+        if not self._reset(*self._reset_fixed, _at(c), _at(zc), _at(wc), _at(z_new), _at(w_new)):
+            return z, w
+        return z_new, w_new
+
+
+def barrier(n: int, I: np.ndarray, E: np.ndarray, size: int) -> Barrier | None:
+    """The compiled bookkeeping of an interior phase, or None where nothing is compiled."""
+    kernels = _lu_kernels()
+    if kernels is None:
+        return None
+    return Barrier(kernels[11], n, I, E, size)
+
+
 def one_norm(ab: np.ndarray) -> float | None:
     """``float(np.abs(ab).sum(axis=0).max())`` of a Fortran-ordered band (numpy's pairwise sums, the same number),
     without its temporary arrays; None where nothing is compiled."""
@@ -1481,8 +1584,12 @@ def _load():
     layout = lib.kept_layout
     layout.restype = ctypes.c_longlong
     layout.argtypes = [ctypes.c_void_p] * 4
+    error, reset = lib.barrier_error, lib.slack_reset
+    error.restype, reset.restype = ctypes.c_double, ctypes.c_int
+    error.argtypes = [ctypes.c_void_p] * 6 + [ctypes.c_double]
+    reset.argtypes = [ctypes.c_void_p] * 7
     return kernel, (factor, solve_lu, inverse_norm, norm, complement, (shifts, _potrf()), eliminated,
-                    definite, step, point, layout), "compiled"
+                    definite, step, point, layout, (error, reset)), "compiled"
 
 
 def _potrf() -> int | None:

@@ -875,8 +875,8 @@ class KeptLayout:
 
     def _compiled(self, order: StageOrder, keep: np.ndarray, at: np.ndarray | None, banded: bool | None) -> bool:
         """The banded layout without an elimination from the compiled index arithmetic
-        (:func:`gnerun.game.banded.kept_layout`: the same integers as the numpy code below, a tenth of its time); False
-        where nothing is compiled or the matrix goes to SuperLU (the numpy code then makes the layout)."""
+        (:class:`gnerun.game.banded.KeptLayouts`: the same integers as the numpy code below, in a third to a half of
+        its time); False where nothing is compiled or the matrix goes to SuperLU (the numpy code then makes it)."""
         compiled = order.compiled_layouts
         if compiled is None:
             compiled = order.compiled_layouts = banded_code.kept_layouts(

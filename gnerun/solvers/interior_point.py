@@ -127,6 +127,7 @@ class InteriorPoint:
         self.E = np.flatnonzero(eq & ~fixed)
         self.fixed = np.flatnonzero(fixed)
         self.linear = DenseBarrier(self) if newton.condensed else SparseBarrier(newton.system, self)
+        self._barrier = None  # the compiled bookkeeping (see _compiled)
 
     def start(self, z: np.ndarray, x: np.ndarray, attempt: int = 0,
               warm: bool = False) -> tuple[np.ndarray, np.ndarray, float]:
@@ -157,10 +158,21 @@ class InteriorPoint:
                 t: float = 1.0, predict: bool = False, kappa: float = KAPPA) -> InteriorIterate:
         """The iterate at (z, w) given L and c there; eps shrinks if H_eps is solved to ``kappa`` eps. ``predict``:
         Mehrotra's steps are taken from it (see :meth:`step`)."""
-        I, E = self.I, self.E
-        lw = z[self.n + I] * w
-        err = max(largest(L), largest(c[I] + w), largest(c[E]), largest(lw - eps))
+        compiled = self._compiled()
+        if compiled:
+            err = compiled.error(L, c, z, w, eps)
+        else:
+            I, E = self.I, self.E
+            lw = z[self.n + I] * w
+            err = max(largest(L), largest(c[I] + w), largest(c[E]), largest(lw - eps))
         return InteriorIterate(z, w, L, c, eps * SHRINK if err <= kappa * eps else eps, t, predict, kappa)
+
+    def _compiled(self):
+        """:meth:`measure`'s and :meth:`reset_slacks`' arithmetic compiled (:class:`gnerun.game.banded.Barrier`: the
+        same numbers; made once), or False where nothing is compiled or ``FUSED`` is off."""
+        if self._barrier is None:
+            self._barrier = banded.barrier(self.n, self.I, self.E, self.n + self.newton.game.m) or False
+        return self._barrier if FUSED else False
 
     def convex_at(self, it: InteriorIterate, parts) -> bool:
         """Whether every player's block of the barrier Newton matrix at ``it`` (``parts``: the derivatives there) is
@@ -176,6 +188,9 @@ class InteriorPoint:
         a collision distance, underestimates) gets w_j = -c_j, and its multiplier is scaled by the old slack over
         the new, so that lambda_j w_j, the row's place on the central path, is kept. Returns (z, w), copies where
         changed."""
+        compiled = self._compiled()
+        if compiled:
+            return compiled.reset(c, z, w)
         lam = z[self.n + self.I]
         inside = -c[self.I]
         reset = (inside > w) & (lam <= w) & np.isfinite(inside)
@@ -567,6 +582,7 @@ class SparseBarrier:
         return step or None
 
     def _build_step(self):
+        """The compiled step's positions and sizes (:func:`gnerun.game.banded.interior_step`), or None."""
         ip, system = self.ip, self.system
         if not ELIMINATE or not ip.I.size:
             return None

@@ -123,24 +123,26 @@ class SparseReduced:
         :meth:`last_rcond` then makes from the same factors."""
         system, parts, z = self.system, state.parts, state.z
         keep = system.kept(A)
+        found = None
         if self._J is not None:  # LQ: a constant matrix, one factorisation per active set
             key = A.tobytes()
             entry = self._lus.get(key)
             if entry is None:
                 entry = self._lus.keep(key, system.factor_kept("newton", self._J, keep))
         else:
+            # factors, estimate and point in one compiled call where it can (the same values), else step by step
             found = system.point_kept(parts, z, keep, estimate) if FUSED else None
-            if found is not None:  # factors, point and estimate in one compiled call (the same values)
+            if found is not None:
                 lu, z_new, rcond = found
-                self._unestimated = None if estimate else (lu, parts.J, keep)
-                if not (rcond >= self.min_rcond or math.isnan(rcond) and not estimate):
-                    return None, rcond
-                return z_new, rcond
-            entry = system.factor_kept("newton", parts.J, keep, estimate=estimate)
+                entry = (lu, rcond)
+            else:
+                entry = system.factor_kept("newton", parts.J, keep, estimate=estimate)
             self._unestimated = None if estimate else (entry[0], parts.J, keep)
         lu, rcond = entry
         if lu is None or not (rcond >= self.min_rcond or math.isnan(rcond) and not estimate):
             return None, rcond
+        if found is not None:
+            return z_new, rcond
         sol = lu.solve(system.rhs(parts)[keep])
         return system.new_iterate(z, sol, A), rcond
 
