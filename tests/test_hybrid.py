@@ -621,6 +621,38 @@ def test_decoupled_plans_that_drive_through_each_other_give_way_to_the_configure
     assert max(problem.best_response_gaps(state.z[: game.n]).values()) <= 1e-5
 
 
+def test_the_interior_phase_begins_at_the_decoupled_plans(monkeypatch: pytest.MonkeyPatch) -> None:
+    """From the cars' decoupled plans the interior phase begins at once, without the Newton step first
+    (``hybrid.PLANS_INTERIOR``): on ALGAMES's merges that step climbs and is refused, so the solves take the same
+    iterates bit for bit with it and without it, and without it no Newton step is tried from the plans."""
+    from benchmarks.problems import trajectory
+
+    problems = trajectory.merge_problems(4)
+    cfg = load_config(text=problems[0].config_yaml)
+    game = compile_game(cfg)
+    tried: list[bool] = []
+    candidate = hybrid.HybridNewton._candidate
+
+    def recorded(self, state, memory):
+        tried.append(memory.abandon < np.inf and memory.interior is None)
+        return candidate(self, state, memory)
+
+    monkeypatch.setattr(hybrid.HybridNewton, "_candidate", recorded)
+    runs = {}
+    for first in (False, True):
+        monkeypatch.setattr(hybrid, "PLANS_INTERIOR", first)
+        tried.clear()
+        solver = make_solver(cfg, game)
+        runs[first] = []
+        for p in problems:
+            x0 = np.asarray(load_config(text=p.config_yaml).game.x0)
+            state = iterate(solver, solver.init(None, x0), on_iterate=lambda s, r=runs[first]: r.append(s.z))
+            assert state.status == Status.CONVERGED and state.search.alone > 0  # (from the plans)
+        assert sum(tried) == (0 if first else len(problems))
+    assert len(runs[True]) == len(runs[False])
+    assert all(np.array_equal(a, b) for a, b in zip(runs[True], runs[False], strict=True))
+
+
 def _through(state) -> int:
     """Iterations counted through the decoupled game's solve (its own iterations inside the first)."""
     return state.k + max(state.search.alone - 1, 0)

@@ -234,6 +234,7 @@ def test_the_globalized_sparse_method_takes_the_condensed_iterates(monkeypatch: 
     costates eliminated, not regularised), and its interior direction makes each player's block of the Schur
     complement positive definite as the condensed form does."""
     monkeypatch.setattr(hybrid, "FIRST_STEP", np.inf)
+    monkeypatch.setattr(hybrid, "PLANS_INTERIOR", False)  # (the Newton phase from the decoupled plans, kept)
     cfg = load_config(CONFIGS / "algames_merge_n.yaml")
     game = compile_game(cfg)
     solvers = {f: make_solver(cfg.model_copy(update={"solver": cfg.solver.model_copy(update={"formulation": f})}),
