@@ -339,27 +339,32 @@ int band_lu_solve(int n, int kl, int ku, const double *ab, int ld, const int *ip
     return 0;
 }
 
-/* numpy's sum of |x| (DOUBLE_pairwise_sum: blocks of at most 128 in 8 accumulators, halves above) */
-static double abs_sum(const double *x, long n) {
-    if (n < 8) {
-        double res = 0.0;
-        for (long i = 0; i < n; i++) res += __builtin_fabs(x[i]);
-        return res;
+/* numpy's sum (DOUBLE_pairwise_sum: from zero, blocks of at most 128 in 8 accumulators, halves above) of TERM(x[i]):
+   abs_sum of |x|, plain_sum of x */
+#define PAIRWISE_SUM(name, TERM)                                                                       \
+    static double name(const double *x, long n) {                                                      \
+        if (n < 8) {                                                                                   \
+            double res = 0.0;                                                                          \
+            for (long i = 0; i < n; i++) res += TERM(x[i]);                                            \
+            return res;                                                                                \
+        }                                                                                              \
+        if (n <= 128) {                                                                                \
+            double r[8];                                                                               \
+            long i;                                                                                    \
+            for (int k = 0; k < 8; k++) r[k] = TERM(x[k]);                                             \
+            for (i = 8; i < n - (n % 8); i += 8)                                                       \
+                for (int k = 0; k < 8; k++) r[k] += TERM(x[i + k]);                                    \
+            double res = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]));            \
+            for (; i < n; i++) res += TERM(x[i]);                                                      \
+            return res;                                                                                \
+        }                                                                                              \
+        long n2 = n / 2;                                                                               \
+        n2 -= n2 % 8;                                                                                  \
+        return name(x, n2) + name(x + n2, n - n2);                                                     \
     }
-    if (n <= 128) {
-        double r[8];
-        long i;
-        for (int k = 0; k < 8; k++) r[k] = __builtin_fabs(x[k]);
-        for (i = 8; i < n - (n % 8); i += 8)
-            for (int k = 0; k < 8; k++) r[k] += __builtin_fabs(x[i + k]);
-        double res = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]));
-        for (; i < n; i++) res += __builtin_fabs(x[i]);
-        return res;
-    }
-    long n2 = n / 2;
-    n2 -= n2 % 8;
-    return abs_sum(x, n2) + abs_sum(x + n2, n - n2);
-}
+#define SAME(v) (v)
+PAIRWISE_SUM(abs_sum, __builtin_fabs)
+PAIRWISE_SUM(plain_sum, SAME)
 
 /* numpy's argmax of |x|: the first NaN, or the first largest */
 static int abs_argmax(const double *x, int n) {
@@ -788,15 +793,12 @@ double players_shifts(int agents, const long long *rows, const long long *decisi
 
 /* ---- the interior phase's bookkeeping (gnerun.solvers.interior_point.InteriorPoint.measure and reset_slacks) ---- */
 
-/* linalg.largest: numpy's max of |v| (a NaN wins), 0 for an empty v */
-static double largest_abs(const double *v, const long long *index, long long n, long long offset) {
-    double best = 0.0;
-    for (long long k = 0; k < n; k++) {
-        double a = __builtin_fabs(v[offset + (index ? index[k] : k)]);
-        if (a != a) return a;
-        if (k == 0 || a > best) best = a;
-    }
-    return best;
+/* one step of linalg.largest (numpy's max of |v|: a NaN wins, 0 for an empty v) over v_k = a: 1 once it is NaN */
+static int fold_largest(double a, long long k, double *best) {
+    a = __builtin_fabs(a);
+    if (a != a) { *best = a; return 1; }
+    if (k == 0 || a > *best) *best = a;
+    return 0;
 }
 
 /* Python's max(a, b): b where b > a (a NaN first stays) */
@@ -808,21 +810,12 @@ double barrier_error(const long long *dims, const long long *const *ix, const do
                      const double *z, const double *w, double eps) {
     long long n = dims[0], nI = dims[1], nE = dims[2];
     const long long *I = ix[0], *E = ix[1];
-    double err = largest_abs(L, 0, n, 0), part = 0.0;
-    for (long long k = 0; k < nI; k++) {
-        double a = __builtin_fabs(c[I[k]] + w[k]);
-        if (a != a) { part = a; break; }
-        if (k == 0 || a > part) part = a;
-    }
-    err = py_max(err, part);
-    err = py_max(err, largest_abs(c, E, nE, 0));
-    part = 0.0;
-    for (long long k = 0; k < nI; k++) {
-        double a = __builtin_fabs(z[n + I[k]] * w[k] - eps);
-        if (a != a) { part = a; break; }
-        if (k == 0 || a > part) part = a;
-    }
-    return py_max(err, part);
+    double part[4] = {0.0, 0.0, 0.0, 0.0};
+    for (long long k = 0; k < n && !fold_largest(L[k], k, &part[0]); k++) {}
+    for (long long k = 0; k < nI && !fold_largest(c[I[k]] + w[k], k, &part[1]); k++) {}
+    for (long long k = 0; k < nE && !fold_largest(c[E[k]], k, &part[2]); k++) {}
+    for (long long k = 0; k < nI && !fold_largest(z[n + I[k]] * w[k] - eps, k, &part[3]); k++) {}
+    return py_max(py_max(py_max(part[0], part[1]), part[2]), part[3]);
 }
 
 /* InteriorPoint.reset_slacks: the rows guessed inactive (lambda_j <= w_j) whose constraint lies further inside than
@@ -832,21 +825,20 @@ int slack_reset(const long long *dims, const long long *const *ix, const double 
                 double *z_new, double *w_new) {
     long long n = dims[0], nI = dims[1], nz = dims[2];
     const long long *I = ix[0];
-    int any = 0;
-    for (long long k = 0; k < nI; k++) {
-        double inside = -c[I[k]];
-        if (inside > w[k] && z[n + I[k]] <= w[k] && inside - inside == 0.0) { any = 1; break; }
-    }
-    if (!any) return 0;
+#define RESETS(k) (-c[I[k]] > w[k] && z[n + I[k]] <= w[k] && -c[I[k]] - -c[I[k]] == 0.0)
+    long long first = 0;
+    while (first < nI && !RESETS(first)) first++;
+    if (first == nI) return 0;
     for (long long j = 0; j < nz; j++) z_new[j] = z[j];
     for (long long k = 0; k < nI; k++) {
-        double inside = -c[I[k]];
         w_new[k] = w[k];
-        if (inside > w[k] && z[n + I[k]] <= w[k] && inside - inside == 0.0) {
+        if (k >= first && RESETS(k)) {
+            double inside = -c[I[k]];
             z_new[n + I[k]] = z[n + I[k]] * (w[k] / inside);
             w_new[k] = inside;
         }
     }
+#undef RESETS
     return 1;
 }
 
@@ -956,28 +948,6 @@ int reduced_point(const long long *dims, const long long *const *ix, const doubl
 
 /* ---- one interior-point step of the sparse barrier, whole (gnerun.solvers.interior_point.InteriorPoint.step) ---- */
 
-/* numpy's sum of x (DOUBLE_pairwise_sum from zero, as abs_sum) */
-static double plain_sum(const double *x, long n) {
-    if (n < 8) {
-        double res = 0.0;
-        for (long i = 0; i < n; i++) res += x[i];
-        return res;
-    }
-    if (n <= 128) {
-        double r[8];
-        long i;
-        for (int k = 0; k < 8; k++) r[k] = x[k];
-        for (i = 8; i < n - (n % 8); i += 8)
-            for (int k = 0; k < 8; k++) r[k] += x[i + k];
-        double res = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]));
-        for (; i < n; i++) res += x[i];
-        return res;
-    }
-    long n2 = n / 2;
-    n2 -= n2 % 8;
-    return plain_sum(x, n2) + plain_sum(x + n2, n - n2);
-}
-
 /* interior_point._to_boundary: fraction times the least -v_i / dv_i over dv_i < 0 (numpy's min: a NaN wins), and
    Python's min(1.0, .); 1 where no dv_i < 0 */
 static double to_boundary(const double *v, const double *dv, long n, double fraction) {
@@ -1046,14 +1016,14 @@ int interior_step(const long long *dims, const long long *const *ix, const long 
     long long edims[7] = {n_rest, n_out, n_re, n_er, kl, ku, ld};
     const long long *eix[8] = {ix[15], ix[16], ix[17], ix[18], ix[19], ix[20], ix[21], ix[22]};
     size_t doubles = (size_t)n_rest * ld + (size_t)def_work + n_add + nfill + n_out + n_re + n_er + 2 * size
-                     + 2 * nk + 2 * nk + 6 * nI + n_out;
+                     + 4 * nk + 5 * nI + n_out;  /* as laid out below */
     double *mem = (double *)calloc(doubles, sizeof(double));
     int *ipiv = (int *)malloc((size_t)(n_rest > 0 ? n_rest : 1) * sizeof(int));
     if (!mem || !ipiv) { free(mem); free(ipiv); return 5; }
     double *ab = mem, *def = ab + (size_t)n_rest * ld, *add = def + def_work, *fill = add + n_add, *diag = fill + nfill,
            *re = diag + n_out, *er = re + n_re, *rhs = er + n_er, *sol = rhs + size, *b = sol + size, *x = b + nk,
            *work = x + nk, *rhs_I = work + 2 * nk, *dw = rhs_I + nI, *comp = dw + nI, *tmp = comp + nI,
-           *dlam = tmp + nI, *inverse = dlam + 2 * nI;
+           *dlam = tmp + nI, *inverse = dlam + nI;
     int code = 0, target = 0;
     if (players_definite(agents, def_dims, def_ix, data, D, def) != 1) { code = 1; goto done; }
     /* the matrix: the shifts (zeros) and -D added to the diagonal; its band as KeptLayout.band fills it */
