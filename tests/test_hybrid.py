@@ -653,6 +653,54 @@ def test_the_interior_phase_begins_at_the_decoupled_plans(monkeypatch: pytest.Mo
     assert all(np.array_equal(a, b) for a, b in zip(runs[True], runs[False], strict=True))
 
 
+def test_the_interior_phase_begins_at_a_cold_start_near_stationary(monkeypatch: pytest.MonkeyPatch) -> None:
+    """ALGAMES's intersections from the configured start values (zero inputs, ||Phi(z^0)|| <= QUICK_BELOW): the
+    interior phase begins at once (``hybrid.QUICK_INTERIOR``). The Newton step from there climbs and is refused, so
+    the solves take the same iterates bit for bit with it and without it, and without it no Newton step is tried from
+    z^0. A start handed to the solver that is not the start values (an equilibrium with its decisions moved by 1e-2)
+    keeps its Newton step, which converges from there in a few iterations."""
+    from benchmarks.problems import trajectory
+
+    problems = trajectory.intersection_problems(3)
+    cfg = load_config(text=problems[0].config_yaml)
+    game = compile_game(cfg)
+    tried: list[bool] = []
+    candidate = hybrid.HybridNewton._candidate
+
+    def recorded(self, state, memory):
+        tried.append(len(memory.merits) == 1 and memory.interior is None)  # a step from z^0
+        return candidate(self, state, memory)
+
+    monkeypatch.setattr(hybrid.HybridNewton, "_candidate", recorded)
+    runs: dict[bool, list[np.ndarray]] = {}
+    solutions = []
+    for leap in (False, True):
+        monkeypatch.setattr(hybrid, "QUICK_INTERIOR", leap)
+        tried.clear()
+        solver = make_solver(cfg, game)
+        runs[leap] = []
+        for p in problems:
+            x0 = np.asarray(load_config(text=p.config_yaml).game.x0)
+            start = solver.init(None, x0)
+            assert start.search.quick and start.search.leap == leap
+            state = iterate(solver, start, on_iterate=lambda s, r=runs[leap]: r.append(s.z))
+            assert state.status == Status.CONVERGED
+            solutions.append((x0, state.z))
+        assert sum(tried) == (0 if leap else len(problems))
+    assert len(runs[True]) == len(runs[False])
+    assert all(np.array_equal(a, b) for a, b in zip(runs[True], runs[False], strict=True))
+    rng = np.random.default_rng(0)
+    solver = make_solver(cfg, game)
+    for x0, z in solutions[len(problems):]:
+        moved = z.copy()
+        moved[:game.n] += 1e-2 * rng.standard_normal(game.n)
+        tried.clear()
+        start = solver.init(moved, x0)
+        assert start.search.quick and not start.search.leap  # near stationary, but not the start values
+        state = iterate(solver, start)
+        assert tried[:1] == [True]  # the Newton step first
+        assert state.status == Status.CONVERGED and state.k <= 5, state.k
+
 def _through(state) -> int:
     """Iterations counted through the decoupled game's solve (its own iterations inside the first)."""
     return state.k + max(state.search.alone - 1, 0)

@@ -809,7 +809,7 @@ def test_the_compiled_bookkeeping_of_the_interior_phase_is_numpys(monkeypatch: p
 @pytest.mark.parametrize("family", ["merge", "intersection"])
 def test_the_compiled_layouts_are_numpys(family: str, monkeypatch: pytest.MonkeyPatch) -> None:
     """The kept matrices' layouts made by the compiled index arithmetic (gnerun.game.banded.KeptLayouts) are the numpy
-    code's, array for array and dtype for dtype, on every layout the solves of ALGAMES's merges and an intersection
+    code's, array for array and dtype for dtype, on every layout the solves of ALGAMES's merges and two intersections
     make without an elimination, with diagonal additions, and with banded LU forced (the SuperLU layout, forced or
     chosen, stays numpy's)."""
     from benchmarks.problems import trajectory
@@ -817,7 +817,7 @@ def test_the_compiled_layouts_are_numpys(family: str, monkeypatch: pytest.Monkey
 
     if banded.status() != "compiled":
         pytest.skip(f"nothing compiled here: {banded.status()}")
-    problems = trajectory.merge_problems(3) if family == "merge" else trajectory.intersection_problems(1)
+    problems = trajectory.merge_problems(3) if family == "merge" else trajectory.intersection_problems(2)
     made = []
     init = sparse.KeptLayout.__init__
 

@@ -37,7 +37,9 @@ first, judged by a nonmonotone watchdog; a more robust method when it fails; res
    **A start near stationary** (such a game whose ||Phi(z^0)|| is at most ``QUICK_BELOW``, cold-started and
    unperturbed): its first interior start takes the faster barrier too; ``FAST_STALL`` stalled steps there begin the
    same start again at the usual pace. ALGAMES's intersections from zero inputs: median 9 iterations instead of 14.5
-   (the overtaking game's three starts near stationary: 4-6 more, 28-50).
+   (the overtaking game's three starts near stationary: 4-6 more, 28-50). Where that start is the configured start
+   values, the interior phase begins at once (``QUICK_INTERIOR``: the Newton step from there climbed on every such
+   start measured); a start handed to the solver keeps its Newton step first (a guess near a solution).
 1. **Newton phase.** The semismooth Newton step (min map or Fischer-Burmeister, with the configured perturbation)
    is taken unless it multiplies ||Phi|| by more than ``BLOWUP`` over a nonmonotone reference (the largest of its
    last ``MEMORY`` values), as PATH's watchdog does: the local method's own path may climb before it converges.
@@ -187,6 +189,13 @@ ALONE_STEPS = 50  # the decoupled game's solve: at most this many iterations (un
 # 200 of 200 of ALGAMES's merges and the overtaking start kept its plans for, at the cost of a factorisation, a
 # condition estimate and an evaluation (0.37 ms of a merge's solve) (False: the Newton step is tried first)
 PLANS_INTERIOR = True
+# ... and so from a start near stationary (QUICK_BELOW) that is the configured start values (zero multipliers): from the
+# intersections' zero inputs the Newton step climbed and was refused on every start measured (the robustness suite's
+# 10 intersections and 3 overtaking starts, the 20 of the iteration benchmark), at the cost of a factorisation, its
+# estimate and two evaluations (0.5-0.7 ms, 10-14% of an intersection's solve). A start handed to the solver (a guess
+# near a solution, its multipliers zero or not) keeps its Newton step: from the intersections' solutions moved by
+# 1e-2 it converges in 3-4 iterations, the interior phase in 6-39 (False: the Newton step is tried first)
+QUICK_INTERIOR = True
 
 
 @dataclass(slots=True, frozen=True, kw_only=True)
@@ -216,6 +225,7 @@ class Memory:
     abandon: float = math.inf  # ||Phi|| at the configured z^0, while z^0 is the decoupled plans: above it, back there
     alone: int = 0  # the iterations of the decoupled game's solve inside the first iteration (0: none)
     quick: bool = False  # the first interior start from z^0 is to take the faster barrier (a start near stationary)
+    leap: bool = False  # ... and is the first step, without a Newton step before it (the configured start values)
     fast: bool = False  # this interior start takes the faster barrier (HybridNewton._kappa)
 
 
@@ -280,8 +290,9 @@ class HybridNewton:
         merit = state.residual_norm
         decouple = self.decouples and not warm and merit > DECOUPLE_ABOVE  # (NaN: not)
         quick = self.quickens and not warm and merit <= QUICK_BELOW
+        leap = quick and QUICK_INTERIOR and np.array_equal(state.z, self.game.z_start())
         state.search = self._from(state, crash=self.avi is not None, warm=warm, decouple=decouple,
-                                  quick=quick)  # a new state
+                                  quick=quick, leap=leap)  # a new state
         if not self.handover:  # the interior phase alone: its start point is z^0
             return self._start_interior(state, 0, k=0)
         return state
@@ -449,6 +460,8 @@ class HybridNewton:
         if PLANS_INTERIOR and memory.abandon < math.inf and memory.interior is None and len(memory.merits) == 1:
             # the step after the decoupled plans: the interior phase at once, as where their Newton step is refused
             return self._start_interior(state, 0)
+        if memory.leap:  # a cold start near stationary: the interior phase at once, as from the plans
+            return self._start_interior(state, 0)
         if memory.crash:
             crashed = self._crash(state, memory)
             if crashed is not None:
@@ -510,7 +523,7 @@ class HybridNewton:
         z, w, eps = self.interior.start(memory.origin, state.x, attempt, warm)
         fast = memory.quick and attempt == 0 and not warm
         memory = evolve(memory, phase="interior", best=math.inf, stalls=0, attempt=attempt,
-                         handover=memory.handover0, crash=False, decouple=False, quick=False, fast=fast)
+                         handover=memory.handover0, crash=False, decouple=False, quick=False, leap=False, fast=fast)
         start = self.newton.advance(state, z, search=memory, k=state.k if k is None else k)
         # Mehrotra's steps in the first start from z^0; the restarts and warm starts keep the monotone barrier
         predict = attempt == 0 and not warm
