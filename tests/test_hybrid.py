@@ -630,14 +630,7 @@ def test_the_interior_phase_begins_at_the_decoupled_plans(monkeypatch: pytest.Mo
     problems = trajectory.merge_problems(4)
     cfg = load_config(text=problems[0].config_yaml)
     game = compile_game(cfg)
-    tried: list[bool] = []
-    candidate = hybrid.HybridNewton._candidate
-
-    def recorded(self, state, memory):
-        tried.append(memory.abandon < np.inf and memory.interior is None)
-        return candidate(self, state, memory)
-
-    monkeypatch.setattr(hybrid.HybridNewton, "_candidate", recorded)
+    tried = _candidates(monkeypatch, lambda memory: memory.abandon < np.inf and memory.interior is None)
     runs = {}
     for first in (False, True):
         monkeypatch.setattr(hybrid, "PLANS_INTERIOR", first)
@@ -664,14 +657,8 @@ def test_the_interior_phase_begins_at_a_cold_start_near_stationary(monkeypatch: 
     problems = trajectory.intersection_problems(3)
     cfg = load_config(text=problems[0].config_yaml)
     game = compile_game(cfg)
-    tried: list[bool] = []
-    candidate = hybrid.HybridNewton._candidate
-
-    def recorded(self, state, memory):
-        tried.append(len(memory.merits) == 1 and memory.interior is None)  # a step from z^0
-        return candidate(self, state, memory)
-
-    monkeypatch.setattr(hybrid.HybridNewton, "_candidate", recorded)
+    # a Newton step tried from z^0
+    tried = _candidates(monkeypatch, lambda memory: len(memory.merits) == 1 and memory.interior is None)
     runs: dict[bool, list[np.ndarray]] = {}
     solutions = []
     for leap in (False, True):
@@ -700,6 +687,20 @@ def test_the_interior_phase_begins_at_a_cold_start_near_stationary(monkeypatch: 
         state = iterate(solver, start)
         assert tried[:1] == [True]  # the Newton step first
         assert state.status == Status.CONVERGED and state.k <= 5, state.k
+
+
+def _candidates(monkeypatch: pytest.MonkeyPatch, which) -> list[bool]:
+    """Records ``which(memory)`` at every Newton step the hybrid method tries (``HybridNewton._candidate``)."""
+    tried: list[bool] = []
+    candidate = hybrid.HybridNewton._candidate
+
+    def recorded(self, state, memory):
+        tried.append(which(memory))
+        return candidate(self, state, memory)
+
+    monkeypatch.setattr(hybrid.HybridNewton, "_candidate", recorded)
+    return tried
+
 
 def _through(state) -> int:
     """Iterations counted through the decoupled game's solve (its own iterations inside the first)."""
