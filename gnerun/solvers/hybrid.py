@@ -225,7 +225,8 @@ class Memory:
     abandon: float = math.inf  # ||Phi|| at the configured z^0, while z^0 is the decoupled plans: above it, back there
     alone: int = 0  # the iterations of the decoupled game's solve inside the first iteration (0: none)
     quick: bool = False  # the first interior start from z^0 is to take the faster barrier (a start near stationary)
-    leap: bool = False  # ... and is the first step, without a Newton step before it (the configured start values)
+    leap: bool = False  # the first step is the interior phase's start, without a Newton step before it (from the
+    # decoupled plans: PLANS_INTERIOR; from the configured start values near stationary: QUICK_INTERIOR)
     fast: bool = False  # this interior start takes the faster barrier (HybridNewton._kappa)
 
 
@@ -422,7 +423,8 @@ class HybridNewton:
         candidate = self.newton.advance(state, z)
         if candidate.status != Status.RUNNING:
             return None
-        candidate.search = self._from(candidate, start=memory.origin, abandon=state.residual_norm, alone=solved.k)
+        candidate.search = self._from(candidate, start=memory.origin, abandon=state.residual_norm, alone=solved.k,
+                                      leap=PLANS_INTERIOR)
         return candidate
 
     @functools.cached_property
@@ -457,10 +459,7 @@ class HybridNewton:
             if decoupled is not None:
                 return decoupled
             memory = evolve(memory, decouple=False)
-        if PLANS_INTERIOR and memory.abandon < math.inf and memory.interior is None and len(memory.merits) == 1:
-            # the step after the decoupled plans: the interior phase at once, as where their Newton step is refused
-            return self._start_interior(state, 0)
-        if memory.leap:  # a cold start near stationary: the interior phase at once, as from the plans
+        if memory.leap:  # from the decoupled plans, or a cold start near stationary: the interior phase at once
             return self._start_interior(state, 0)
         if memory.crash:
             crashed = self._crash(state, memory)
